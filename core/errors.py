@@ -1,0 +1,44 @@
+"""Exceptions raised by the TCB Surface engine.
+
+Every error a user can cause derives from :class:`TCBError`; those caused by bad input also
+derive from :class:`ValueError`, so ``except ValueError`` keeps working for library users.
+Messages say what is wrong *and* what to do about it: the Blender add-on shows them verbatim.
+"""
+
+from __future__ import annotations
+
+
+class TCBError(Exception):
+    """Base class of all errors raised on purpose by ``core``."""
+
+
+class InvalidInputError(TCBError, ValueError):
+    """Input data that cannot be used (NaN/inf, too few points, wrong shape, ...)."""
+
+
+class InvalidKnotsError(InvalidInputError):
+    """A knot set from which no spline space can be built (too few, collinear, non-finite)."""
+
+
+class TopologyError(InvalidInputError):
+    """A mesh whose topology is not a disk (closed, several boundary loops, non-manifold)."""
+
+
+class ParameterizationError(InvalidInputError):
+    """The data cannot be mapped to a plane without folds (e.g. a strongly curved cloud)."""
+
+
+class FileFormatError(InvalidInputError):
+    """A file that cannot be read: unknown extension, malformed content, truncated data."""
+
+
+class BorderError(TCBError):
+    """The basis does not sum to one at some data parameters (the border rings are too thin)."""
+
+
+class SingularSystemError(TCBError):
+    """The least-squares system is singular or too ill-conditioned to give a trustworthy fit."""
+
+
+class CancelledError(TCBError):
+    """Raised internally when a callback requested cancellation."""

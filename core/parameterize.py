@@ -1,0 +1,721 @@
+"""Parameterization: map scanned points or a disk-like mesh to the parameter plane.
+
+See ``method.md`` section 4 (Parameterization). Two maps are implemented:
+
+* **Point clouds** (height fields, gently curved patches): orthogonal projection onto the
+  best-fit (PCA) plane, ``uv = ((p - o) . [a_u, a_v]) / s``, with a check for folds.
+* **Meshes of disk topology**: the boundary loop goes to the unit circle by chord length and the
+  interior vertices are placed by Floater's mean-value weights (a Tutte embedding), one sparse
+  linear solve for ``u`` and ``v`` together.
+
+Inputs that cannot be parameterized without folds (closed meshes, several boundary loops,
+non-manifold or non-orientable meshes, clouds folding over their best-fit plane) raise a
+:class:`~.errors.TopologyError` or :class:`~.errors.ParameterizationError` that says what is needed,
+never a wrong parameterization.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components, depth_first_order
+from scipy.sparse.linalg import splu
+from scipy.spatial import ConvexHull, cKDTree
+
+from .errors import InvalidInputError, ParameterizationError, TopologyError
+
+__all__ = [
+    "MIN_POINTS",
+    "Normalization",
+    "Parameterization",
+    "count_duplicates",
+    "normalize",
+    "parameterize",
+    "parameterize_mesh",
+    "parameterize_points",
+]
+
+MIN_POINTS = 10
+"""Fewest distinct points a point cloud must have."""
+
+# Fold detection for point clouds (method.md section 4).
+_FOLD_NEIGHBOURS = 12  # neighbours (besides the point itself) of the local PCA and uv tests
+_FOLD_MIN_COS = 0.2  # |local normal . plane normal| below this: surface nearly perpendicular
+_FOLD_OFF_SURFACE_SIN = np.sin(np.radians(60.0))  # uv-neighbour this steeply off the surface
+_FOLD_NOISE_FACTOR = 4.0  # ... and farther off the local plane than this many sigma_i
+_FOLD_MIN_OFF_NEIGHBOURS = 0.25  # fraction of uv-neighbours off the surface for a point to count
+_FOLD_COHERENCE = 0.5  # fraction of suspect 3D neighbours for a point to be flagged
+_FOLD_MAX_FRACTION = 0.02  # fraction of flagged points above which the cloud is rejected
+_FOLD_MAX_SAMPLE = 100_000  # larger clouds are checked on a seeded random subset of this size
+_THIN_NEIGHBOURHOOD = 0.25  # lambda_0 / lambda_1 above this: local normal unreliable
+_COLLINEAR_RTOL = 1e-9  # RMS distance from the best line, relative to the scale
+
+
+# --------------------------------------------------------------------------------------------
+# Validation and normalization
+# --------------------------------------------------------------------------------------------
+
+
+def _as_points(points: np.ndarray, *, what: str = "points") -> np.ndarray:
+    """Return ``points`` as a C-contiguous ``(n, 3) float64`` array or raise InvalidInputError."""
+    try:
+        arr = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(
+            f"{what} must be numbers (an (N, 3) array of x, y, z coordinates): {exc}"
+        ) from None
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise InvalidInputError(
+            f"{what} must be an (N, 3) array of x, y, z coordinates; got shape {arr.shape}"
+        )
+    return np.ascontiguousarray(arr)
+
+
+def _check_finite(points: np.ndarray, *, what: str = "points") -> None:
+    """Raise InvalidInputError naming how many rows of ``points`` contain NaN or inf."""
+    bad = ~np.isfinite(points).all(axis=1)
+    n_bad = int(bad.sum())
+    if n_bad:
+        raise InvalidInputError(
+            f"{n_bad} of {len(points)} {what} have NaN or infinite coordinates; "
+            "remove them (e.g. points[np.isfinite(points).all(axis=1)]) and try again"
+        )
+
+
+def count_duplicates(points: np.ndarray) -> int:
+    """Number of rows of ``points`` that exactly repeat an earlier row.
+
+    ``n - len(np.unique(points, axis=0))``: exact (bitwise-equal value) duplicates only; near
+    duplicates are not counted.
+
+    Args:
+        points: ``(n, d)`` array.
+
+    Returns:
+        The number of redundant rows (0 when all rows are distinct).
+    """
+    arr = np.asarray(points)
+    if arr.ndim != 2 or len(arr) == 0:
+        return 0
+    return int(len(arr) - len(np.unique(arr, axis=0)))
+
+
+@dataclass(frozen=True, eq=False)
+class Normalization:
+    """Similarity that maps the bounding box of the data to a box of half-diagonal 1.
+
+    ``apply(p) = (p - center) / scale`` and ``undo(q) = q * scale + center``, with ``center`` the
+    centre of the bounding box and ``scale`` half its diagonal (method.md section 4: all
+    tolerances of the engine are relative to this scale). The two maps invert each other to
+    about one ulp of the coordinates.
+
+    Attributes:
+        center: ``(3,) float64`` centre of the bounding box.
+        scale: half the length of the bounding-box diagonal (> 0).
+    """
+
+    center: np.ndarray
+    scale: float
+
+    def apply(self, p: np.ndarray) -> np.ndarray:
+        """Map original coordinates ``(..., 3)`` to normalized ones: ``(p - center) / scale``."""
+        return (np.asarray(p, dtype=np.float64) - self.center) / self.scale
+
+    def undo(self, q: np.ndarray) -> np.ndarray:
+        """Map normalized coordinates ``(..., 3)`` back: ``q * scale + center``."""
+        return np.asarray(q, dtype=np.float64) * self.scale + self.center
+
+
+def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
+    """Validate a point cloud and map it into the box centred at 0 with half-diagonal 1.
+
+    ``q = (p - c) / s`` with ``c`` the bounding-box centre and ``s`` half the bounding-box
+    diagonal (method.md section 4).
+
+    Args:
+        points: ``(n, 3)`` array of x, y, z coordinates.
+
+    Returns:
+        ``(q, normalization)``: ``q`` is ``(n, 3) float64``; ``normalization.undo(q)`` gives the
+        points back.
+
+    Raises:
+        InvalidInputError: wrong shape, NaN/inf rows, fewer than 10 (distinct) points, all
+            points identical, or all points on one line. Exact duplicates are allowed as long
+            as at least 10 distinct points remain.
+    """
+    p = _as_points(points)
+    _check_finite(p)
+    n = len(p)
+    if n < MIN_POINTS:
+        raise InvalidInputError(
+            f"at least {MIN_POINTS} points are needed to fit a surface; got {n}"
+        )
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    center = 0.5 * (lo + hi)
+    scale = 0.5 * float(np.linalg.norm(hi - lo))
+    if not scale > 0.0:
+        raise InvalidInputError(
+            f"all {n} points are identical; a surface needs points spread in two directions"
+        )
+    n_dup = count_duplicates(p)
+    if n - n_dup < MIN_POINTS:
+        raise InvalidInputError(
+            f"only {n - n_dup} distinct points ({n_dup} of {n} are exact duplicates); at least "
+            f"{MIN_POINTS} distinct points are needed to fit a surface"
+        )
+    q = (p - center) / scale
+    # Rank test: RMS distance of the points from their best line, relative to the scale (1 now).
+    sv = np.linalg.svd(q - q.mean(axis=0), compute_uv=False)
+    if sv[1] / np.sqrt(n) <= _COLLINEAR_RTOL:
+        raise InvalidInputError(
+            f"all {n} points lie on one straight line; a surface needs points spread in two "
+            "directions"
+        )
+    return q, Normalization(center=_readonly(center), scale=scale)
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    """Return ``a`` flagged read-only (the dataclasses below are immutable values)."""
+    a = np.ascontiguousarray(a)
+    a.setflags(write=False)
+    return a
+
+
+# --------------------------------------------------------------------------------------------
+# The result
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Parameterization:
+    """Parameters ``uv`` of the input points and the domain they cover (method.md section 4).
+
+    Attributes:
+        uv: ``(n, 2) float64`` parameters of the input points, row ``i`` for point ``i``. For a
+            ``"plane"`` the domain is scaled to ``[-1, 1]^2`` (the longer side spans it), for a
+            ``"disk"`` it is the unit disk. Rows of mesh vertices that no face references are
+            NaN (see ``used``).
+        kind: ``"plane"`` (point cloud projected on its best-fit plane) or ``"disk"`` (mesh).
+        domain_polygon: ``(b, 2) float64`` counter-clockwise polygon bounding the parameter
+            domain of the data: the convex hull of ``uv`` for a plane, the boundary polygon
+            (vertices on the unit circle) for a disk.
+        used: ``(n,) bool``; False for mesh vertices that no face references (they have no
+            parameter and must be left out of a fit). All True for a point cloud.
+        boundary: ``(b,) int64`` indices of the boundary loop in counter-clockwise uv order
+            (``uv[boundary] == domain_polygon``), or None for a point cloud.
+        faces: ``(f, 3) int64`` triangles actually used (degenerate and duplicate faces
+            removed, polygons split), oriented so that every uv triangle has positive area;
+            None for a point cloud.
+        origin: ``(3,) float64`` point of the best-fit plane that maps to ``uv = 0`` (plane).
+        axes: ``(3, 3) float64`` orthonormal rows ``(a_u, a_v, n)``, right-handed, ``n`` the
+            plane normal (plane only).
+        scale: 3D length of one uv unit (plane only): ``uv = ((p - origin) @ axes[:2].T) /
+            scale``.
+    """
+
+    uv: np.ndarray
+    kind: str
+    domain_polygon: np.ndarray
+    used: np.ndarray
+    boundary: np.ndarray | None = None
+    faces: np.ndarray | None = None
+    origin: np.ndarray | None = None
+    axes: np.ndarray | None = None
+    scale: float | None = None
+
+    def contains(self, uv: np.ndarray, tol: float = 1e-12) -> np.ndarray:
+        """Mask of parameters inside ``domain_polygon`` (points on its edges count as inside).
+
+        Even-odd (crossing number) test: a horizontal ray from ``x`` crosses edge ``a -> b`` when
+        ``(a_v > x_v) != (b_v > x_v)`` and ``x_u < a_u + (x_v - a_v)(b_u - a_u)/(b_v - a_v)``;
+        ``x`` is inside when it crosses an odd number of edges, or when its distance to an edge
+        is at most ``tol`` (relative to the polygon size).
+
+        Args:
+            uv: ``(m, 2)`` parameters (or a single ``(2,)`` point).
+            tol: boundary tolerance relative to the polygon's bounding-box size.
+
+        Returns:
+            ``(m,) bool`` (or a bool scalar for a single point).
+        """
+        x = np.asarray(uv, dtype=np.float64)
+        single = x.ndim == 1
+        x = np.atleast_2d(x)
+        if x.shape[-1] != 2:
+            raise InvalidInputError(f"uv must be an (M, 2) array; got shape {x.shape}")
+        inside = _points_in_polygon(x, self.domain_polygon, tol)
+        return bool(inside[0]) if single else inside
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Parameters of new 3D points of a plane parameterization.
+
+        ``uv = ((p - origin) @ axes[:2].T) / scale`` (orthogonal projection on the best-fit
+        plane, method.md section 4).
+
+        Raises:
+            InvalidInputError: for a mesh (``"disk"``) parameterization, which has parameters
+                only at its vertices.
+        """
+        if self.kind != "plane" or self.origin is None or self.axes is None or not self.scale:
+            raise InvalidInputError(
+                "project() maps 3D points only for a point-cloud (plane) parameterization; a "
+                "mesh parameterization has parameters only at its vertices"
+            )
+        p = np.asarray(points, dtype=np.float64)
+        return ((p - self.origin) @ self.axes[:2].T) / self.scale
+
+
+def _points_in_polygon(x: np.ndarray, poly: np.ndarray, tol: float) -> np.ndarray:
+    """Even-odd point-in-polygon test with an on-edge tolerance; see Parameterization.contains.
+
+    Vectorized over points and edges, in chunks of points so memory stays bounded.
+    """
+    a = np.asarray(poly, dtype=np.float64)
+    b = np.roll(a, -1, axis=0)
+    e = b - a
+    ee = np.einsum("ij,ij->i", e, e)
+    ee_safe = np.where(ee > 0.0, ee, 1.0)
+    size = float(np.ptp(a, axis=0).max()) if len(a) else 0.0
+    atol = tol * max(size, np.finfo(float).tiny)
+    out = np.empty(len(x), dtype=bool)
+    chunk = max(1, 4_000_000 // max(len(a), 1))
+    for s in range(0, len(x), chunk):
+        xs = x[s : s + chunk, None, :]  # (m, 1, 2)
+        au, av = a[:, 0], a[:, 1]
+        straddle = (av > xs[..., 1]) != (b[:, 1] > xs[..., 1])
+        dv = np.where(straddle, b[:, 1] - av, 1.0)
+        u_cross = au + (xs[..., 1] - av) * (b[:, 0] - au) / dv
+        crossings = np.count_nonzero(straddle & (xs[..., 0] < u_cross), axis=1)
+        # distance to the closest edge (segment) for the boundary tolerance
+        t = np.clip(np.einsum("mbk,bk->mb", xs - a, e) / ee_safe, 0.0, 1.0)
+        d2 = np.sum((xs - (a + t[..., None] * e)) ** 2, axis=-1).min(axis=1)
+        out[s : s + chunk] = (crossings % 2 == 1) | (d2 <= atol * atol)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Point clouds: best-fit plane
+# --------------------------------------------------------------------------------------------
+
+
+def _local_planes(
+    q: np.ndarray, k: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Local PCA of every point over itself and its ``k`` nearest neighbours (3D).
+
+    ``C_i = (1/(k+1)) sum_j (q_j - mean)(q_j - mean)^T`` with eigenvalues
+    ``lambda_0 <= lambda_1 <= lambda_2`` (batched ``np.linalg.eigh`` on the ``(n, 3, 3)``
+    stack). The normal ``n_i`` is the eigenvector of ``lambda_0`` and ``sigma_i =
+    sqrt(lambda_0)`` the RMS distance of the neighbourhood from its plane. The normal is
+    *reliable* when the neighbourhood is a thin disk, ``lambda_0 < 0.25 lambda_1`` (neither a
+    line, as on sparse scan lines, nor a noise blob).
+
+    Returns:
+        ``normals (n, 3)``, ``sigma (n,)``, ``reliable (n,) bool``, ``idx (n, k+1)`` the
+        neighbourhoods (each point's own index among them).
+    """
+    _, idx = cKDTree(q).query(q, k=k + 1, workers=-1)
+    nb = q[idx]
+    nb -= nb.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", nb, nb) / (k + 1)
+    w, v = np.linalg.eigh(cov)
+    w = np.maximum(w, 0.0)
+    reliable = w[:, 0] < _THIN_NEIGHBOURHOOD * w[:, 1]
+    return v[:, :, 0], np.sqrt(w[:, 0]), reliable, idx
+
+
+def _fold_fraction(q: np.ndarray, uv: np.ndarray, normal: np.ndarray) -> float:
+    """Fraction of points where the cloud is not a height field over its best-fit plane.
+
+    Two tests (method.md section 4, "detect folds"), with the local planes of
+    :func:`_local_planes` (``k = 12`` neighbours):
+
+    * steep: ``|n_i . n| < 0.2`` with ``n`` the normal of the best-fit plane (the surface is
+      nearly perpendicular to the plane; a fold turns through there);
+    * overlap: among the 12 nearest neighbours ``j`` of ``uv_i`` *in the parameter plane*, at
+      least 3 whose 3D offset ``d = q_j - q_i`` leaves the local plane steeply and beyond the
+      noise, ``|d . n_i| > max(sin 60deg |d|, 4 sigma_i)`` (the projection put points of another
+      layer next to ``i``: their order flipped).
+
+    Only points with a reliable local normal are suspects, and a point counts as flagged only
+    when at least half of its 3D neighbourhood are suspects (folds are regions; noise makes
+    isolated suspects), so noise and line-like neighbourhoods do not cause false alarms. Clouds of more than 100 000 points are checked on a seeded
+    (deterministic) random subset of that size.
+    """
+    if len(q) > _FOLD_MAX_SAMPLE:
+        pick = np.random.default_rng(0).choice(len(q), _FOLD_MAX_SAMPLE, replace=False)
+        q, uv = q[pick], uv[pick]
+    k = min(_FOLD_NEIGHBOURS, len(q) - 1)
+    normals, sigma, reliable, idx = _local_planes(q, k)
+    steep = np.abs(normals @ normal) < _FOLD_MIN_COS
+    _, jdx = cKDTree(uv).query(uv, k=k + 1, workers=-1)
+    d = q[jdx] - q[:, None, :]  # (n, k+1, 3)
+    dn = np.abs(np.einsum("nkj,nj->nk", d, normals))
+    dlen = np.sqrt(np.einsum("nkj,nkj->nk", d, d))
+    off = (dn > _FOLD_OFF_SURFACE_SIN * dlen) & (dn > _FOLD_NOISE_FACTOR * sigma[:, None])
+    overlap = np.count_nonzero(off, axis=1) >= _FOLD_MIN_OFF_NEIGHBOURS * k
+    suspect = reliable & (steep | overlap)
+    # folds are regions, noise flags isolated points: keep a flag only where it is coherent
+    flagged = np.count_nonzero(suspect[idx], axis=1) >= _FOLD_COHERENCE * (k + 1)
+    return float(np.count_nonzero(flagged)) / len(q)
+
+
+def parameterize_points(points: np.ndarray) -> Parameterization:
+    """Parameterize a point cloud by orthogonal projection on its best-fit plane.
+
+    With ``m`` the centroid and ``a_u, a_v`` the two principal axes of largest variance
+    (SVD of the centred points), ``n = a_u x a_v`` (right-handed, sign fixed so that the largest
+    component of ``n`` is positive), the parameters are
+    ``uv = ((p - o) . [a_u, a_v]) / s`` where ``o`` and ``s`` centre the projected bounding box
+    at 0 and scale its longer side to ``[-1, 1]`` (method.md section 4). On a plane the map is an
+    isometry up to the factor ``s``.
+
+    Folds are detected as in :func:`_fold_fraction`; more than 2 % flagged points is an error.
+
+    Args:
+        points: ``(n, 3)`` points, ``n >= 10`` distinct, not all on a line.
+
+    Returns:
+        A ``"plane"`` :class:`Parameterization` with ``domain_polygon`` the convex hull of uv.
+
+    Raises:
+        InvalidInputError: bad input (see :func:`normalize`).
+        ParameterizationError: the cloud folds over its best-fit plane.
+    """
+    q, norm = normalize(points)
+    m = q.mean(axis=0)
+    _, _, vt = np.linalg.svd(q - m, full_matrices=False)
+    a_u, a_v = vt[0].copy(), vt[1].copy()
+    # deterministic signs: largest |component| positive for a_u and for the normal
+    a_u *= np.sign(a_u[np.argmax(np.abs(a_u))])
+    n = np.cross(a_u, a_v)
+    if n[np.argmax(np.abs(n))] < 0.0:
+        a_v, n = -a_v, -n
+    axes = np.stack([a_u, a_v, n / np.linalg.norm(n)])
+    proj = (q - m) @ axes[:2].T
+    c = 0.5 * (proj.min(axis=0) + proj.max(axis=0))
+    s = 0.5 * float(np.ptp(proj, axis=0).max())
+    uv = (proj - c) / s
+
+    frac = _fold_fraction(q, uv, axes[2])
+    if frac > _FOLD_MAX_FRACTION:
+        raise ParameterizationError(
+            f"the point cloud folds over its best-fit plane: at {100 * frac:.1f}% of the points "
+            "the surface is nearly perpendicular to that plane or overlaps itself in projection; "
+            "a height field or a gently curved patch is needed: split the scan into patches "
+            "that each face one direction, or supply a mesh of disk topology (with faces)"
+        )
+    hull = ConvexHull(uv)  # 2D: vertices are in counter-clockwise order
+    origin = norm.undo(m + c @ axes[:2])
+    return Parameterization(
+        uv=_readonly(uv),
+        kind="plane",
+        domain_polygon=_readonly(uv[hull.vertices]),
+        used=_readonly(np.ones(len(uv), dtype=bool)),
+        origin=_readonly(origin),
+        axes=_readonly(axes),
+        scale=s * norm.scale,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Meshes: disk topology, Floater mean-value map
+# --------------------------------------------------------------------------------------------
+
+
+def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Validate ``faces`` (``(f, k)`` integer, ``k >= 3``) and split polygons into fans.
+
+    A polygon ``(v0, ..., v_{k-1})`` becomes the triangles ``(v0, v_j, v_{j+1})``,
+    ``j = 1..k-2`` (quads: ``(a, b, c), (a, c, d)``).
+    """
+    try:
+        f = np.asarray(faces)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(f"faces must be an (F, 3) integer array: {exc}") from None
+    if f.ndim != 2 or f.shape[1] < 3:
+        raise InvalidInputError(
+            f"faces must be an (F, 3) array of vertex indices (or (F, 4) quads); got shape "
+            f"{f.shape}"
+        )
+    if len(f) == 0:
+        raise InvalidInputError(
+            "the mesh has no faces; give faces of a disk-like patch, or parameterize the "
+            "vertices as a point cloud (faces=None)"
+        )
+    if not np.issubdtype(f.dtype, np.integer):
+        if not (np.issubdtype(f.dtype, np.floating) and np.all(np.isfinite(f))
+                and np.all(f == np.round(f))):
+            raise InvalidInputError(
+                f"faces must hold integer vertex indices; got values of type {f.dtype}"
+            )
+    f = f.astype(np.int64)
+    bad = (f < 0) | (f >= n_vertices)
+    if bad.any():
+        raise InvalidInputError(
+            f"{int(bad.sum())} face indices are out of range (the mesh has {n_vertices} "
+            f"vertices, valid indices are 0..{n_vertices - 1}); fix the face list"
+        )
+    k = f.shape[1]
+    j = np.arange(1, k - 1)
+    tris = np.stack([np.broadcast_to(f[:, :1], (len(f), k - 2)), f[:, j], f[:, j + 1]], axis=-1)
+    return tris.reshape(-1, 3)
+
+
+def _orient_consistently(tris: np.ndarray, edge_id: np.ndarray) -> np.ndarray:
+    """Flip triangles so that every interior edge is traversed once in each direction.
+
+    The face graph is lifted to its orientation double cover: nodes ``(f, 0)`` (as given) and
+    ``(f, 1)`` (flipped); neighbours ``f, g`` sharing an edge are joined ``(f, s)-(g, s)`` when
+    they traverse it in opposite directions (consistent) and ``(f, s)-(g, 1-s)`` otherwise. The
+    surface is orientable iff ``(f, 0)`` and ``(f, 1)`` lie in different components; in each
+    piece the side needing fewer flips is kept.
+
+    Args:
+        tris: ``(f, 3)`` triangles.
+        edge_id: ``(3 f,)`` undirected edge id of half-edge ``(tris[i, c], tris[i, c+1])`` at
+            position ``3 i + c``; every edge has one or two half-edges.
+
+    Returns:
+        The triangles, some reversed.
+
+    Raises:
+        TopologyError: the mesh is not orientable.
+    """
+    nf = len(tris)
+    he_from = tris.reshape(-1)
+    he_to = np.roll(tris, -1, axis=1).reshape(-1)
+    face_of = np.repeat(np.arange(nf), 3)
+    order = np.argsort(edge_id, kind="stable")
+    sid = edge_id[order]
+    pair = np.flatnonzero(sid[1:] == sid[:-1])  # positions of interior-edge pairs in `order`
+    h1, h2 = order[pair], order[pair + 1]
+    f1, f2 = face_of[h1], face_of[h2]
+    consistent = he_from[h1] == he_to[h2]  # opposite directions
+    s = (~consistent).astype(np.int64)
+    rows = np.concatenate([f1, f1 + nf])
+    cols = np.concatenate([f2 + nf * s, f2 + nf * (1 - s)])
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(2 * nf, 2 * nf))
+    _, label = connected_components(graph, directed=False)
+    l0, l1 = label[:nf], label[nf:]
+    if np.any(l0 == l1):
+        raise TopologyError(
+            "the mesh is not orientable (like a Moebius strip); a disk-like patch is needed: "
+            "cut the strip open or supply another patch"
+        )
+    # side A of each piece = double-cover component with the smaller label
+    side_a = l0 < l1
+    piece = np.minimum(l0, l1)
+    n_a = np.bincount(piece, weights=side_a, minlength=2 * nf)
+    n_all = np.bincount(piece, minlength=2 * nf)
+    keep_a = n_a[piece] >= n_all[piece] - n_a[piece]  # keep the majority orientation
+    flip = side_a != keep_a
+    out = tris.copy()
+    out[flip] = out[flip][:, ::-1]
+    return out
+
+
+def _mean_value_weights(p: np.ndarray, tris: np.ndarray, n: int) -> sp.csr_matrix:
+    """Floater's mean-value weights ``W`` (``(n, n)`` CSR, positive on mesh edges).
+
+    ``w_ij = (tan(alpha_ij / 2) + tan(beta_ij / 2)) / |p_j - p_i|`` where ``alpha_ij, beta_ij``
+    are the angles at ``p_i`` of the two triangles sharing edge ``ij`` (one on the boundary).
+    Computed per triangle corner with ``tan(theta / 2) = |e1 x e2| / (|e1||e2| + e1 . e2)``,
+    which is accurate for small angles (method.md section 4).
+    """
+    i, j, k = tris[:, 0], tris[:, 1], tris[:, 2]
+    rows, cols, vals = [], [], []
+    for a, b, c in ((i, j, k), (j, k, i), (k, i, j)):
+        e1, e2 = p[b] - p[a], p[c] - p[a]
+        l1, l2 = np.linalg.norm(e1, axis=1), np.linalg.norm(e2, axis=1)
+        cross = np.linalg.norm(np.cross(e1, e2), axis=1)
+        den = l1 * l2 + np.einsum("ij,ij->i", e1, e2)
+        tan_half = cross / np.maximum(den, 1e-12 * l1 * l2)
+        rows += [a, a]
+        cols += [b, c]
+        vals += [tan_half / l1, tan_half / l2]
+    w = sp.coo_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+    )
+    return w.tocsr()  # duplicates (the two triangles of an edge) are summed
+
+
+def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization:
+    """Parameterize a triangle (or quad) mesh of disk topology over the unit disk.
+
+    Boundary (method.md section 4): the boundary loop ``b_0, ..., b_{B-1}`` (in the direction of
+    the oriented faces) goes to the unit circle by chord length,
+    ``uv(b_i) = (cos 2 pi t_i, sin 2 pi t_i)``, ``t_i = L_i / L``, ``L_i`` the 3D length of the
+    loop from ``b_0`` to ``b_i``. Interior: ``sum_j w_ij (uv_i - uv_j) = 0`` with Floater's
+    mean-value weights (:func:`_mean_value_weights`), one sparse LU solve with two right-hand
+    sides. Positive weights and a convex boundary give an embedding (Tutte/Floater); every uv
+    triangle is checked to have positive area anyway.
+
+    Cleaning: polygons are split into fans; faces with a repeated vertex and repeated faces are
+    dropped; faces are re-oriented consistently (majority orientation kept). Vertices that no
+    face references are left out: their ``uv`` rows are NaN and ``used`` is False.
+
+    Args:
+        points: ``(n, 3)`` vertex coordinates.
+        faces: ``(f, 3)`` triangles or ``(f, k)`` polygons (e.g. quads) of vertex indices.
+
+    Returns:
+        A ``"disk"`` :class:`Parameterization`.
+
+    Raises:
+        InvalidInputError: bad arrays (shape, NaN, indices out of range, zero-length edges).
+        TopologyError: non-manifold edges or vertices, several pieces, non-orientable, closed,
+            several boundary loops, or not a disk (handles).
+        ParameterizationError: a uv triangle came out flipped or degenerate.
+    """
+    p = _as_points(points, what="vertices")
+    n = len(p)
+    tris = _as_triangles(faces, n)
+
+    # drop degenerate (repeated index) and repeated faces
+    ok = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 2] != tris[:, 0])
+    tris = tris[ok]
+    if len(tris) == 0:
+        raise InvalidInputError(
+            "every face of the mesh is degenerate (repeats a vertex); a disk-like patch of "
+            "triangles or quads is needed"
+        )
+    _, first = np.unique(np.sort(tris, axis=1), axis=0, return_index=True)
+    tris = tris[np.sort(first)]
+
+    used = np.bincount(tris.ravel(), minlength=n) > 0
+    _check_finite(p[used], what="referenced vertices")
+
+    # undirected edges and their face counts
+    he_from = tris.reshape(-1)
+    he_to = np.roll(tris, -1, axis=1).reshape(-1)
+    key = np.minimum(he_from, he_to) * n + np.maximum(he_from, he_to)
+    ekey, edge_id, ecount = np.unique(key, return_inverse=True, return_counts=True)
+    edge_id = edge_id.reshape(-1)
+    n_nonmanifold = int(np.count_nonzero(ecount > 2))
+    if n_nonmanifold:
+        raise TopologyError(
+            f"the mesh has non-manifold edges ({n_nonmanifold} of them are shared by more than "
+            "two faces); a disk-like patch is needed: remove the extra faces at those edges "
+            "(Blender: Select > Select All by Trait > Non Manifold)"
+        )
+    ea, eb = ekey // n, ekey % n
+
+    # one connected piece
+    graph = sp.coo_matrix((np.ones(len(ea)), (ea, eb)), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    n_pieces = len(np.unique(label[used]))
+    if n_pieces > 1:
+        raise TopologyError(
+            f"the mesh has {n_pieces} separate pieces (connected components); one connected "
+            "disk-like patch is needed: keep the largest piece or fit each piece separately"
+        )
+
+    tris = _orient_consistently(tris, edge_id)
+    he_from = tris.reshape(-1)
+    he_to = np.roll(tris, -1, axis=1).reshape(-1)
+
+    # boundary: half-edges of edges with one face, in face direction (interior on the left)
+    on_boundary = ecount[edge_id] == 1
+    if not on_boundary.any():
+        raise TopologyError(
+            "the mesh is closed (it has no boundary); a disk-like open patch is needed: delete "
+            "some faces to open it"
+        )
+    bf, bt = he_from[on_boundary], he_to[on_boundary]
+    out_degree = np.bincount(bf, minlength=n)
+    n_pinched = int(np.count_nonzero(out_degree > 1))
+    if n_pinched:
+        raise TopologyError(
+            f"the mesh has {n_pinched} non-manifold vertices (the surface touches itself at a "
+            "single vertex); a disk-like patch is needed: split or remove the faces there "
+            "(Blender: Mesh > Split > Faces by Edges, or delete the touching faces)"
+        )
+    bgraph = sp.coo_matrix((np.ones(len(bf)), (bf, bt)), shape=(n, n)).tocsr()
+    _, blabel = connected_components(bgraph, directed=False)
+    n_loops = len(np.unique(blabel[bf]))
+    if n_loops > 1:
+        raise TopologyError(
+            f"the mesh has {n_loops} boundary loops (holes); a disk-like patch with exactly one "
+            "boundary is needed: fill the holes or cut the patch"
+        )
+    euler = int(np.count_nonzero(used)) - len(ekey) + len(tris)
+    if euler != 1:
+        raise TopologyError(
+            f"the mesh is not a disk (Euler characteristic {euler}, a disk has 1): it has "
+            f"handles or tunnels; cut them open so that the patch is a disk"
+        )
+
+    # the loop in order, starting at its smallest vertex index
+    loop = depth_first_order(bgraph, int(bf.min()), directed=True, return_predecessors=False)
+    if len(loop) != len(bf):  # cannot happen after the checks above; keep the guarantee
+        raise TopologyError("the boundary of the mesh is not a simple loop; a disk is needed")
+
+    seg = np.linalg.norm(p[np.roll(loop, -1)] - p[loop], axis=1)
+    elen = np.linalg.norm(p[eb] - p[ea], axis=1)
+    n_zero = int(np.count_nonzero(elen <= 0.0))
+    if n_zero:
+        raise InvalidInputError(
+            f"the mesh has {n_zero} zero-length edges (coincident vertices); merge vertices by "
+            "distance (Blender: Mesh > Clean Up > Merge by Distance) and try again"
+        )
+    t = np.concatenate([[0.0], np.cumsum(seg[:-1])]) / seg.sum()
+    uv = np.full((n, 2), np.nan)
+    uv[loop] = np.column_stack([np.cos(2.0 * np.pi * t), np.sin(2.0 * np.pi * t)])
+
+    # interior: (D - W)_II uv_I = W_IB uv_B, D = diag(row sums of W)
+    interior = used.copy()
+    interior[loop] = False
+    ii = np.flatnonzero(interior)
+    if len(ii):
+        w = _mean_value_weights(p, tris, n)[ii]
+        a = sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w[:, ii]
+        rhs = w[:, loop] @ uv[loop]
+        try:
+            sol = splu(sp.csc_matrix(a)).solve(np.asfortranarray(rhs))
+        except RuntimeError as exc:  # singular factor
+            raise ParameterizationError(
+                f"the mean-value system is singular ({exc}); the mesh has degenerate "
+                "triangles: clean it up (Blender: Mesh > Clean Up > Degenerate Dissolve)"
+            ) from None
+        if not np.all(np.isfinite(sol)):
+            raise ParameterizationError(
+                "the mean-value system has no finite solution; the mesh has degenerate "
+                "triangles: clean it up (Blender: Mesh > Clean Up > Degenerate Dissolve)"
+            )
+        uv[ii] = sol
+
+    # fold-over check: det(a, b, c) > 0 for every uv triangle
+    ua, ub, uc = uv[tris[:, 0]], uv[tris[:, 1]], uv[tris[:, 2]]
+    det = (ub[:, 0] - ua[:, 0]) * (uc[:, 1] - ua[:, 1]) - (ub[:, 1] - ua[:, 1]) * (
+        uc[:, 0] - ua[:, 0]
+    )
+    n_flipped = int(np.count_nonzero(~(det > 0.0)))
+    if n_flipped:
+        raise ParameterizationError(
+            f"{n_flipped} of {len(tris)} triangles came out flipped or degenerate in the "
+            "parameter domain; this happens with zero-area (sliver) triangles: clean up the mesh "
+            "(Blender: Mesh > Clean Up > Degenerate Dissolve) and try again"
+        )
+    return Parameterization(
+        uv=_readonly(uv),
+        kind="disk",
+        domain_polygon=_readonly(uv[loop]),
+        used=_readonly(used),
+        boundary=_readonly(loop.astype(np.int64)),
+        faces=_readonly(tris),
+    )
+
+
+def parameterize(points: np.ndarray, faces: np.ndarray | None = None) -> Parameterization:
+    """Parameterize a point cloud (``faces is None``) or a disk-like mesh (method.md section 4).
+
+    Dispatches to :func:`parameterize_points` (best-fit plane) or :func:`parameterize_mesh`
+    (mean-value map onto the unit disk).
+    """
+    if faces is None:
+        return parameterize_points(points)
+    return parameterize_mesh(points, faces)

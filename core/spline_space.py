@@ -1,0 +1,220 @@
+"""TCB and DCB spline spaces (method.md sections 2.2, 2.3 and 7).
+
+* TCB (Liu-Snoeyink): one basis function per interior set ``I`` of the level-k configurations,
+  ``B_I(x) = sum_{T : (T, I) in Gamma_k} |det T| M(x | T u I)``.
+* DCB (Neamtu): one basis function per Delaunay configuration, ``N_{T,I} = |det T| M(x | T u I)``;
+  built by the same procedure from a Delaunay ``Gamma_0`` with constrained-Delaunay links.
+
+Both have Greville points ``xi = mean(I)`` with ``sum xi B = x``, are a partition of unity inside
+the region where every link closed, and are evaluated as sparse CSR matrices over points.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import scipy.sparse as sp
+
+from .border import check_partition_of_unity
+from .configurations import (
+    Configurations,
+    LinkTriangulator,
+    constrained_delaunay,
+    link_triangulation_procedure,
+)
+from .errors import InvalidKnotsError
+from .simplex import SimplexBatch
+from .spatial import BoxIndex
+
+__all__ = ["SplineSpace", "build_space", "validate_knots"]
+
+_DERIVATIVES = {(0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)}
+
+
+def validate_knots(knots) -> np.ndarray:
+    """Return ``knots`` as (n, 2) float64 or raise :class:`InvalidKnotsError` saying why not."""
+    try:
+        knots = np.asarray(knots, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InvalidKnotsError(f"knots must be an (n, 2) array of numbers: {exc}") from None
+    if knots.ndim != 2 or knots.shape[1] != 2:
+        raise InvalidKnotsError(f"knots must be an (n, 2) array, got shape {knots.shape}")
+    bad = ~np.isfinite(knots).all(axis=1)
+    if bad.any():
+        raise InvalidKnotsError(f"{int(bad.sum())} knots are NaN or infinite; all must be finite")
+    if len(knots) < 3:
+        raise InvalidKnotsError(f"at least 3 knots are needed, got {len(knots)}")
+    uniq = np.unique(knots, axis=0)
+    if len(uniq) < len(knots):
+        raise InvalidKnotsError(
+            f"{len(knots) - len(uniq)} knots coincide with others; knots must be distinct"
+        )
+    centered = knots - knots.mean(axis=0)
+    s = np.linalg.svd(centered, compute_uv=False)
+    if s[1] <= 1e-12 * max(s[0], 1e-300):
+        raise InvalidKnotsError("all knots are collinear; they must span a 2D region")
+    return knots
+
+
+def _set_keys(sets: np.ndarray, n: int) -> np.ndarray:
+    """Integer key of each sorted index set (rows of ``sets``), ``sum_j sets[:, j] n^j``."""
+    keys = np.zeros(len(sets), dtype=np.int64)
+    for j in range(sets.shape[1] - 1, -1, -1):
+        keys = keys * n + sets[:, j]
+    return keys
+
+
+class SplineSpace:
+    """A TCB or DCB spline space of degree ``k`` over a knot set (use :func:`build_space`).
+
+    Attributes
+    ----------
+    knots : (n, 2) float64
+    degree : int
+    mode : "tcb" or "dcb"
+    configurations : :class:`~core.configurations.Configurations` (``Gamma_0 .. Gamma_k``)
+    config_basis : (c, ) int, the basis function of each level-k configuration
+    interior_sets : (n_basis, k) int, the set ``I`` of each basis function
+    greville : (n_basis, 2) float64, ``xi_I = mean(I)``
+    net_faces : (f, 3) int, control-net triangles over basis indices (TCB; empty for DCB)
+    """
+
+    def __init__(self, knots: np.ndarray, degree: int, mode: str, configurations: Configurations):
+        self.knots = knots
+        self.degree = degree
+        self.mode = mode
+        self.configurations = configurations
+        T, I = configurations.level(degree)
+        self.config_triangles, self.config_interior = T, I
+        n = len(knots)
+        if mode == "tcb":
+            keys = _set_keys(I, n)
+            ukeys, first, inv = np.unique(keys, return_index=True, return_inverse=True)
+            self._basis_keys = ukeys
+            self.config_basis = inv.reshape(-1)
+            self.interior_sets = I[first]
+        else:
+            self._basis_keys = None
+            self.config_basis = np.arange(len(T))
+            self.interior_sets = I
+        self.n_basis = int(len(self.interior_sets))
+        self.greville = knots[self.interior_sets].mean(axis=1) if self.n_basis else np.zeros((0, 2))
+        p, q, r = knots[T[:, 0]], knots[T[:, 1]], knots[T[:, 2]]
+        weights = np.abs((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
+        self._batch = SimplexBatch(knots, np.concatenate([T, I], axis=1), weights)
+        self._index = BoxIndex(self._batch.bbox)
+        self.net_faces = self._centroid_triangulation() if mode == "tcb" else np.zeros((0, 3), int)
+
+    # ----------------------------------------------------------------------------------------
+    @property
+    def n_configurations(self) -> int:
+        return len(self.config_triangles)
+
+    def basis_index(self, sets: np.ndarray) -> np.ndarray:
+        """Basis index of each sorted interior set (rows of ``sets``), -1 where none (TCB)."""
+        if self._basis_keys is None:
+            raise ValueError("basis_index is defined for TCB spaces (DCB has one per configuration)")
+        sets = np.sort(np.asarray(sets, dtype=np.int64), axis=1)
+        keys = _set_keys(sets, len(self.knots))
+        pos = np.searchsorted(self._basis_keys, keys)
+        pos = np.minimum(pos, len(self._basis_keys) - 1)
+        return np.where(self._basis_keys[pos] == keys, pos, -1)
+
+    def _centroid_triangulation(self) -> np.ndarray:
+        """Order-k centroid triangulation over the basis functions (method.md section 7)."""
+        k = self.degree
+        faces = []
+        T, I = self.configurations.level(k - 1)
+        if len(T):
+            corners = [self.basis_index(np.concatenate([I, T[:, v : v + 1]], axis=1)) for v in range(3)]
+            faces.append(np.stack(corners, axis=1))
+        if k >= 2:
+            T, I = self.configurations.level(k - 2)
+            if len(T):
+                corners = [
+                    self.basis_index(np.concatenate([I, T[:, [v, (v + 1) % 3]]], axis=1))
+                    for v in range(3)
+                ]
+                faces.append(np.stack(corners, axis=1))
+        if not faces:
+            return np.zeros((0, 3), dtype=np.int64)
+        F = np.concatenate(faces)
+        return F[(F >= 0).all(axis=1)]
+
+    # ----------------------------------------------------------------------------------------
+    def evaluate(self, uv, derivative: Sequence[int] = (0, 0)) -> sp.csr_matrix:
+        """All basis functions (or a partial derivative) at ``uv`` (m, 2): CSR (m, n_basis).
+
+        ``derivative`` is ``(du, dv)`` with ``du + dv <= 2``. Pairs (point, configuration) come
+        from the bucket-grid index; the values from :class:`~core.simplex.SimplexBatch`.
+        """
+        der = tuple(int(d) for d in derivative)
+        if der not in _DERIVATIVES:
+            raise ValueError(f"derivative must be one of {sorted(_DERIVATIVES)}, got {derivative}")
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        rows, cols, vals = [], [], []
+        for pt, cfg in self._index.pairs(uv):
+            v = self._batch.evaluate(uv[pt], cfg, der)
+            nz = v != 0
+            rows.append(pt[nz].astype(np.int32))
+            cols.append(self.config_basis[cfg[nz]].astype(np.int32))
+            vals.append(v[nz])
+        if rows:
+            r, c, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+        else:
+            r = c = np.zeros(0, dtype=np.int32)
+            v = np.zeros(0)
+        A = sp.csr_matrix((v, (r, c)), shape=(len(uv), self.n_basis))
+        A.sum_duplicates()
+        return A
+
+    def check_partition_of_unity(self, uv, tol: float = 1e-9, raise_error: bool = False):
+        """See :func:`core.border.check_partition_of_unity`."""
+        return check_partition_of_unity(self, uv, tol, raise_error)
+
+    def __repr__(self) -> str:
+        return (
+            f"SplineSpace(mode={self.mode!r}, degree={self.degree}, knots={len(self.knots)}, "
+            f"configurations={self.n_configurations}, n_basis={self.n_basis})"
+        )
+
+
+def build_space(
+    knots,
+    degree: int = 2,
+    mode: str = "tcb",
+    triangulation=None,
+    link_triangulator: LinkTriangulator | None = None,
+) -> SplineSpace:
+    """Build a TCB or DCB spline space of ``degree`` on ``knots`` (method.md sections 2.1-2.3).
+
+    Parameters
+    ----------
+    knots : (n, 2) float
+        Distinct knots, not all collinear.
+    degree : int
+        1, 2 (C^1, the default) or 3.
+    mode : "tcb" or "dcb"
+        TCB: one function per interior set. DCB: one per Delaunay configuration (then
+        ``triangulation`` and ``link_triangulator`` must be left unset).
+    triangulation : (t, 3) int, optional
+        ``Gamma_0`` (Delaunay by default).
+    link_triangulator : callable, optional
+        Chooses the triangulation of each link polygon (constrained Delaunay by default); see
+        :mod:`core.configurations`.
+    """
+    knots = validate_knots(knots)
+    if degree not in (1, 2, 3):
+        raise ValueError(f"degree must be 1, 2 or 3, got {degree}")
+    if mode not in ("tcb", "dcb"):
+        raise ValueError(f"mode must be 'tcb' or 'dcb', got {mode!r}")
+    if mode == "dcb" and (triangulation is not None or link_triangulator is not None):
+        raise ValueError("mode 'dcb' uses the Delaunay configurations; do not pass a triangulation")
+    configs = link_triangulation_procedure(
+        knots,
+        degree,
+        triangulation=triangulation,
+        link_triangulator=link_triangulator or constrained_delaunay,
+    )
+    return SplineSpace(knots, degree, mode, configs)
