@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, depth_first_order
 from scipy.sparse.linalg import splu
-from scipy.spatial import ConvexHull, cKDTree
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .errors import InvalidInputError, ParameterizationError, TopologyError
 
@@ -107,8 +107,8 @@ class Normalization:
     """Similarity that maps the bounding box of the data to a box of half-diagonal 1.
 
     ``apply(p) = (p - center) / scale`` and ``undo(q) = q * scale + center``, with ``center`` the
-    centre of the bounding box and ``scale`` half its diagonal (method.md section 4: all
-    tolerances of the engine are relative to this scale). The two maps invert each other to
+    centre of the bounding box and ``scale`` half its diagonal (method.md section 4; the
+    tolerances of this module are relative to this scale). The two maps invert each other to
     about one ulp of the coordinates.
 
     Attributes:
@@ -288,11 +288,15 @@ def _points_in_polygon(x: np.ndarray, poly: np.ndarray, tol: float) -> np.ndarra
         straddle = (av > xs[..., 1]) != (b[:, 1] > xs[..., 1])
         dv = np.where(straddle, b[:, 1] - av, 1.0)
         u_cross = au + (xs[..., 1] - av) * (b[:, 0] - au) / dv
-        crossings = np.count_nonzero(straddle & (xs[..., 0] < u_cross), axis=1)
-        # distance to the closest edge (segment) for the boundary tolerance
-        t = np.clip(np.einsum("mbk,bk->mb", xs - a, e) / ee_safe, 0.0, 1.0)
-        d2 = np.sum((xs - (a + t[..., None] * e)) ** 2, axis=-1).min(axis=1)
-        out[s : s + chunk] = (crossings % 2 == 1) | (d2 <= atol * atol)
+        inside = np.count_nonzero(straddle & (xs[..., 0] < u_cross), axis=1) % 2 == 1
+        # points outside by parity may still lie on an edge (within atol): segment distance
+        out_idx = np.flatnonzero(~inside)
+        if len(out_idx):
+            xo = xs[out_idx]
+            t = np.clip(np.einsum("mbk,bk->mb", xo - a, e) / ee_safe, 0.0, 1.0)
+            d2 = np.sum((xo - (a + t[..., None] * e)) ** 2, axis=-1).min(axis=1)
+            inside[out_idx] = d2 <= atol * atol
+        out[s : s + chunk] = inside
     return out
 
 
@@ -301,9 +305,7 @@ def _points_in_polygon(x: np.ndarray, poly: np.ndarray, tol: float) -> np.ndarra
 # --------------------------------------------------------------------------------------------
 
 
-def _local_planes(
-    q: np.ndarray, k: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _local_planes(q: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Local PCA of every point over itself and its ``k`` nearest neighbours (3D).
 
     ``C_i = (1/(k+1)) sum_j (q_j - mean)(q_j - mean)^T`` with eigenvalues
@@ -342,8 +344,9 @@ def _fold_fraction(q: np.ndarray, uv: np.ndarray, normal: np.ndarray) -> float:
 
     Only points with a reliable local normal are suspects, and a point counts as flagged only
     when at least half of its 3D neighbourhood are suspects (folds are regions; noise makes
-    isolated suspects), so noise and line-like neighbourhoods do not cause false alarms. Clouds of more than 100 000 points are checked on a seeded
-    (deterministic) random subset of that size.
+    isolated suspects), so noise and line-like neighbourhoods do not cause false alarms.
+    Clouds of more than 100 000 points are checked on a seeded (deterministic) random subset of
+    that size.
     """
     if len(q) > _FOLD_MAX_SAMPLE:
         pick = np.random.default_rng(0).choice(len(q), _FOLD_MAX_SAMPLE, replace=False)
@@ -408,7 +411,13 @@ def parameterize_points(points: np.ndarray) -> Parameterization:
             "a height field or a gently curved patch is needed: split the scan into patches "
             "that each face one direction, or supply a mesh of disk topology (with faces)"
         )
-    hull = ConvexHull(uv)  # 2D: vertices are in counter-clockwise order
+    try:
+        hull = ConvexHull(uv)  # 2D: vertices are in counter-clockwise order
+    except QhullError:
+        raise InvalidInputError(
+            "the points lie almost on one straight line; a surface needs points spread in two "
+            "directions"
+        ) from None
     origin = norm.undo(m + c @ axes[:2])
     return Parameterization(
         uv=_readonly(uv),
@@ -446,12 +455,13 @@ def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
             "the mesh has no faces; give faces of a disk-like patch, or parameterize the "
             "vertices as a point cloud (faces=None)"
         )
-    if not np.issubdtype(f.dtype, np.integer):
-        if not (np.issubdtype(f.dtype, np.floating) and np.all(np.isfinite(f))
-                and np.all(f == np.round(f))):
-            raise InvalidInputError(
-                f"faces must hold integer vertex indices; got values of type {f.dtype}"
-            )
+    integral = np.issubdtype(f.dtype, np.integer) or (
+        np.issubdtype(f.dtype, np.floating) and np.all(np.isfinite(f)) and np.all(f == np.round(f))
+    )
+    if not integral:
+        raise InvalidInputError(
+            f"faces must hold integer vertex indices; got values of type {f.dtype}"
+        )
     f = f.astype(np.int64)
     bad = (f < 0) | (f >= n_vertices)
     if bad.any():
@@ -617,6 +627,8 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
     tris = _orient_consistently(tris, edge_id)
     he_from = tris.reshape(-1)
     he_to = np.roll(tris, -1, axis=1).reshape(-1)
+    key = np.minimum(he_from, he_to) * n + np.maximum(he_from, he_to)
+    edge_id = np.searchsorted(ekey, key)  # reversed faces list their edges in another order
 
     # boundary: half-edges of edges with one face, in face direction (interior on the left)
     on_boundary = ecount[edge_id] == 1

@@ -22,6 +22,7 @@ from .configurations import (
     LinkTriangulator,
     constrained_delaunay,
     link_triangulation_procedure,
+    triangulate_polygon,
 )
 from .errors import InvalidKnotsError
 from .simplex import SimplexBatch
@@ -55,6 +56,53 @@ def validate_knots(knots) -> np.ndarray:
     if s[1] <= 1e-12 * max(s[0], 1e-300):
         raise InvalidKnotsError("all knots are collinear; they must span a 2D region")
     return knots
+
+
+def _remove_ghost_vertices(faces: np.ndarray, coords: np.ndarray, ghosts: np.ndarray) -> np.ndarray:
+    """Remove each ghost vertex from a triangulation by re-triangulating its star polygon.
+
+    ``faces`` (F, 3) CCW vertex ids, ``coords`` (V, 2). Loops over the ghosts only (a small
+    fraction of the vertices), each step touching the few faces around one ghost.
+    """
+    face_list = [tuple(f) for f in faces.tolist()]
+    alive = [True] * len(face_list)
+    incident: dict[int, list[int]] = {}
+    ghost_set = set(ghosts.tolist())
+    for fi, f in enumerate(face_list):
+        for v in f:
+            if v in ghost_set:
+                incident.setdefault(v, []).append(fi)
+    for g in ghosts.tolist():
+        star = [fi for fi in incident.get(g, []) if alive[fi]]
+        nxt = {}
+        for fi in star:
+            a, b, c = face_list[fi]
+            # rotate so that the ghost comes first: (g, p, q), boundary edge p -> q
+            p, q = (b, c) if a == g else (c, a) if b == g else (a, b)
+            nxt[p] = q
+            alive[fi] = False
+        if not nxt:
+            continue
+        start = next(iter(nxt))
+        ring, v = [start], nxt[start]
+        while v != start and v in nxt and len(ring) <= len(nxt):
+            ring.append(v)
+            v = nxt[v]
+        if v != start or len(ring) != len(nxt):
+            continue  # open fan: the ghost lies at the border, its faces stay removed
+        try:
+            tris = triangulate_polygon(coords[ring])
+        except InvalidKnotsError:
+            continue
+        for t in tris:
+            face = tuple(ring[i] for i in t)
+            face_list.append(face)
+            alive.append(True)
+            for v in face:
+                if v in ghost_set:
+                    incident.setdefault(v, []).append(len(face_list) - 1)
+    out = [f for f, a in zip(face_list, alive) if a]
+    return np.array(out, dtype=np.int64).reshape(-1, 3)
 
 
 def _set_keys(sets: np.ndarray, n: int) -> np.ndarray:
@@ -122,25 +170,45 @@ class SplineSpace:
         return np.where(self._basis_keys[pos] == keys, pos, -1)
 
     def _centroid_triangulation(self) -> np.ndarray:
-        """Order-k centroid triangulation over the basis functions (method.md section 7)."""
+        """Order-k centroid triangulation over the basis functions (method.md section 7).
+
+        Faces: ``(xi_{I'+a}, xi_{I'+b}, xi_{I'+c})`` for ``(T, I')`` in ``Gamma_{k-1}`` and
+        ``(xi_{I''+ab}, xi_{I''+bc}, xi_{I''+ca})`` for ``(T, I'')`` in ``Gamma_{k-2}``. Some of
+        these vertices are *ghosts*: sets ``J`` whose link cancels completely (e.g. for
+        quadratics an edge ``ab`` where each end is an ear tip of the other's one-ring
+        triangulation), so no basis function exists for them. method.md section 7 does not say
+        what to do; a ghost's faces form a closed fan around it, so we remove the ghost and
+        re-triangulate its star polygon (ear clipping in Greville coordinates). Fans that are
+        not closed lie at the border and are dropped with their ghost.
+        """
         k = self.degree
-        faces = []
+        groups = []
         T, I = self.configurations.level(k - 1)
         if len(T):
-            corners = [self.basis_index(np.concatenate([I, T[:, v : v + 1]], axis=1)) for v in range(3)]
-            faces.append(np.stack(corners, axis=1))
+            groups.append(np.stack([np.concatenate([I, T[:, [v]]], axis=1) for v in range(3)], 1))
         if k >= 2:
             T, I = self.configurations.level(k - 2)
             if len(T):
-                corners = [
-                    self.basis_index(np.concatenate([I, T[:, [v, (v + 1) % 3]]], axis=1))
-                    for v in range(3)
-                ]
-                faces.append(np.stack(corners, axis=1))
-        if not faces:
+                groups.append(
+                    np.stack(
+                        [np.concatenate([I, T[:, [v, (v + 1) % 3]]], axis=1) for v in range(3)], 1
+                    )
+                )
+        if not groups:
             return np.zeros((0, 3), dtype=np.int64)
-        F = np.concatenate(faces)
-        return F[(F >= 0).all(axis=1)]
+        sets = np.sort(np.concatenate(groups), axis=2)  # (F, 3, k)
+        F = len(sets)
+        keys = _set_keys(sets.reshape(-1, k), len(self.knots))
+        ukeys, first, inv = np.unique(keys, return_index=True, return_inverse=True)
+        faces = inv.reshape(F, 3)
+        coords = self.knots[sets.reshape(-1, k)[first]].mean(axis=1)
+        pos = np.minimum(np.searchsorted(self._basis_keys, ukeys), len(self._basis_keys) - 1)
+        exists = self._basis_keys[pos] == ukeys
+        ghosts = np.flatnonzero(~exists)
+        if len(ghosts):
+            faces = _remove_ghost_vertices(faces, coords, ghosts)
+        faces = faces[exists[faces].all(axis=1)]
+        return pos[faces]
 
     # ----------------------------------------------------------------------------------------
     def evaluate(self, uv, derivative: Sequence[int] = (0, 0)) -> sp.csr_matrix:

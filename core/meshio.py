@@ -1,0 +1,743 @@
+"""Reading and writing geometry files for the command-line tool.
+
+Readers return ``(points, faces)``: ``points (n, 3) float64`` and ``faces (f, 3) int64``
+triangles (polygons split into fans ``(v0, v_j, v_{j+1})``), or ``faces = None`` for a point
+cloud. Supported:
+
+=========================  =====================================================================
+``.off``                   ASCII OFF (``OFF``/``COFF``/``NOFF``/``CNOFF``/``STOFF`` headers,
+                           counts on the header line or the next, ``#`` comments)
+``.obj``                   Wavefront OBJ: ``v`` and ``f`` lines (``f 1/2/3 ...``, negative
+                           indices); everything else is ignored
+``.ply``                   PLY ascii, binary_little_endian, binary_big_endian: vertex ``x, y, z``
+                           of any numeric type, face list ``vertex_indices``/``vertex_index``
+``.xyz .txt .csv .pts``    text columns (whitespace or comma separated); the first three are
+                           ``x, y, z``; an optional header line is skipped
+``.npy``                   an ``(n, 3)`` array (more columns: the first three are used)
+``.npz``                   key ``points`` (and optional ``faces``), or a DEM: key ``elevation``
+                           (rows, cols) with ``xmin, xmax, ymin, ymax``
+=========================  =====================================================================
+
+Writers: :func:`write_mesh` for ``.obj`` (ASCII) and ``.ply`` (binary little endian).
+
+Bulk data are parsed with numpy (``np.loadtxt``, structured dtypes on the raw bytes); only OBJ
+files and binary PLY files with mixed polygon sizes use a Python loop over lines / faces.
+Every problem with a file raises :class:`~.errors.FileFormatError` naming the file.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from .errors import FileFormatError, InvalidInputError
+
+__all__ = ["READ_EXTENSIONS", "WRITE_EXTENSIONS", "read_geometry", "write_mesh"]
+
+READ_EXTENSIONS = (".off", ".obj", ".ply", ".xyz", ".txt", ".csv", ".pts", ".npy", ".npz")
+WRITE_EXTENSIONS = (".obj", ".ply")
+
+PathLike = str | os.PathLike
+
+# degrees of latitude -> metres (the value matplotlib's DEM examples use)
+_METRES_PER_DEGREE = 111_200.0
+
+
+class _MalformedError(Exception):
+    """Internal: a parse problem; turned into FileFormatError with the file name."""
+
+
+# --------------------------------------------------------------------------------------------
+# Public API
+# --------------------------------------------------------------------------------------------
+
+
+def read_geometry(path: PathLike) -> tuple[np.ndarray, np.ndarray | None]:
+    """Read points and (optionally) faces from a file; the format follows the extension.
+
+    Args:
+        path: file to read (see the module docstring for the formats).
+
+    Returns:
+        ``(points, faces)``: ``points (n, 3) float64``; ``faces (f, 3) int64`` triangles with
+        0-based indices, or None when the file holds no faces (a point cloud).
+
+    Raises:
+        FileFormatError: missing file, unknown extension, or malformed/truncated content.
+    """
+    p = Path(path)
+    ext = p.suffix.lower()
+    if not p.is_file():
+        raise FileFormatError(f"no such file: {str(p)!r}; check the path")
+    if ext not in _READERS:
+        raise FileFormatError(
+            f"cannot read {p.name!r}: unknown file type {ext or '(no extension)'!r}; "
+            f"supported: {', '.join(READ_EXTENSIONS)}"
+        )
+    try:
+        points, faces = _READERS[ext](p)
+    except _MalformedError as exc:
+        raise FileFormatError(f"cannot read {p.name!r}: {exc}") from None
+    except OSError as exc:
+        raise FileFormatError(f"cannot read {p.name!r}: {exc.strerror or exc}") from None
+    except (ValueError, IndexError, TypeError, struct.error, UnicodeDecodeError) as exc:
+        raise FileFormatError(f"cannot read {p.name!r}: malformed content ({exc})") from None
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    if faces is not None:
+        faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+        if len(faces) == 0:
+            faces = None
+        elif faces.min() < 0 or faces.max() >= len(points):
+            raise FileFormatError(
+                f"cannot read {p.name!r}: faces refer to vertices that do not exist (indices "
+                f"{int(faces.min())}..{int(faces.max())}, but there are {len(points)} vertices)"
+            )
+    return points, faces
+
+
+def write_mesh(path: PathLike, vertices: np.ndarray, faces: np.ndarray) -> None:
+    """Write a polygon mesh as ``.obj`` (ASCII) or ``.ply`` (binary little endian).
+
+    OBJ: ``v x y z`` lines with 17 significant digits (exact round trip of float64) and
+    ``f i j k`` lines with 1-based indices. PLY: ``double x, y, z`` vertices and a face list
+    ``uchar`` count / ``int`` indices.
+
+    Args:
+        path: output file; its extension chooses the format.
+        vertices: ``(n, 3)`` coordinates.
+        faces: ``(f, k)`` 0-based vertex indices, ``k >= 3`` (triangles, quads, ...).
+
+    Raises:
+        FileFormatError: unknown extension or the file cannot be written.
+        InvalidInputError: bad arrays (shape, NaN, indices out of range).
+    """
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext not in WRITE_EXTENSIONS:
+        raise FileFormatError(
+            f"cannot write {p.name!r}: unknown mesh file type {ext or '(no extension)'!r}; "
+            f"supported: {', '.join(WRITE_EXTENSIONS)}"
+        )
+    v = np.asarray(vertices, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise InvalidInputError(f"vertices must be an (N, 3) array; got shape {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise InvalidInputError("vertices have NaN or infinite coordinates; cannot write them")
+    f = np.asarray(faces)
+    if f.ndim != 2 or f.shape[1] < 3 or (f.size and not np.issubdtype(f.dtype, np.integer)):
+        raise InvalidInputError(
+            f"faces must be an (F, k) integer array with k >= 3; got shape {f.shape}, "
+            f"type {f.dtype}"
+        )
+    if f.size and (f.min() < 0 or f.max() >= len(v)):
+        raise InvalidInputError(
+            f"face indices must be in 0..{len(v) - 1}; got {int(f.min())}..{int(f.max())}"
+        )
+    if f.shape[1] > 255:
+        raise InvalidInputError("faces with more than 255 vertices cannot be written")
+    try:
+        if ext == ".obj":
+            _write_obj(p, v, f.astype(np.int64))
+        else:
+            _write_ply(p, v, f.astype(np.int64))
+    except OSError as exc:
+        raise FileFormatError(f"cannot write {str(p)!r}: {exc.strerror or exc}") from None
+
+
+# --------------------------------------------------------------------------------------------
+# Helpers
+# --------------------------------------------------------------------------------------------
+
+
+def _fan(polys: np.ndarray) -> np.ndarray:
+    """Split ``(f, k)`` polygons into ``(f (k-2), 3)`` fan triangles ``(v0, v_j, v_{j+1})``."""
+    polys = np.asarray(polys, dtype=np.int64)
+    f, k = polys.shape
+    if k < 3:
+        return np.empty((0, 3), dtype=np.int64)
+    j = np.arange(1, k - 1)
+    first = np.broadcast_to(polys[:, :1], (f, k - 2))
+    return np.stack([first, polys[:, j], polys[:, j + 1]], axis=-1).reshape(-1, 3)
+
+
+def _fan_groups(groups: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """Fan triangles of polygons given in groups of equal size, in the original face order.
+
+    Args:
+        groups: ``(face_numbers (m,), polygons (m, k))`` per polygon size ``k``.
+    """
+    tris, where = [], []
+    for ids, polys in groups:
+        k = polys.shape[1]
+        if k >= 3:
+            tris.append(_fan(polys))
+            where.append(np.repeat(ids, k - 2))
+    if not tris:
+        return np.empty((0, 3), dtype=np.int64)
+    order = np.argsort(np.concatenate(where), kind="stable")
+    return np.concatenate(tris)[order]
+
+
+def _loadtxt(lines: list[str], what: str, **kw) -> np.ndarray:
+    """``np.loadtxt`` over a list of lines; problems become _MalformedError naming ``what``."""
+    if not lines:
+        return np.empty((0, len(kw.get("usecols", (0,)))))
+    try:
+        return np.loadtxt(lines, ndmin=2, comments=None, **kw)
+    except ValueError as exc:
+        msg = str(exc).split("\n")[0]
+        raise _MalformedError(f"bad {what}: {msg}") from None
+
+
+def _polygons_from_lines(lines: list[str], what: str, first_col: int = 0) -> np.ndarray:
+    """Triangles from text lines ``... n i0 i1 ... i_{n-1} [extra]`` (count at ``first_col``).
+
+    Lines are grouped by their count (a loop over the few distinct polygon sizes only) and each
+    group is parsed by ``np.loadtxt``; polygons with fewer than 3 vertices are dropped.
+    """
+    if not lines:
+        return np.empty((0, 3), dtype=np.int64)
+    counts = _loadtxt(lines, what, usecols=(first_col,), dtype=np.int64)[:, 0]
+    if counts.min() < 0:
+        raise _MalformedError(f"bad {what}: negative vertex count")
+    arr = np.array(lines, dtype=object)
+    groups = []
+    for n in np.unique(counts[counts >= 3]):
+        sel = np.flatnonzero(counts == n)
+        cols = tuple(range(first_col + 1, first_col + 1 + int(n)))
+        groups.append((sel, _loadtxt(list(arr[sel]), what, usecols=cols, dtype=np.int64)))
+    return _fan_groups(groups)
+
+
+def _text_lines(path: Path) -> list[str]:
+    """Non-empty lines of a text file with ``#`` comments removed."""
+    text = path.read_text(encoding="utf-8", errors="replace")
+    text = re.sub(r"#[^\n]*", "", text)
+    return [ln for ln in text.splitlines() if ln.strip()]
+
+
+# --------------------------------------------------------------------------------------------
+# OFF
+# --------------------------------------------------------------------------------------------
+
+_OFF_HEADER = re.compile(r"^(ST)?(C)?(N)?(4)?(n)?OFF$")
+
+
+def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """ASCII OFF: ``OFF``, ``V F E``, ``V`` vertex lines, ``F`` lines ``n i0 ... i_{n-1}``."""
+    lines = _text_lines(path)
+    if not lines:
+        raise _MalformedError("the file is empty")
+    head = lines[0].split()
+    m = _OFF_HEADER.match(head[0])
+    if not m:
+        raise _MalformedError(f"the first line must be 'OFF', not {lines[0].strip()[:40]!r}")
+    if m.group(4) or m.group(5):
+        raise _MalformedError(f"{head[0]} (not 3D) files are not supported; use plain OFF")
+    if "BINARY" in (t.upper() for t in head[1:]):
+        raise _MalformedError("binary OFF is not supported; save the file as ASCII OFF")
+    rest = head[1:]
+    body = 1
+    if not rest:
+        if len(lines) < 2:
+            raise _MalformedError("the vertex/face counts are missing after 'OFF'")
+        rest, body = lines[1].split(), 2
+    try:
+        nv, nf = int(rest[0]), int(rest[1])
+    except (ValueError, IndexError):
+        raise _MalformedError(
+            f"bad counts line {' '.join(rest)[:40]!r}; expected 'V F E'"
+        ) from None
+    if nv < 0 or nf < 0:
+        raise _MalformedError("negative vertex or face count")
+    if len(lines) < body + nv + nf:
+        found = len(lines) - body
+        raise _MalformedError(
+            f"the header announces {nv} vertices and {nf} faces, but only {found} data lines "
+            "follow (the file is truncated)"
+        )
+    verts = _loadtxt(lines[body : body + nv], "vertex line", usecols=(0, 1, 2))
+    faces = _polygons_from_lines(lines[body + nv : body + nv + nf], "face line")
+    return verts, (faces if nf else None)
+
+
+# --------------------------------------------------------------------------------------------
+# OBJ
+# --------------------------------------------------------------------------------------------
+
+
+def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """Wavefront OBJ: ``v x y z [w | r g b]`` and ``f a b c ...`` where ``a`` may be ``i``,
+    ``i/t``, ``i//n`` or ``i/t/n``, 1-based, negative = relative to the vertices read so far.
+    Other statements (``vt``, ``vn``, ``g``, ``usemtl``, ``l``, ...) are ignored. One loop over
+    the ``v``/``f`` lines; coordinates are converted in bulk by ``np.loadtxt``."""
+    coords: list[str] = []
+    polys: list[list[int]] = []
+    text = path.read_text(encoding="utf-8", errors="replace")
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        parts = raw.split("#", 1)[0].split()
+        if not parts or parts[0] not in ("v", "f"):
+            continue
+        if parts[0] == "v":
+            if len(parts) < 4:
+                raise _MalformedError(f"line {lineno}: a vertex needs x, y, z: {raw.strip()!r}")
+            coords.append(" ".join(parts[1:4]))
+            continue
+        try:
+            idx = [int(t.split("/", 1)[0]) for t in parts[1:]]
+        except ValueError:
+            raise _MalformedError(f"line {lineno}: bad face {raw.strip()!r}") from None
+        nv = len(coords)
+        idx = [i - 1 if i > 0 else nv + i for i in idx]  # 1-based, or relative if negative
+        if any(i < 0 or i >= nv for i in idx):
+            raise _MalformedError(
+                f"line {lineno}: the face refers to a vertex not defined before it"
+            )
+        if len(idx) >= 3:
+            polys.append(idx)
+    verts = _loadtxt(coords, "vertex line", usecols=(0, 1, 2))
+    if not polys:
+        return verts, None
+    by_size: dict[int, list[int]] = {}
+    for i, poly in enumerate(polys):  # group by polygon size to fan-split in bulk
+        by_size.setdefault(len(poly), []).append(i)
+    groups = [
+        (np.array(ids), np.array([polys[i] for i in ids], dtype=np.int64))
+        for ids in by_size.values()
+    ]
+    return verts, _fan_groups(groups)
+
+
+def _write_obj(path: Path, v: np.ndarray, f: np.ndarray) -> None:
+    """ASCII OBJ, bulk formatted with ``np.savetxt``."""
+    with open(path, "w", encoding="ascii", newline="\n") as fh:
+        fh.write("# written by TCB Surface\n")
+        np.savetxt(fh, v, fmt="v %.17g %.17g %.17g")
+        if len(f):
+            np.savetxt(fh, f + 1, fmt="f" + " %d" * f.shape[1])
+
+
+# --------------------------------------------------------------------------------------------
+# PLY
+# --------------------------------------------------------------------------------------------
+
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}  # fmt: skip
+
+
+class _PlyElement:
+    """One ``element`` of a PLY header: name, count, and its properties in order.
+
+    ``props`` holds ``(name, dtype)`` for scalars and ``(name, (count_dtype, item_dtype))`` for
+    lists (dtype strings without byte order).
+    """
+
+    def __init__(self, name: str, count: int) -> None:
+        self.name, self.count = name, count
+        self.props: list[tuple[str, str | tuple[str, str]]] = []
+
+    def has_list(self) -> bool:
+        return any(isinstance(t, tuple) for _, t in self.props)
+
+
+def _ply_header(data: bytes) -> tuple[str, list[_PlyElement], int]:
+    """Parse the header; return the format, the elements, and the byte offset of the body."""
+    if not data.startswith(b"ply"):
+        raise _MalformedError("not a PLY file (it does not start with 'ply')")
+    end = re.search(rb"end_header[ \t]*\r?\n", data)
+    if end is None:
+        raise _MalformedError("the header has no 'end_header' line (truncated or not PLY)")
+    fmt = None
+    elements: list[_PlyElement] = []
+    for raw in data[: end.start()].decode("ascii", errors="replace").splitlines()[1:]:
+        t = raw.split()
+        if not t or t[0] in ("comment", "obj_info"):
+            continue
+        if t[0] == "format" and len(t) >= 2:
+            fmt = t[1]
+        elif t[0] == "element" and len(t) == 3:
+            try:
+                elements.append(_PlyElement(t[1], int(t[2])))
+            except ValueError:
+                raise _MalformedError(f"bad header line {raw.strip()!r}") from None
+        elif t[0] == "property" and elements:
+            try:
+                if t[1] == "list" and len(t) == 5:
+                    elements[-1].props.append((t[4], (_PLY_TYPES[t[2]], _PLY_TYPES[t[3]])))
+                elif len(t) == 3:
+                    elements[-1].props.append((t[2], _PLY_TYPES[t[1]]))
+                else:
+                    raise KeyError(raw)
+            except KeyError:
+                raise _MalformedError(f"bad header line {raw.strip()!r}") from None
+        else:
+            raise _MalformedError(f"bad header line {raw.strip()!r}")
+    if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
+        raise _MalformedError(f"unknown PLY format {fmt!r}")
+    return fmt, elements, end.end()
+
+
+def _ply_vertices_and_faces(
+    tables: dict[str, dict[str, np.ndarray]],
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Pick ``x, y, z`` of ``vertex`` and the triangles of ``face`` from the parsed tables."""
+    vt = tables.get("vertex")
+    if vt is None:
+        raise _MalformedError("there is no 'vertex' element")
+    missing = [c for c in "xyz" if c not in vt]
+    if missing:
+        raise _MalformedError(f"the vertex element has no property {', '.join(missing)}")
+    verts = np.column_stack([vt["x"], vt["y"], vt["z"]]).astype(np.float64)
+    ft = tables.get("face")
+    if ft is None:
+        return verts, None
+    return verts, ft.get("__triangles__", np.empty((0, 3), dtype=np.int64))
+
+
+def _face_list_name(el: _PlyElement) -> str | None:
+    names = [n for n, t in el.props if isinstance(t, tuple)]
+    for want in ("vertex_indices", "vertex_index"):
+        if want in names:
+            return want
+    return None
+
+
+def _read_ply(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """PLY (ascii, binary_little_endian, binary_big_endian)."""
+    data = path.read_bytes()
+    fmt, elements, offset = _ply_header(data)
+    tables: dict[str, dict[str, np.ndarray]] = {}
+    if fmt == "ascii":
+        lines = [
+            ln for ln in data[offset:].decode("ascii", errors="replace").splitlines() if ln.strip()
+        ]
+        pos = 0
+        for el in elements:
+            block = lines[pos : pos + el.count]
+            if len(block) < el.count:
+                raise _MalformedError(
+                    f"the {el.name!r} element announces {el.count} lines but only "
+                    f"{len(block)} follow (the file is truncated)"
+                )
+            pos += el.count
+            if el.name in ("vertex", "face"):
+                tables[el.name] = _ply_ascii_element(el, block)
+    else:
+        endian = "<" if fmt == "binary_little_endian" else ">"
+        for el in elements:
+            table, offset = _ply_binary_element(el, data, offset, endian)
+            if el.name in ("vertex", "face"):
+                tables[el.name] = table
+            if "vertex" in tables and "face" in tables:
+                break  # nothing after vertices and faces is needed
+    return _ply_vertices_and_faces(tables)
+
+
+def _ply_ascii_element(el: _PlyElement, block: list[str]) -> dict[str, np.ndarray]:
+    """Columns of an ASCII element. Scalars before the first list have fixed columns; for a
+    face element the list ``vertex_indices`` is parsed by polygon size (see
+    :func:`_polygons_from_lines`)."""
+    out: dict[str, np.ndarray] = {}
+    fixed = []
+    for name, t in el.props:
+        if isinstance(t, tuple):
+            break
+        fixed.append(name)
+    if fixed and block:
+        cols = _loadtxt(block, f"{el.name} line", usecols=tuple(range(len(fixed))))
+        for c, name in enumerate(fixed):
+            out[name] = cols[:, c]
+    elif fixed:
+        for name in fixed:
+            out[name] = np.empty(0)
+    if el.name == "face":
+        lname = _face_list_name(el)
+        if lname is None:
+            raise _MalformedError("the face element has no list 'vertex_indices' / 'vertex_index'")
+        first = [n for n, _ in el.props].index(lname)
+        if first != len(fixed):
+            raise _MalformedError("a list property before 'vertex_indices' is not supported")
+        out["__triangles__"] = _polygons_from_lines(block, "face line", first_col=first)
+    return out
+
+
+def _ply_binary_element(
+    el: _PlyElement, data: bytes, offset: int, endian: str
+) -> tuple[dict[str, np.ndarray], int]:
+    """Read one binary element at ``offset``; return its columns and the offset after it.
+
+    Elements of scalars and elements whose lists all have the same length are read with one
+    structured dtype (``np.frombuffer``). Lists of varying length (e.g. mixed triangles and
+    quads) need the record offsets, found by a loop over records; the indices are then
+    gathered in bulk per polygon size.
+    """
+    if el.count == 0:
+        return {}, offset
+    if not el.has_list():
+        dt = np.dtype([(n, endian + t) for n, t in el.props])
+        arr = _frombuffer(data, dt, el.count, offset, el.name)
+        return {n: arr[n] for n in arr.dtype.names}, offset + dt.itemsize * el.count
+
+    # first record: list lengths, to try a fixed-size layout
+    sizes = []
+    pos = offset
+    for _, t in el.props:
+        if isinstance(t, tuple):
+            cdt = np.dtype(endian + t[0])
+            if pos + cdt.itemsize > len(data):
+                raise _MalformedError(f"the {el.name!r} data are truncated")
+            n = int(np.frombuffer(data, cdt, 1, pos)[0])
+            sizes.append(n)
+            pos += cdt.itemsize + n * np.dtype(t[1]).itemsize
+        else:
+            pos += np.dtype(t).itemsize
+    fields = []
+    li = 0
+    for name, t in el.props:
+        if isinstance(t, tuple):
+            fields.append((name + "__n", endian + t[0]))
+            fields.append((name, endian + t[1], (sizes[li],)))
+            li += 1
+        else:
+            fields.append((name, endian + t))
+    dt = np.dtype(fields)
+    fits = offset + dt.itemsize * el.count <= len(data)
+    arr = np.frombuffer(data, dt, el.count, offset) if fits else None
+    list_names = [name for name, t in el.props if isinstance(t, tuple)]
+    uniform = arr is not None and all(
+        np.all(arr[name + "__n"] == s) for name, s in zip(list_names, sizes, strict=True)
+    )
+    out: dict[str, np.ndarray] = {}
+    if uniform:
+        for name, _ in el.props:
+            out[name] = arr[name]
+        end = offset + dt.itemsize * el.count
+    else:
+        out, end = _ply_binary_ragged(el, data, offset, endian)
+    if el.name == "face":
+        lname = _face_list_name(el)
+        if lname is None:
+            raise _MalformedError("the face element has no list 'vertex_indices' / 'vertex_index'")
+        idx = out[lname]
+        if isinstance(idx, np.ndarray):
+            out["__triangles__"] = _fan(idx.reshape(el.count, -1))
+        else:  # ragged: size -> (face numbers, (m, size) indices)
+            out["__triangles__"] = _fan_groups(list(idx.values()))
+    return out, end
+
+
+def _ply_binary_ragged(el: _PlyElement, data: bytes, offset: int, endian: str) -> tuple[dict, int]:
+    """Binary element with lists of varying length: loop over records to find offsets."""
+    n = el.count
+    total = len(data)
+    # per property: offsets (and counts for lists) of every record
+    starts = {name: np.empty(n, dtype=np.int64) for name, _ in el.props}
+    counts = {name: np.empty(n, dtype=np.int64) for name, t in el.props if isinstance(t, tuple)}
+    layout = []
+    for name, t in el.props:
+        if isinstance(t, tuple):
+            c = np.dtype(endian + t[0])
+            layout.append(
+                (
+                    name,
+                    True,
+                    struct.Struct(endian + c.char).unpack_from,
+                    c.itemsize,
+                    np.dtype(t[1]).itemsize,
+                )
+            )
+        else:
+            layout.append((name, False, None, np.dtype(t).itemsize, 0))
+    pos = offset
+    try:
+        for r in range(n):
+            for name, is_list, unpack, size, item in layout:
+                starts[name][r] = pos
+                if is_list:
+                    k = unpack(data, pos)[0]
+                    counts[name][r] = k
+                    pos += size + k * item
+                else:
+                    pos += size
+    except struct.error:
+        raise _MalformedError(f"the {el.name!r} data are truncated") from None
+    if pos > total:
+        raise _MalformedError(f"the {el.name!r} data are truncated")
+    buf = np.frombuffer(data, np.uint8)
+    out: dict = {}
+    for name, t in el.props:
+        if isinstance(t, tuple):
+            item = np.dtype(endian + t[1])
+            csize = np.dtype(t[0]).itemsize
+            groups = {}
+            for k in np.unique(counts[name]):
+                ids = np.flatnonzero(counts[name] == k)
+                k = int(k)
+                byte = (
+                    starts[name][ids, None, None]
+                    + csize
+                    + np.arange(k)[None, :, None] * item.itemsize
+                    + np.arange(item.itemsize)[None, None, :]
+                )
+                raw = np.ascontiguousarray(buf[byte]).view(item).reshape(len(ids), k)
+                groups[k] = (ids, raw.astype(np.int64))
+            out[name] = groups
+        else:
+            dt = np.dtype(endian + t)
+            byte = starts[name][:, None] + np.arange(dt.itemsize)[None, :]
+            out[name] = np.ascontiguousarray(buf[byte]).view(dt).reshape(n)
+    return out, pos
+
+
+def _frombuffer(data: bytes, dt: np.dtype, count: int, offset: int, what: str) -> np.ndarray:
+    need = dt.itemsize * count
+    if offset + need > len(data):
+        raise _MalformedError(
+            f"the {what!r} data are truncated: {need} bytes expected, "
+            f"{max(len(data) - offset, 0)} present"
+        )
+    return np.frombuffer(data, dt, count, offset)
+
+
+def _write_ply(path: Path, v: np.ndarray, f: np.ndarray) -> None:
+    """Binary little-endian PLY: ``double x, y, z``; face list ``uchar`` count, ``int`` index."""
+    header = (
+        "ply\nformat binary_little_endian 1.0\ncomment written by TCB Surface\n"
+        f"element vertex {len(v)}\nproperty double x\nproperty double y\nproperty double z\n"
+        f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    k = f.shape[1]
+    rec = np.empty(len(f), dtype=np.dtype([("n", "u1"), ("i", "<i4", (k,))]))
+    rec["n"] = k
+    rec["i"] = f
+    with open(path, "wb") as fh:
+        fh.write(header.encode("ascii"))
+        fh.write(np.ascontiguousarray(v, dtype="<f8").tobytes())
+        fh.write(rec.tobytes())
+
+
+# --------------------------------------------------------------------------------------------
+# Point clouds: text columns, .npy, .npz
+# --------------------------------------------------------------------------------------------
+
+
+def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
+    """Text columns: whitespace or comma separated; the first three are x, y, z."""
+    lines = _text_lines(path)
+    if not lines:
+        raise _MalformedError("the file has no data lines")
+    delim = "," if "," in lines[0] or (len(lines) > 1 and "," in lines[1]) else None
+    try:
+        [float(t) for t in (lines[0].split(delim))[:3]]
+    except ValueError:
+        lines = lines[1:]  # a header line such as 'x,y,z'
+    if not lines:
+        raise _MalformedError("the file has no data lines")
+    if len(lines[0].split(delim)) < 3:
+        raise _MalformedError("each line needs at least three numbers (x, y, z)")
+    return _loadtxt(lines, "line", usecols=(0, 1, 2), delimiter=delim), None
+
+
+def _read_npy(path: Path) -> tuple[np.ndarray, None]:
+    arr = np.load(path, allow_pickle=False)
+    return _points_array(arr, "the array"), None
+
+
+def _points_array(arr: np.ndarray, what: str) -> np.ndarray:
+    if arr.ndim != 2 or arr.shape[1] < 3 or not np.issubdtype(arr.dtype, np.number):
+        raise _MalformedError(f"{what} must be an (N, 3) array of numbers; got shape {arr.shape}")
+    return arr[:, :3].astype(np.float64)
+
+
+def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """``points`` (+ optional ``faces``), or a DEM (``elevation`` + ``xmin..ymax``)."""
+    with np.load(path, allow_pickle=False) as z:
+        keys = set(z.files)
+        if "points" in keys:
+            pts = _points_array(z["points"], "'points'")
+            if "faces" not in keys:
+                return pts, None
+            f = z["faces"]
+            if f.ndim != 2 or f.shape[1] < 3 or not np.issubdtype(f.dtype, np.integer):
+                raise _MalformedError(f"'faces' must be an (F, 3) integer array; got {f.shape}")
+            return pts, _fan(f)
+        if "elevation" in keys:
+            return _dem_points({k: z[k] for k in keys}), None
+    raise _MalformedError(
+        f"expected key 'points' (and optional 'faces') or a DEM with 'elevation'; found keys "
+        f"{sorted(keys)}"
+    )
+
+
+def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
+    """Grid points of a DEM: ``elevation`` (rows, cols), bounds ``xmin, xmax, ymin, ymax``.
+
+    Column ``j`` is at ``x = linspace(xmin, xmax, cols)[j]`` and row ``i`` at
+    ``y = linspace(ymin, ymax, rows)[i]`` as stored (the jacksboro file stores the northern
+    latitude as ``ymin``: its row 0 is the northern edge, so the order is kept, not sorted).
+
+    Geographic grids (bounds in degrees: |x| <= 180, |y| <= 90, and an elevation range larger
+    than 10x the extent in degrees, i.e. heights in metres) are converted to metres relative to
+    the south-west corner, ``x' = (x - x0) * 111200 cos(lat_mid)``, ``y' = (y - y0) * 111200``;
+    an optional key ``units`` (``'degrees'`` or ``'metres'``) overrides the guess. Non-finite
+    elevations (no data) are skipped, and so are values equal to an optional ``nodata`` key.
+    """
+    elev = np.asarray(z["elevation"])
+    if elev.ndim != 2 or min(elev.shape) < 2 or not np.issubdtype(elev.dtype, np.number):
+        raise _MalformedError(f"'elevation' must be a 2D grid of numbers; got shape {elev.shape}")
+    try:
+        xmin, xmax, ymin, ymax = (float(z[k]) for k in ("xmin", "xmax", "ymin", "ymax"))
+    except KeyError as exc:
+        raise _MalformedError(
+            f"the DEM needs keys xmin, xmax, ymin, ymax; {exc} is missing"
+        ) from None
+    except (TypeError, ValueError):
+        raise _MalformedError("the DEM bounds xmin, xmax, ymin, ymax must be numbers") from None
+    rows, cols = elev.shape
+    x = np.linspace(xmin, xmax, cols)
+    y = np.linspace(ymin, ymax, rows)
+    h = elev.astype(np.float64)
+    units = str(z["units"]) if "units" in z else "auto"
+    if units not in ("auto", "degrees", "metres", "meters"):
+        raise _MalformedError(f"unknown DEM units {units!r}; use 'degrees' or 'metres'")
+    if units == "auto":
+        extent = max(abs(xmax - xmin), abs(ymax - ymin))
+        finite = h[np.isfinite(h)]
+        relief = float(np.ptp(finite)) if finite.size else 0.0
+        geographic = (
+            max(abs(xmin), abs(xmax)) <= 180.0
+            and max(abs(ymin), abs(ymax)) <= 90.0
+            and relief > 10.0 * extent
+        )
+        units = "degrees" if geographic else "metres"
+    if units == "degrees":
+        lat_mid = np.radians(0.5 * (ymin + ymax))
+        x = (x - min(xmin, xmax)) * _METRES_PER_DEGREE * np.cos(lat_mid)
+        y = (y - min(ymin, ymax)) * _METRES_PER_DEGREE
+    gx, gy = np.meshgrid(x, y)
+    pts = np.column_stack([gx.ravel(), gy.ravel(), h.ravel()])
+    keep = np.isfinite(pts[:, 2])
+    if "nodata" in z:
+        keep &= pts[:, 2] != float(z["nodata"])
+    return pts[keep]
+
+
+_READERS = {
+    ".off": _read_off,
+    ".obj": _read_obj,
+    ".ply": _read_ply,
+    ".xyz": _read_xyz,
+    ".txt": _read_xyz,
+    ".csv": _read_xyz,
+    ".pts": _read_xyz,
+    ".npy": _read_npy,
+    ".npz": _read_npz,
+}

@@ -1,0 +1,381 @@
+"""Reading and writing geometry files: every format round-trips, polygons are split into fans,
+and malformed, truncated or missing files raise FileFormatError naming the problem."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from core.errors import FileFormatError, InvalidInputError
+from core.meshio import read_geometry, write_mesh
+
+DATA = Path(__file__).resolve().parents[2] / "data"
+
+# a unit square split as a quad (0, 1, 2, 3) plus a triangle (1, 4, 2): 5 vertices
+VERTS = np.array(
+    [[0.0, 0.0, 0.0], [1.0, 0.0, 0.5], [1.0, 1.0, 0.25], [0.0, 1.0, -0.125], [2.0, 0.5, 1.0]]
+)
+ROWS = VERTS.tolist()  # Python floats: repr() gives the shortest exact decimal
+# the quad as a fan (0, 1, 2), (0, 2, 3); then the triangle
+TRIS = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 2]])
+
+
+def ply_header(fmt: str, vertex_props: list[str], n_faces: int, face_props: list[str]) -> bytes:
+    lines = ["ply", f"format {fmt} 1.0", "comment made by hand", f"element vertex {len(VERTS)}"]
+    lines += [f"property {p}" for p in vertex_props]
+    lines += [f"element face {n_faces}"] + [f"property {p}" for p in face_props]
+    return ("\n".join(lines + ["end_header"]) + "\n").encode("ascii")
+
+
+# ---------------------------------------------------------------------------------------------
+# round trips through write_mesh
+# ---------------------------------------------------------------------------------------------
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(3, 60),
+    k=st.sampled_from([3, 4]),
+    ext=st.sampled_from([".obj", ".ply"]),
+)
+def test_written_meshes_read_back_equal(
+    tmp_path_factory: pytest.TempPathFactory, seed: int, n: int, k: int, ext: str
+) -> None:
+    rng = np.random.default_rng(seed)
+    verts = rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-5, 6)
+    faces = rng.integers(0, n, size=(2 * n, k))
+    path = tmp_path_factory.mktemp("rt") / f"mesh{ext}"
+    write_mesh(path, verts, faces)
+    pts, tris = read_geometry(path)
+    np.testing.assert_array_equal(pts, verts)  # bit-exact coordinates
+    expected = faces if k == 3 else np.stack([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]], 1)
+    np.testing.assert_array_equal(tris, expected.reshape(-1, 3))
+
+
+def test_sample_off_files_read_with_announced_counts() -> None:
+    for name, nv, nf in [
+        ("nefertiti", 299, 562),
+        ("three_peaks", 1907, 3671),
+        ("patch-01", 735, 1396),
+    ]:
+        pts, faces = read_geometry(DATA / f"{name}.off")
+        assert pts.shape == (nv, 3) and pts.dtype == np.float64
+        assert faces.shape == (nf, 3) and faces.dtype == np.int64
+        assert faces.min() == 0 and faces.max() == nv - 1
+
+
+def test_write_mesh_rejects_unknown_extension_and_bad_arrays(tmp_path: Path) -> None:
+    with pytest.raises(FileFormatError, match=r"\.obj, \.ply"):
+        write_mesh(tmp_path / "m.stl", VERTS, TRIS)
+    with pytest.raises(InvalidInputError, match="face indices"):
+        write_mesh(tmp_path / "m.obj", VERTS, TRIS + 10)
+    with pytest.raises(InvalidInputError, match=r"\(N, 3\)"):
+        write_mesh(tmp_path / "m.ply", VERTS[:, :2], TRIS)
+    with pytest.raises(FileFormatError, match="cannot write"):
+        write_mesh(tmp_path / "no" / "such" / "dir" / "m.obj", VERTS, TRIS)
+
+
+# ---------------------------------------------------------------------------------------------
+# OFF
+# ---------------------------------------------------------------------------------------------
+
+
+def test_off_with_counts_on_header_comments_polygons_and_colours(tmp_path: Path) -> None:
+    text = (
+        "OFF 5 2 0  # counts on the header line\n"
+        "# a comment line\n\n"
+        + "\n".join(" ".join(repr(c) for c in v) for v in ROWS)
+        + "\n4 0 1 2 3 255 0 0\n"  # quad with a colour
+        "3 1 4 2\n"
+    )
+    (tmp_path / "a.off").write_text(text)
+    pts, faces = read_geometry(tmp_path / "a.off")
+    np.testing.assert_array_equal(pts, VERTS)
+    np.testing.assert_array_equal(faces, TRIS)
+
+
+def test_coff_and_point_only_off(tmp_path: Path) -> None:
+    body = "\n".join(" ".join(map(repr, v)) + " 0.5 0.5 0.5 1" for v in ROWS)
+    (tmp_path / "c.off").write_text(f"COFF\n5 0 0\n{body}\n")
+    pts, faces = read_geometry(tmp_path / "c.off")
+    np.testing.assert_array_equal(pts, VERTS)
+    assert faces is None
+
+
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [
+        ("OFF\n5 2 0\n0 0 0\n1 0 0\n1 1 0\n3 0 1 2\n", "truncated"),  # too few vertex lines
+        ("OFF\n3 1 0\n0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n", "vertex line"),  # text in a number
+        ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", "do not exist"),  # index out of range
+        ("PLY\n3 1 0\n", "first line must be 'OFF'"),
+        ("OFF\nthree 1 0\n", "counts"),
+        ("", "empty"),
+    ],
+)
+def test_malformed_off_raises_file_format_error(tmp_path: Path, text: str, problem: str) -> None:
+    (tmp_path / "bad.off").write_text(text)
+    with pytest.raises(FileFormatError, match=problem) as info:
+        read_geometry(tmp_path / "bad.off")
+    assert "bad.off" in str(info.value)
+
+
+# ---------------------------------------------------------------------------------------------
+# OBJ
+# ---------------------------------------------------------------------------------------------
+
+
+def test_obj_with_slashes_quads_negative_indices_and_other_statements(tmp_path: Path) -> None:
+    text = (
+        "# exported\nmtllib x.mtl\no thing\n"
+        + "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in ROWS[:4])
+        + "vt 0 0\nvt 1 0\nvn 0 0 1\nusemtl red\ns off\n"
+        "f 1/1/1 2/2/1 3/1/1 4//1\n"  # quad with texture/normal indices
+        f"v {ROWS[4][0]!r} {ROWS[4][1]!r} {ROWS[4][2]!r} 1.0\n"  # optional w
+        "f -4 -1 -3  # relative indices: 2 5 3\n"
+        "l 1 2\n"
+    )
+    (tmp_path / "a.obj").write_text(text)
+    pts, faces = read_geometry(tmp_path / "a.obj")
+    np.testing.assert_array_equal(pts, VERTS)
+    np.testing.assert_array_equal(faces, TRIS)
+
+
+def test_obj_without_faces_is_a_point_cloud(tmp_path: Path) -> None:
+    (tmp_path / "p.obj").write_text("".join(f"v {x} {y} {z}\n" for x, y, z in ROWS))
+    pts, faces = read_geometry(tmp_path / "p.obj")
+    assert faces is None and pts.shape == (5, 3)
+
+
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "not defined"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 two 3\n", "bad face"),
+        ("v 0 0\n", "needs x, y, z"),
+        ("v 0 0 zero\n", "vertex line"),
+    ],
+)
+def test_malformed_obj_raises_file_format_error(tmp_path: Path, text: str, problem: str) -> None:
+    (tmp_path / "bad.obj").write_text(text)
+    with pytest.raises(FileFormatError, match=problem):
+        read_geometry(tmp_path / "bad.obj")
+
+
+# ---------------------------------------------------------------------------------------------
+# PLY
+# ---------------------------------------------------------------------------------------------
+
+
+def test_ascii_ply_with_extra_properties_and_vertex_index(tmp_path: Path) -> None:
+    head = ply_header(
+        "ascii",
+        ["float x", "float y", "float z", "float nx", "uchar red"],
+        2,
+        ["list uchar int vertex_index", "uchar flags"],
+    )
+    body = "".join(f"{x!r} {y!r} {z!r} 0 0 1 200\n" for x, y, z in ROWS)
+    body += "4 0 1 2 3 7\n3 1 4 2 0\n"
+    (tmp_path / "a.ply").write_bytes(head + body.encode())
+    pts, faces = read_geometry(tmp_path / "a.ply")
+    np.testing.assert_array_equal(pts, VERTS)
+    np.testing.assert_array_equal(faces, TRIS)
+
+
+@pytest.mark.parametrize("endian", ["<", ">"])
+@pytest.mark.parametrize("mixed", [False, True])
+def test_binary_ply_structured_read(tmp_path: Path, endian: str, mixed: bool) -> None:
+    """Binary little/big endian; float32 coordinates with extra properties; faces all quads
+    (fixed-size fast path) or quads and triangles (ragged path); uint indices, ushort count."""
+    fmt = "binary_little_endian" if endian == "<" else "binary_big_endian"
+    vdt = np.dtype(
+        [
+            ("x", endian + "f4"),
+            ("red", "u1"),
+            ("y", endian + "f4"),
+            ("z", endian + "f4"),
+            ("q", endian + "f8"),
+        ]
+    )
+    v = np.zeros(len(VERTS), vdt)
+    v["x"], v["y"], v["z"] = VERTS.T
+    faces = [[0, 1, 2, 3], [1, 4, 2]] if mixed else [[0, 1, 2, 3], [1, 4, 2, 0]]
+    head = ply_header(
+        fmt,
+        ["float x", "uchar red", "float y", "float z", "double q"],
+        len(faces),
+        ["uchar flags", "list ushort uint vertex_indices"],
+    )
+    fbytes = b"".join(
+        np.array([9], "u1").tobytes()
+        + np.array([len(f)], endian + "u2").tobytes()
+        + np.array(f, endian + "u4").tobytes()
+        for f in faces
+    )
+    (tmp_path / "b.ply").write_bytes(head + v.tobytes() + fbytes)
+    pts, tris = read_geometry(tmp_path / "b.ply")
+    np.testing.assert_array_equal(pts, VERTS.astype(np.float32).astype(np.float64))
+    expected = TRIS if mixed else np.array([[0, 1, 2], [0, 2, 3], [1, 4, 2], [1, 2, 0]])
+    np.testing.assert_array_equal(tris, expected)
+
+
+def test_binary_ply_with_integer_coordinates_and_no_faces(tmp_path: Path) -> None:
+    head = (
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n"
+        b"property short x\nproperty short y\nproperty int z\nend_header\n"
+    )
+    v = np.array([(1, 2, 3), (-4, 5, 6), (7, 8, -9)], [("x", "<i2"), ("y", "<i2"), ("z", "<i4")])
+    (tmp_path / "i.ply").write_bytes(head + v.tobytes())
+    pts, faces = read_geometry(tmp_path / "i.ply")
+    np.testing.assert_array_equal(pts, [[1, 2, 3], [-4, 5, 6], [7, 8, -9]])
+    assert faces is None
+
+
+def test_truncated_binary_ply_raises_file_format_error(tmp_path: Path) -> None:
+    write_mesh(tmp_path / "m.ply", VERTS, TRIS)
+    data = (tmp_path / "m.ply").read_bytes()
+    body = data.index(b"end_header\n") + len(b"end_header\n")
+    for keep in (len(data) - 5, body + 50):  # inside the face data, inside the vertex data
+        (tmp_path / "t.ply").write_bytes(data[:keep])
+        with pytest.raises(FileFormatError, match="truncated"):
+            read_geometry(tmp_path / "t.ply")
+    # mixed polygon sizes (ragged layout), truncated in the last face
+    write_mesh(tmp_path / "q.ply", VERTS, np.array([[0, 1, 2, 3]]))
+    quad = (tmp_path / "q.ply").read_bytes()
+    head = quad[: quad.index(b"end_header")].replace(b"element face 1", b"element face 2")
+    tri = np.array([3], "u1").tobytes() + np.array([1, 4, 2], "<i4").tobytes()
+    ragged = head + quad[quad.index(b"end_header") :] + tri
+    (tmp_path / "r.ply").write_bytes(ragged)
+    np.testing.assert_array_equal(read_geometry(tmp_path / "r.ply")[1], TRIS)
+    (tmp_path / "r.ply").write_bytes(ragged[:-2])
+    with pytest.raises(FileFormatError, match="truncated"):
+        read_geometry(tmp_path / "r.ply")
+
+
+@pytest.mark.parametrize(
+    ("data", "problem"),
+    [
+        (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n", "end_header"),
+        (b"ply\nformat binary_middle_endian 1.0\nend_header\n", "unknown PLY format"),
+        (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nend_header\n", "bad header"),
+        (
+            b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+            b"property float z\nend_header\n0 0 0\n",
+            "truncated",
+        ),
+        (
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+            b"property float z\nend_header\n0 zero 0\n",
+            "vertex line",
+        ),
+        (
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+            b"end_header\n0 0\n",
+            "no property z",
+        ),
+        (b"solid stl\n", "not a PLY file"),
+    ],
+)
+def test_malformed_ply_raises_file_format_error(tmp_path: Path, data: bytes, problem: str) -> None:
+    (tmp_path / "bad.ply").write_bytes(data)
+    with pytest.raises(FileFormatError, match=problem):
+        read_geometry(tmp_path / "bad.ply")
+
+
+# ---------------------------------------------------------------------------------------------
+# point clouds: text, npy, npz (points / DEM)
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("name", "text"),
+    [
+        ("p.xyz", "".join(f"{x!r} {y!r}\t{z!r} 0.1 0.2\n" for x, y, z in ROWS)),
+        ("p.csv", "x,y,z,intensity\n" + "".join(f"{x!r}, {y!r}, {z!r}, 7\n" for x, y, z in ROWS)),
+        ("p.txt", "# scan\n" + "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in ROWS)),
+    ],
+    ids=["xyz-extra-columns", "csv-with-header", "txt-with-comment"],
+)
+def test_text_point_clouds(tmp_path: Path, name: str, text: str) -> None:
+    (tmp_path / name).write_text(text)
+    pts, faces = read_geometry(tmp_path / name)
+    np.testing.assert_array_equal(pts, VERTS)
+    assert faces is None
+
+
+def test_text_in_a_number_column_raises_file_format_error(tmp_path: Path) -> None:
+    (tmp_path / "p.xyz").write_text("0 0 0\n1 0 0\n1 one 0\n")
+    with pytest.raises(FileFormatError, match="p.xyz"):
+        read_geometry(tmp_path / "p.xyz")
+    (tmp_path / "q.csv").write_text("0,0\n1,0\n")
+    with pytest.raises(FileFormatError, match="three numbers"):
+        read_geometry(tmp_path / "q.csv")
+
+
+def test_npy_and_npz_points_and_faces(tmp_path: Path) -> None:
+    np.save(tmp_path / "p.npy", VERTS)
+    pts, faces = read_geometry(tmp_path / "p.npy")
+    np.testing.assert_array_equal(pts, VERTS)
+    assert faces is None
+    np.savez(tmp_path / "m.npz", points=VERTS, faces=np.array([[0, 1, 2, 3], [1, 4, 2, 0]]))
+    pts, faces = read_geometry(tmp_path / "m.npz")
+    np.testing.assert_array_equal(faces, [[0, 1, 2], [0, 2, 3], [1, 4, 2], [1, 2, 0]])
+    np.save(tmp_path / "bad.npy", VERTS[:, :2])
+    with pytest.raises(FileFormatError, match=r"\(N, 3\)"):
+        read_geometry(tmp_path / "bad.npy")
+    np.savez(tmp_path / "other.npz", stuff=VERTS)
+    with pytest.raises(FileFormatError, match="'stuff'"):
+        read_geometry(tmp_path / "other.npz")
+
+
+def test_dem_npz_becomes_grid_points_in_metres() -> None:
+    pts, faces = read_geometry(DATA / "jacksboro_fault_dem.npz")
+    assert faces is None and pts.shape == (344 * 403, 3)
+    with np.load(DATA / "jacksboro_fault_dem.npz") as z:
+        elev = z["elevation"]
+    np.testing.assert_array_equal(pts[:, 2], elev.ravel())
+    # 3 arc-second grid: about 74 m (x, at 36.6 deg N) by 93 m (y), starting at the SW corner
+    dx = np.diff(np.unique(pts[:, 0]))
+    dy = np.diff(np.unique(pts[:, 1]))
+    assert 70 < dx.mean() < 78 and 89 < dy.mean() < 97
+    assert pts[:, 0].min() == 0 and pts[:, 1].min() == 0
+    # row 0 is the northern edge (the file stores the northern latitude as 'ymin')
+    assert pts[0, 1] == pts[:, 1].max()
+
+
+def test_small_dem_in_metres_with_nodata(tmp_path: Path) -> None:
+    elev = np.array([[1.0, 2.0, np.nan], [4.0, -9999.0, 6.0]])
+    np.savez(
+        tmp_path / "d.npz",
+        elevation=elev,
+        xmin=1000.0,
+        xmax=1020.0,
+        ymin=500.0,
+        ymax=510.0,
+        nodata=-9999.0,
+    )
+    pts, _ = read_geometry(tmp_path / "d.npz")
+    np.testing.assert_array_equal(
+        pts, [[1000, 500, 1], [1010, 500, 2], [1000, 510, 4], [1020, 510, 6]]
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# paths
+# ---------------------------------------------------------------------------------------------
+
+
+def test_missing_file_and_unknown_extension(tmp_path: Path) -> None:
+    with pytest.raises(FileFormatError, match="no such file"):
+        read_geometry(tmp_path / "nothing.off")
+    (tmp_path / "model.stl").write_text("solid x\n")
+    with pytest.raises(FileFormatError, match=r"unknown file type '\.stl'.*\.off.*\.ply"):
+        read_geometry(tmp_path / "model.stl")
+    # FileFormatError is an InvalidInputError and a ValueError
+    with pytest.raises(ValueError):
+        read_geometry(tmp_path / "nothing.obj")

@@ -1,0 +1,421 @@
+"""Properties of the parameterization (method.md section 4): best-fit plane for clouds with fold
+detection, mean-value map of disk-like meshes onto the unit disk, and the topology errors."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial import Delaunay
+
+from core.errors import InvalidInputError, ParameterizationError, TopologyError
+from core.meshio import read_geometry
+from core.parameterize import (
+    Normalization,
+    Parameterization,
+    count_duplicates,
+    normalize,
+    parameterize,
+    parameterize_mesh,
+    parameterize_points,
+)
+
+DATA = Path(__file__).resolve().parents[2] / "data"
+MESHES = ["nefertiti.off", "three_peaks.off", "patch-01.off"]
+
+
+# ---------------------------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------------------------
+
+
+def grid_mesh(n: int = 6, quads: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(n x n) vertices on [0, 1]^2 with a small bump, triangulated (or quads), CCW from +z."""
+    u, v = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    pts = np.column_stack([u.ravel(), v.ravel(), 0.1 * np.sin(3 * u.ravel()) * v.ravel()])
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
+    a = (j * n + i).ravel()
+    b, c, d = a + 1, a + n + 1, a + n
+    if quads:
+        return pts, np.column_stack([a, b, c, d])
+    return pts, np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+
+
+def signed_areas(uv: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
+    return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+
+
+def polygon_area(poly: np.ndarray) -> float:
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q *= np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] *= -1
+    return q
+
+
+def sphere_cap(n: int, max_polar_deg: float, seed: int = 0) -> np.ndarray:
+    """Points uniform on the unit sphere with polar angle <= max_polar_deg."""
+    rng = np.random.default_rng(seed)
+    ct = rng.uniform(np.cos(np.radians(max_polar_deg)), 1.0, n)
+    ph = rng.uniform(0, 2 * np.pi, n)
+    st_ = np.sqrt(1 - ct**2)
+    return np.column_stack([st_ * np.cos(ph), st_ * np.sin(ph), ct])
+
+
+# ---------------------------------------------------------------------------------------------
+# normalize
+# ---------------------------------------------------------------------------------------------
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    offset=st.floats(-1e6, 1e6),
+    size=st.floats(1e-3, 1e4),
+)
+def test_normalize_undo_inverts_apply_to_an_ulp(seed: int, offset: float, size: float) -> None:
+    pts = np.random.default_rng(seed).normal(size=(50, 3)) * size + offset
+    q, norm = normalize(pts)
+    assert isinstance(norm, Normalization)
+    np.testing.assert_array_equal(q, norm.apply(pts))
+    back = norm.undo(q)
+    ulp = np.spacing(np.abs(pts).max())
+    assert np.abs(back - pts).max() <= 2 * ulp
+    # bounding box centred at 0 with half-diagonal 1
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    np.testing.assert_allclose(0.5 * (lo + hi), 0.0, atol=4 * ulp / norm.scale + 1e-15)
+    assert abs(0.5 * np.linalg.norm(hi - lo) - 1.0) < 1e-12
+
+
+def test_normalize_rejects_bad_input_with_specific_messages() -> None:
+    rng = np.random.default_rng(0)
+    with pytest.raises(InvalidInputError, match=r"\(N, 3\)"):
+        normalize(rng.random((20, 2)))
+    bad = rng.random((20, 3))
+    bad[[2, 5], 1] = np.nan
+    bad[7, 0] = np.inf
+    with pytest.raises(InvalidInputError, match="3 of 20 points have NaN or infinite"):
+        normalize(bad)
+    with pytest.raises(InvalidInputError, match="at least 10 points are needed"):
+        normalize(rng.random((9, 3)))
+    with pytest.raises(InvalidInputError, match="identical"):
+        normalize(np.ones((30, 3)))
+    t = rng.random(30)
+    with pytest.raises(InvalidInputError, match="straight line"):
+        normalize(np.column_stack([t, 2 * t + 1, -t]))
+    few = np.repeat(rng.random((6, 3)), 5, axis=0)
+    with pytest.raises(InvalidInputError, match="only 6 distinct points"):
+        normalize(few)
+    with pytest.raises(InvalidInputError, match="must be numbers"):
+        normalize([["a", "b", "c"]] * 12)
+
+
+def test_duplicates_are_counted_and_allowed() -> None:
+    pts = np.random.default_rng(1).random((20, 3))
+    dup = np.concatenate([pts, pts[:5], pts[:2]])
+    assert count_duplicates(pts) == 0
+    assert count_duplicates(dup) == 7
+    q, _ = normalize(dup)  # 20 distinct points: allowed
+    assert q.shape == (27, 3)
+
+
+# ---------------------------------------------------------------------------------------------
+# point clouds
+# ---------------------------------------------------------------------------------------------
+
+
+def test_plane_projection_of_a_tilted_plane_is_an_isometry() -> None:
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(-3, 5, size=(400, 2)) * [1.0, 0.6]
+    rot = random_rotation(rng)
+    pts = np.column_stack([xy, np.zeros(len(xy))]) @ rot.T + [1e3, -20.0, 7.0]
+    par = parameterize(pts)
+    assert isinstance(par, Parameterization) and par.kind == "plane"
+    assert par.boundary is None and par.faces is None and par.used.all()
+    d3 = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+    duv = np.linalg.norm(par.uv[:, None] - par.uv[None], axis=-1) * par.scale
+    np.testing.assert_allclose(duv, d3, atol=1e-9 * d3.max())
+    # frame: orthonormal, right-handed, normal = plane normal
+    np.testing.assert_allclose(par.axes @ par.axes.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(np.cross(par.axes[0], par.axes[1]), par.axes[2], atol=1e-12)
+    assert abs(abs(par.axes[2] @ rot[:, 2]) - 1) < 1e-12
+    # domain fits [-1, 1]^2 with the longer side spanning it; project() agrees with uv
+    assert np.abs(par.uv).max() == pytest.approx(1.0)
+    np.testing.assert_allclose(par.project(pts), par.uv, atol=1e-12)
+    # the domain polygon is the CCW convex hull and contains every parameter
+    assert polygon_area(par.domain_polygon) > 0
+    assert par.contains(par.uv).all()
+    assert not par.contains(np.array([[1.5, 0.0], [0.0, -1.2]])).any()
+
+
+def test_plane_orientation_follows_the_right_hand_rule() -> None:
+    """A height field z = f(x, y) gets the normal +z, so uv orientation matches xy."""
+    rng = np.random.default_rng(3)
+    xy = rng.random((300, 2)) * [2.0, 1.0]
+    pts = np.column_stack([xy, 0.1 * np.sin(xy[:, 0])])
+    par = parameterize_points(pts)
+    assert par.axes[2] @ [0, 0, 1] > 0.99
+    tri = Delaunay(xy).simplices
+    assert np.all(signed_areas(par.uv, tri) * signed_areas(xy, tri) > 0)
+
+
+@pytest.mark.parametrize("max_polar", [90.0, 120.0])
+def test_a_cloud_folding_over_its_plane_is_rejected(max_polar: float) -> None:
+    with pytest.raises(ParameterizationError, match="folds over its best-fit plane"):
+        parameterize(sphere_cap(3000, max_polar))
+
+
+def test_a_z_folded_sheet_is_rejected() -> None:
+    """A sheet folded back over itself (two layers overlap in projection)."""
+    rng = np.random.default_rng(4)
+    r, n = 0.05, 4000
+    s, y = rng.uniform(0, 1.0 + np.pi * r + 0.7, n), rng.uniform(0, 1, n)
+    turn = (s - 1.0) / r
+    x = np.where(s < 1, s, np.where(turn < np.pi, 1 + r * np.sin(turn), 1 - (s - 1 - np.pi * r)))
+    z = np.where(s < 1, 0.0, np.where(turn < np.pi, r - r * np.cos(turn), 2 * r))
+    with pytest.raises(ParameterizationError):
+        parameterize(np.column_stack([x, y, z]))
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.01, 0.03])
+def test_gentle_caps_and_noisy_planes_are_accepted(noise: float) -> None:
+    rng = np.random.default_rng(5)
+    cap = sphere_cap(3000, 45.0) + noise * rng.normal(size=(3000, 3))
+    assert parameterize(cap).kind == "plane"
+    xy = rng.random((3000, 2))
+    plane = np.column_stack([xy, noise * rng.normal(size=3000)])  # noise up to 1.7x spacing
+    assert parameterize(plane).kind == "plane"
+
+
+def test_dem_as_point_cloud_is_fast_and_faces_up() -> None:
+    pts, faces = read_geometry(DATA / "jacksboro_fault_dem.npz")
+    assert faces is None and pts.shape == (344 * 403, 3)
+    t0 = time.perf_counter()
+    par = parameterize(pts)
+    elapsed = time.perf_counter() - t0
+    assert elapsed < 4.0, f"DEM parameterization took {elapsed:.2f} s"
+    assert par.kind == "plane" and par.axes[2][2] > 0.99
+    assert np.abs(par.uv).max() <= 1.0 + 1e-12
+    # the hull of the (slightly rotated) lattice: nearly the full projected rectangle
+    extent = np.ptp(par.uv, axis=0)
+    assert polygon_area(par.domain_polygon) == pytest.approx(extent[0] * extent[1], rel=0.01)
+    assert par.contains(par.uv).all()
+
+
+# ---------------------------------------------------------------------------------------------
+# meshes
+# ---------------------------------------------------------------------------------------------
+
+
+def check_disk(par: Parameterization, pts: np.ndarray) -> None:
+    """Disk properties: boundary on the unit circle by chord length (CCW), interior strictly
+    inside, every uv triangle positively oriented."""
+    assert par.kind == "disk"
+    b = par.boundary
+    np.testing.assert_allclose(np.linalg.norm(par.uv[b], axis=1), 1.0, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(par.domain_polygon, par.uv[b])
+    ang = np.unwrap(np.arctan2(par.uv[b, 1], par.uv[b, 0]))
+    steps = np.diff(np.append(ang, ang[0] + 2 * np.pi))
+    chords = np.linalg.norm(pts[np.roll(b, -1)] - pts[b], axis=1)
+    np.testing.assert_allclose(steps, 2 * np.pi * chords / chords.sum(), atol=1e-12)
+    interior = par.used.copy()
+    interior[b] = False
+    assert np.all(np.linalg.norm(par.uv[interior], axis=1) < 1 - 1e-9)
+    assert np.all(signed_areas(par.uv, par.faces) > 0)
+    assert par.contains(par.uv[par.used]).all()
+
+
+@pytest.mark.parametrize("name", MESHES)
+def test_sample_meshes_map_onto_the_unit_disk_without_folds(name: str) -> None:
+    pts, faces = read_geometry(DATA / name)
+    par = parameterize(pts, faces)
+    assert par.uv.shape == (len(pts), 2) and par.used.all()
+    assert len(par.faces) == len(faces)
+    check_disk(par, pts)
+
+
+def test_mean_value_map_reproduces_a_planar_disk() -> None:
+    """Linear precision of mean-value weights: a planar mesh whose boundary already lies evenly
+    on the unit circle (starting at angle 0) is mapped to itself."""
+    rng = np.random.default_rng(6)
+    m = 40
+    ang = 2 * np.pi * np.arange(m) / m
+    rad = np.sqrt(rng.uniform(0, 0.8, 200))
+    phi = rng.uniform(0, 2 * np.pi, 200)
+    xy = np.concatenate(
+        [
+            np.column_stack([np.cos(ang), np.sin(ang)]),
+            np.column_stack([rad * np.cos(phi), rad * np.sin(phi)]),
+        ]
+    )
+    tris = Delaunay(xy).simplices
+    tris = np.where((signed_areas(xy, tris) > 0)[:, None], tris, tris[:, ::-1])
+    par = parameterize_mesh(np.column_stack([xy, np.zeros(len(xy))]), tris)
+    np.testing.assert_allclose(par.uv, xy, atol=1e-12)
+
+
+def test_quads_are_split_and_parameterized() -> None:
+    pts, quads = grid_mesh(7, quads=True)
+    par = parameterize(pts, quads)
+    assert len(par.faces) == 2 * len(quads)
+    check_disk(par, pts)
+
+
+def test_reversed_and_mixed_face_orientation_are_made_consistent() -> None:
+    pts, faces = grid_mesh(8)
+    flipped = faces[:, ::-1]
+    par = parameterize(pts, flipped)
+    check_disk(par, pts)
+    # the majority orientation is kept: all faces were reversed, none flipped back
+    np.testing.assert_array_equal(par.faces, flipped)
+    mixed = faces.copy()
+    mixed[::3] = mixed[::3, ::-1]
+    par = parameterize(pts, mixed)
+    check_disk(par, pts)
+
+
+def test_unreferenced_vertices_get_no_parameter_and_degenerate_faces_are_dropped() -> None:
+    pts, faces = grid_mesh(6)
+    pts = np.concatenate([pts, [[5.0, 5.0, 5.0], [np.nan, 0, 0]]])  # stray + NaN vertex, unused
+    degenerate = np.array([[0, 0, 1], [3, 4, 3]])
+    par = parameterize(pts, np.concatenate([faces, degenerate, faces[:2]]))  # + duplicates
+    assert par.used.sum() == 36 and not par.used[-2:].any()
+    assert np.isnan(par.uv[-2:]).all() and np.isfinite(par.uv[:36]).all()
+    assert len(par.faces) == len(faces)
+    check_disk(par, pts)
+
+
+def octahedron() -> tuple[np.ndarray, np.ndarray]:
+    pts = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    faces = np.array(
+        [[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]]
+    )
+    return pts, faces
+
+
+def test_closed_mesh_is_a_topology_error() -> None:
+    with pytest.raises(TopologyError, match="closed"):
+        parameterize(*octahedron())
+
+
+def test_mesh_with_a_hole_reports_the_number_of_boundary_loops() -> None:
+    pts, faces = grid_mesh(8)  # 7 x 7 cells; cell (i, j) has triangles c and c + 49
+    keep = np.ones(len(faces), bool)
+    cell = 2 * 7 + 2
+    keep[[cell, cell + 49]] = False  # a square hole
+    with pytest.raises(TopologyError, match="2 boundary loops"):
+        parameterize(pts, faces[keep])
+    cell = 4 * 7 + 4
+    keep[[cell, cell + 49]] = False  # a second hole
+    with pytest.raises(TopologyError, match="3 boundary loops"):
+        parameterize(pts, faces[keep])
+
+
+def test_non_manifold_edge_is_reported_with_its_count() -> None:
+    pts, faces = grid_mesh(5)
+    # a fin on the interior edge (6, 7): three faces share it
+    fin = np.concatenate([pts, [[0.3, 0.3, 1.0]]])
+    with pytest.raises(TopologyError, match=r"non-manifold edges \(1 of them"):
+        parameterize(fin, np.concatenate([faces, [[6, 7, 25]]]))
+    # two fins on two interior edges
+    fins = np.concatenate([pts, [[0.3, 0.3, 1.0], [0.6, 0.6, 1.0]]])
+    with pytest.raises(TopologyError, match=r"non-manifold edges \(2 of them"):
+        parameterize(fins, np.concatenate([faces, [[6, 7, 25], [12, 13, 26]]]))
+
+
+def test_two_components_are_a_topology_error() -> None:
+    pts, faces = grid_mesh(5)
+    two = np.concatenate([pts, pts + [3.0, 0, 0]])
+    with pytest.raises(TopologyError, match="2 separate pieces"):
+        parameterize(two, np.concatenate([faces, faces + len(pts)]))
+
+
+def test_bowtie_vertex_is_a_topology_error() -> None:
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]], float)
+    with pytest.raises(TopologyError, match="non-manifold vertices"):
+        parameterize(pts, np.array([[0, 1, 2], [0, 3, 4]]))
+
+
+def test_moebius_strip_is_not_orientable() -> None:
+    n = 12
+    t = 2 * np.pi * np.arange(n) / n
+    pts = np.concatenate(
+        [
+            np.column_stack(
+                [
+                    (1 + s * np.cos(t / 2)) * np.cos(t),
+                    (1 + s * np.cos(t / 2)) * np.sin(t),
+                    s * np.sin(t / 2),
+                ]
+            )
+            for s in (-0.3, 0.3)
+        ]
+    )
+    i = np.arange(n)
+    j = (i + 1) % n
+    lo_j = np.where(j == 0, n + j, j)  # the strip is glued with a half twist
+    hi_j = np.where(j == 0, j, n + j)
+    faces = np.concatenate(
+        [np.column_stack([i, lo_j, n + i]), np.column_stack([n + i, lo_j, hi_j])]
+    )
+    with pytest.raises(TopologyError, match="not orientable"):
+        parameterize(pts, faces)
+
+
+def test_punctured_torus_is_not_a_disk() -> None:
+    """One boundary loop but a handle: Euler characteristic -1."""
+    n, m = 8, 6
+    a, b = np.meshgrid(2 * np.pi * np.arange(n) / n, 2 * np.pi * np.arange(m) / m, indexing="ij")
+    pts = np.column_stack(
+        [
+            ((2 + np.cos(b)) * np.cos(a)).ravel(),
+            ((2 + np.cos(b)) * np.sin(a)).ravel(),
+            np.sin(b).ravel(),
+        ]
+    )
+    i, j = np.meshgrid(np.arange(n), np.arange(m), indexing="ij")
+    v00 = (i * m + j).ravel()
+    v10 = (((i + 1) % n) * m + j).ravel()
+    v11 = (((i + 1) % n) * m + (j + 1) % m).ravel()
+    v01 = (i * m + (j + 1) % m).ravel()
+    faces = np.concatenate([np.column_stack([v00, v10, v11]), np.column_stack([v00, v11, v01])])
+    with pytest.raises(TopologyError, match="closed"):
+        parameterize(pts, faces)
+    with pytest.raises(TopologyError, match="Euler characteristic -1"):
+        parameterize(pts, faces[1:])
+
+
+def test_bad_mesh_arrays_are_invalid_input() -> None:
+    pts, faces = grid_mesh(4)
+    with pytest.raises(InvalidInputError, match="out of range"):
+        parameterize(pts, np.concatenate([faces, [[0, 1, 99]]]))
+    with pytest.raises(InvalidInputError, match=r"\(F, 3\)"):
+        parameterize(pts, faces[:, :2])
+    with pytest.raises(InvalidInputError, match="no faces"):
+        parameterize(pts, np.empty((0, 3), int))
+    with pytest.raises(InvalidInputError, match="integer"):
+        parameterize(pts, faces + 0.5)
+    dup = pts.copy()
+    dup[1] = dup[0]
+    with pytest.raises(InvalidInputError, match="zero-length edges"):
+        parameterize(dup, faces)
+
+
+def test_parameterization_is_immutable() -> None:
+    par = parameterize(*grid_mesh(4))
+    with pytest.raises(ValueError):
+        par.uv[0, 0] = 3.0
+    with pytest.raises(AttributeError):
+        par.kind = "plane"  # type: ignore[misc]
+    with pytest.raises(InvalidInputError, match="point-cloud"):
+        par.project(np.zeros((1, 3)))
