@@ -329,7 +329,39 @@ def _local_planes(q: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.nda
     return v[:, :, 0], np.sqrt(w[:, 0]), reliable, idx
 
 
-def _fold_fraction(q: np.ndarray, uv: np.ndarray, normal: np.ndarray) -> float:
+def _fold_sample(q: np.ndarray) -> np.ndarray:
+    """Indices of the (seeded) subset of at most 100 000 points used by the fold checks."""
+    if len(q) > _FOLD_MAX_SAMPLE:
+        return np.sort(np.random.default_rng(0).choice(len(q), _FOLD_MAX_SAMPLE, replace=False))
+    return np.arange(len(q))
+
+
+def _projection_normal(q: np.ndarray, pca_normal: np.ndarray, planes) -> np.ndarray:
+    """The projection direction that makes the cloud most like a height field.
+
+    Candidates: the PCA normal, the mean of the local normals (oriented towards the PCA
+    normal) and the three coordinate axes. Score: the 2nd percentile of ``|n_i . n|`` over the
+    reliable local normals (how steep the steepest parts are). A height field whose height range
+    is comparable to its width tilts the PCA plane (Franke's function: 45 degrees) and makes
+    its flanks look nearly perpendicular; the mean normal or the vertical axis does not.
+    """
+    normals, _, reliable, _ = planes
+    nr = normals[reliable] if reliable.any() else normals
+    oriented = nr * np.where(nr @ pca_normal < 0, -1.0, 1.0)[:, None]
+    mean = oriented.mean(axis=0)
+    cands = [pca_normal]
+    if np.linalg.norm(mean) > 1e-12:
+        cands.append(mean / np.linalg.norm(mean))
+    cands.extend(np.eye(3))
+    scores = [np.quantile(np.abs(nr @ c), 0.02) for c in cands]
+    # prefer the PCA plane unless another direction is clearly less steep
+    best = int(np.argmax(scores))
+    return cands[0] if scores[best] <= scores[0] + 0.05 else cands[best]
+
+
+def _fold_fraction(
+    q: np.ndarray, uv: np.ndarray, normal: np.ndarray, planes=None
+) -> float:
     """Fraction of points where the cloud is not a height field over its best-fit plane.
 
     Two tests (method.md section 4, "detect folds"), with the local planes of
@@ -346,13 +378,14 @@ def _fold_fraction(q: np.ndarray, uv: np.ndarray, normal: np.ndarray) -> float:
     when at least half of its 3D neighbourhood are suspects (folds are regions; noise makes
     isolated suspects), so noise and line-like neighbourhoods do not cause false alarms.
     Clouds of more than 100 000 points are checked on a seeded (deterministic) random subset of
-    that size.
+    that size; ``planes`` are the local planes of that subset when already computed.
     """
-    if len(q) > _FOLD_MAX_SAMPLE:
-        pick = np.random.default_rng(0).choice(len(q), _FOLD_MAX_SAMPLE, replace=False)
-        q, uv = q[pick], uv[pick]
-    k = min(_FOLD_NEIGHBOURS, len(q) - 1)
-    normals, sigma, reliable, idx = _local_planes(q, k)
+    sample = _fold_sample(q)
+    q, uv = q[sample], uv[sample]
+    normals, sigma, reliable, idx = planes if planes is not None else _local_planes(
+        q, min(_FOLD_NEIGHBOURS, len(q) - 1)
+    )
+    k = idx.shape[1] - 1
     steep = np.abs(normals @ normal) < _FOLD_MIN_COS
     _, jdx = cKDTree(uv).query(uv, k=k + 1, workers=-1)
     d = q[jdx] - q[:, None, :]  # (n, k+1, 3)
@@ -369,9 +402,12 @@ def _fold_fraction(q: np.ndarray, uv: np.ndarray, normal: np.ndarray) -> float:
 def parameterize_points(points: np.ndarray) -> Parameterization:
     """Parameterize a point cloud by orthogonal projection on its best-fit plane.
 
-    With ``m`` the centroid and ``a_u, a_v`` the two principal axes of largest variance
-    (SVD of the centred points), ``n = a_u x a_v`` (right-handed, sign fixed so that the largest
-    component of ``n`` is positive), the parameters are
+    The projection normal ``n`` is the PCA normal (SVD of the centred points) unless another
+    direction makes the cloud clearly less steep (see :func:`_projection_normal`: for height
+    fields whose height range is comparable to their width, the mean local normal or the
+    vertical axis); ``a_u`` is the largest principal direction projected into that plane and
+    ``a_v = n x a_u`` (right-handed, signs fixed so that the largest components of ``a_u`` and
+    ``n`` are positive). The parameters are
     ``uv = ((p - o) . [a_u, a_v]) / s`` where ``o`` and ``s`` centre the projected bounding box
     at 0 and scale its longer side to ``[-1, 1]`` (method.md section 4). On a plane the map is an
     isometry up to the factor ``s``.
@@ -391,19 +427,26 @@ def parameterize_points(points: np.ndarray) -> Parameterization:
     q, norm = normalize(points)
     m = q.mean(axis=0)
     _, _, vt = np.linalg.svd(q - m, full_matrices=False)
-    a_u, a_v = vt[0].copy(), vt[1].copy()
+    sample = _fold_sample(q)
+    planes = _local_planes(q[sample], min(_FOLD_NEIGHBOURS, len(sample) - 1))
+    n = _projection_normal(q[sample], np.cross(vt[0], vt[1]), planes)
+    # u along the largest principal direction projected into the plane
+    a_u = vt[0] - (vt[0] @ n) * n
+    if np.linalg.norm(a_u) < 1e-8:
+        a_u = vt[1] - (vt[1] @ n) * n
+    a_u /= np.linalg.norm(a_u)
     # deterministic signs: largest |component| positive for a_u and for the normal
     a_u *= np.sign(a_u[np.argmax(np.abs(a_u))])
-    n = np.cross(a_u, a_v)
     if n[np.argmax(np.abs(n))] < 0.0:
-        a_v, n = -a_v, -n
-    axes = np.stack([a_u, a_v, n / np.linalg.norm(n)])
+        n = -n
+    a_v = np.cross(n, a_u)
+    axes = np.stack([a_u, a_v, n])
     proj = (q - m) @ axes[:2].T
     c = 0.5 * (proj.min(axis=0) + proj.max(axis=0))
     s = 0.5 * float(np.ptp(proj, axis=0).max())
     uv = (proj - c) / s
 
-    frac = _fold_fraction(q, uv, axes[2])
+    frac = _fold_fraction(q, uv, axes[2], planes)
     if frac > _FOLD_MAX_FRACTION:
         raise ParameterizationError(
             f"the point cloud folds over its best-fit plane: at {100 * frac:.1f}% of the points "

@@ -1,0 +1,437 @@
+"""Adaptive knot insertion: the reconstruction loop (method.md section 6).
+
+1. Initial interior knots in general position, denser where the data bends (sampled from the data
+   parameters with probability growing with a local curvature measure, jittered, never a grid),
+   plus rings of auxiliary border knots (method.md section 3).
+2. Repeat: build the (feature-sensitive) configurations and the basis, fit (section 5), measure
+   ``e_j = |S(x_j) - p_j|``; stop at the tolerance, the control-point budget or the iteration
+   limit; rank the ``Gamma_0`` triangles by the error of their data and insert one knot in each
+   of the worst, at the error-weighted centroid of its data pulled away from the triangle's
+   edges (knot lines) and corners (knots).
+
+A ``callback(report)`` receives a dict per iteration (iteration, knots, control_points, rms, max,
+rms_rel, max_rel, seconds) and may return True to cancel: the best surface so far is returned.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .border import border_rings
+from .configurations import link_triangulation_procedure
+from .errors import BorderError, InvalidInputError
+from .fit import FitResult, fit_control_points
+from .simplex import SimplexBatch
+from .spatial import BoxIndex
+from .spline_space import SplineSpace, build_space, validate_knots
+from .triangulation import FeatureLinkTriangulator, PlaneFitCost, feature_triangulation
+
+__all__ = [
+    "RefineOptions",
+    "ring_count",
+    "feature_measure",
+    "initial_knots",
+    "make_space",
+    "locate",
+    "insertion_points",
+    "adaptive_fit",
+]
+
+
+def ring_count(degree: int) -> int:
+    """Border rings used by the fit: two for quadratics, three for cubics (method.md section 3)."""
+    return 2 if degree <= 2 else 3
+
+
+@dataclass(frozen=True)
+class RefineOptions:
+    """Settings of the adaptive loop (see :func:`core.fit_surface` for their meaning)."""
+
+    degree: int = 2
+    mode: str = "tcb"
+    tolerance: float = 1e-3
+    relative: bool = True
+    criterion: str = "rms"
+    max_control_points: int = 2000
+    max_iterations: int = 20
+    smoothness: float = 1e-4
+    initial_knots: int | None = None
+    knots_per_iteration: int | None = None
+    feature_sensitive: bool = True
+    seed: int = 0
+
+    def validate(self) -> None:
+        if self.degree not in (2, 3):
+            raise InvalidInputError(f"degree must be 2 or 3, got {self.degree}")
+        if self.mode not in ("tcb", "dcb"):
+            raise InvalidInputError(f"mode must be 'tcb' or 'dcb', got {self.mode!r}")
+        if self.criterion not in ("rms", "max"):
+            raise InvalidInputError(f"criterion must be 'rms' or 'max', got {self.criterion!r}")
+        if not (np.isfinite(self.tolerance) and self.tolerance >= 0):
+            raise InvalidInputError(f"tolerance must be a nonnegative number, got {self.tolerance}")
+        if self.max_control_points < 10:
+            raise InvalidInputError("max_control_points must be at least 10")
+        if self.max_iterations < 1:
+            raise InvalidInputError("max_iterations must be at least 1")
+        if not (np.isfinite(self.smoothness) and self.smoothness >= 0):
+            raise InvalidInputError(f"smoothness must be a nonnegative number, got {self.smoothness}")
+
+
+def feature_measure(uv: np.ndarray, points: np.ndarray, k: int = 12, max_points: int = 50_000,
+                    seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Surface variation ``lambda_min / (lambda_1 + lambda_2 + lambda_3)`` of the covariance of
+    each point's ``k`` nearest neighbours in parameter space (Pauly et al.), on a subsample.
+
+    Returns the sample's indices (s,) and their measures (s,); batched eigenvalues, no loop.
+    """
+    N = len(uv)
+    rng = np.random.default_rng(seed)
+    sample = np.sort(rng.choice(N, max_points, replace=False)) if N > max_points else np.arange(N)
+    k = min(k, len(sample))
+    tree = cKDTree(uv[sample])
+    _, nb = tree.query(uv[sample], k=k)
+    Q = points[sample][nb]  # (s, k, 3)
+    Q = Q - Q.mean(axis=1, keepdims=True)
+    cov = np.einsum("ski,skj->sij", Q, Q) / k
+    ev = np.linalg.eigvalsh(cov)
+    return sample, ev[:, 0] / np.maximum(ev.sum(axis=1), 1e-300)
+
+
+def initial_knots(uv: np.ndarray, points: np.ndarray, count: int, seed: int = 0) -> np.ndarray:
+    """``count`` interior knots in general position, denser where the data bends.
+
+    Knots are drawn from the data parameters with probability ``(1 + 4 f / mean f)`` (``f`` the
+    surface variation), thinned so no two are closer than ``0.4 h`` (``h`` the mean spacing),
+    and jittered by up to ``0.25`` times the data spacing so lattice data does not give
+    co-circular or collinear knots (method.md sections 2.4 and 6).
+    """
+    rng = np.random.default_rng(seed)
+    sample, f = feature_measure(uv, points, seed=seed)
+    w = 1.0 + 4.0 * f / max(f.mean(), 1e-300)
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    area = max(float(np.prod(hi - lo)), 1e-300)
+    # the data's own spacing, for the jitter
+    d, _ = cKDTree(uv[sample]).query(uv[sample[: min(len(sample), 2000)]], k=2)
+    spacing = float(np.median(d[:, 1])) if d.shape[1] > 1 else 0.0
+    # data covers a fraction of the bbox (disk: pi/4): estimate it from a coarse occupancy grid
+    g = 32
+    cell = np.floor((uv - lo) / np.maximum(hi - lo, 1e-300) * (g - 1e-9)).astype(int)
+    occupied = len(np.unique(cell[:, 0] * g + cell[:, 1])) / (g * g)
+    h = np.sqrt(area * occupied / max(count, 1))
+    cand = sample[rng.choice(len(sample), size=min(len(sample), 4 * count), replace=False,
+                             p=w / w.sum())]
+    pts = uv[cand] + rng.uniform(-0.25, 0.25, (len(cand), 2)) * spacing
+    pts = np.clip(pts, lo, hi)
+    # greedy thinning against earlier picks (loop over at most 4*count candidates, each a
+    # KD-tree query against the accepted ones)
+    keep = np.zeros(len(pts), dtype=bool)
+    tree_pts: list = []
+    for i in range(len(pts)):
+        if tree_pts:
+            dd = np.min(np.sum((np.asarray(tree_pts) - pts[i]) ** 2, axis=1))
+            if dd < (0.4 * h) ** 2:
+                continue
+        keep[i] = True
+        tree_pts.append(pts[i])
+        if len(tree_pts) >= count:
+            break
+    pts = pts[keep]
+    return place_clear_of_lines(pts, np.zeros((0, 2)), fallbacks=pts + 0.3 * h * (
+        rng.random((len(pts), 2)) - 0.5))
+
+
+def make_space(
+    knots: np.ndarray,
+    degree: int,
+    mode: str,
+    cost: PlaneFitCost | None,
+    n_interior: int,
+) -> SplineSpace:
+    """The spline space for one iteration: DCB, plain TCB, or feature-sensitive TCB."""
+    if mode == "dcb":
+        return build_space(knots, degree, mode="dcb")
+    if cost is None:
+        return build_space(knots, degree, mode="tcb")
+    knots = validate_knots(knots)
+    movable = np.zeros(len(knots), dtype=bool)
+    movable[:n_interior] = True
+    tri0 = feature_triangulation(knots, cost, movable=movable)
+    configs = link_triangulation_procedure(
+        knots, degree, triangulation=tri0,
+        link_triangulator=FeatureLinkTriangulator(cost, degree, movable),
+    )
+    return SplineSpace(knots, degree, "tcb", configs)
+
+
+# A new knot must lie at least this fraction of |ab| away from the line through any two nearby
+# knots a, b: near-collinear triples make near-degenerate simplex splines (huge, thin leaves)
+# and the fit overshoots; exactly collinear ones also break C^1 (method.md section 1).
+LINE_CLEARANCE = 0.08
+
+
+def _clearance(x: np.ndarray, pts: np.ndarray) -> float:
+    """min over pairs (a, b) of ``pts`` of ``|det(a, b, x)| / |ab|^2`` (distance to the line
+    ab in units of |ab|), for pairs not farther from ``x`` than ``|ab|``; ``inf`` if none."""
+    if len(pts) < 2:
+        return np.inf
+    i, j = np.triu_indices(len(pts), 1)
+    a, b = pts[i], pts[j]
+    ab = b - a
+    L2 = (ab * ab).sum(axis=1)
+    det = np.abs(ab[:, 0] * (x[1] - a[:, 1]) - ab[:, 1] * (x[0] - a[:, 0]))
+    # only lines whose segment is near x matter for the configurations around x
+    mid = 0.5 * (a + b)
+    near = ((mid - x) ** 2).sum(axis=1) <= L2
+    return float((det[near] / np.maximum(L2[near], 1e-300)).min(initial=np.inf))
+
+
+def place_clear_of_lines(
+    candidates: np.ndarray, existing: np.ndarray, fallbacks: np.ndarray | None = None,
+    neighbours: int = 10,
+) -> np.ndarray:
+    """Move each candidate knot so it is not nearly collinear with two nearby knots.
+
+    For candidate ``x`` with fallback ``f`` (e.g. the centroid of its triangle), the positions
+    ``x + t (f - x)``, ``t = 0, 0.25, 0.5, 0.75, 1`` are tried in order and the first whose
+    :data:`LINE_CLEARANCE` holds against its ``neighbours`` nearest knots (existing ones and the
+    candidates placed before it) is kept; if none does, the one with the best clearance. A loop
+    over the candidates (tens per iteration), each step vectorized over knot pairs.
+    """
+    if fallbacks is None:
+        fallbacks = candidates
+    placed = []
+    pool = np.asarray(existing, dtype=np.float64)
+    tree = cKDTree(pool) if len(pool) else None
+    for x, f in zip(candidates, fallbacks):
+        best, best_c = x, -1.0
+        for t in (0.0, 0.25, 0.5, 0.75, 1.0):
+            y = x + t * (f - x)
+            near = []
+            if tree is not None:
+                _, idx = tree.query(y, k=min(neighbours, len(pool)))
+                near.append(pool[np.atleast_1d(idx)])
+            if placed:
+                P = np.asarray(placed)
+                near.append(P[np.argsort(((P - y) ** 2).sum(axis=1))[:neighbours]])
+            c = _clearance(y, np.concatenate(near)) if near else np.inf
+            if c >= LINE_CLEARANCE:
+                best = y
+                break
+            if c > best_c:
+                best, best_c = y, c
+        placed.append(best)
+    return np.asarray(placed).reshape(-1, 2)
+
+
+
+def locate(knots: np.ndarray, triangles: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Index of the (half-open) triangle holding each parameter, -1 outside; (N,) int.
+
+    The degree-0 simplex splines ``|det T| M(x | T)`` are the indicators of the triangles
+    (method.md section 1), so point location is one evaluation pass over the bucket grid.
+    """
+    a, b, c = (knots[triangles[:, j]] for j in range(3))
+    w = np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    batch = SimplexBatch(knots, triangles, w)
+    owner = np.full(len(uv), -1, dtype=np.int64)
+    for p, t in BoxIndex(batch.bbox).pairs(uv):
+        hit = batch.evaluate(uv[p], t) > 0.5
+        owner[p[hit]] = t[hit]
+    return owner
+
+
+def insertion_points(
+    knots: np.ndarray,
+    triangles: np.ndarray,
+    uv: np.ndarray,
+    errors: np.ndarray,
+    count: int,
+    criterion: str = "rms",
+    min_points: int = 4,
+) -> np.ndarray:
+    """New knots: one in each of the ``count`` worst ``Gamma_0`` triangles (method.md section 6).
+
+    Triangles are ranked by the sum of squared errors (``criterion="rms"``) or the largest error
+    (``"max"``) of their data; only triangles with at least ``min_points`` data points are
+    refined. The knot goes to the error-weighted centroid of the triangle's data, with its
+    barycentric coordinates clamped to at least 0.15 so it stays away from the knot lines and
+    knots of the triangle, then moved towards the triangle's centroid as far as needed to keep
+    clear of the lines through nearby knots (:func:`place_clear_of_lines`).
+    """
+    owner = locate(knots, triangles, uv)
+    ok = owner >= 0
+    o, e = owner[ok], errors[ok]
+    T = len(triangles)
+    counts = np.bincount(o, minlength=T)
+    e2 = e * e
+    score = np.bincount(o, weights=e2, minlength=T)
+    if criterion == "max":
+        score = np.zeros(T)
+        np.maximum.at(score, o, e)
+    score[counts < min_points] = -1.0
+    order = np.argsort(-score, kind="stable")
+    worst = order[: count][score[order[: count]] > 0]
+    if len(worst) == 0:
+        return np.zeros((0, 2))
+    wsum = np.bincount(o, weights=e2, minlength=T)
+    cu = np.bincount(o, weights=e2 * uv[ok, 0], minlength=T)
+    cv = np.bincount(o, weights=e2 * uv[ok, 1], minlength=T)
+    cen = np.stack([cu, cv], axis=1)[worst] / np.maximum(wsum[worst], 1e-300)[:, None]
+    a, b, c = (knots[triangles[worst, j]] for j in range(3))
+    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+
+    def cross(p, q, r):
+        return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+
+    beta = np.stack([cross(cen, b, c), cross(a, cen, c), cross(a, b, cen)], axis=1) / det[:, None]
+    beta = np.where(np.isfinite(beta), beta, 1.0 / 3.0)
+    beta = np.maximum(beta, 0.15)
+    beta /= beta.sum(axis=1, keepdims=True)
+    new = beta[:, :1] * a + beta[:, 1:2] * b + beta[:, 2:] * c
+    return place_clear_of_lines(new, knots, fallbacks=(a + b + c) / 3)
+
+
+def _add_ring(ring_knots: np.ndarray, seed: int) -> np.ndarray:
+    """One more ring of border knots around the existing ones, at their own spacing."""
+    d, _ = cKDTree(ring_knots).query(ring_knots, k=2)
+    h = float(np.median(d[:, 1]))
+    new = border_rings(ring_knots.min(axis=0), ring_knots.max(axis=0), h, rings=1, seed=seed)
+    return np.vstack([ring_knots, new])
+
+
+@dataclass
+class IterationState:
+    knots: np.ndarray
+    n_interior: int
+    space: SplineSpace
+    fit: FitResult
+
+
+def adaptive_fit(
+    uv: np.ndarray,
+    points: np.ndarray,
+    options: RefineOptions,
+    diagonal: float,
+    weights: np.ndarray | None = None,
+    start_knots: np.ndarray | None = None,
+    ring_knots: np.ndarray | None = None,
+    callback=None,
+    history_offset: int = 0,
+    unit: float = 1.0,
+) -> tuple[IterationState, list[dict], str]:
+    """Run the loop of method.md section 6 on parameters ``uv`` and (normalized) ``points``.
+
+    ``diagonal`` is the bounding-box diagonal in the units of ``points`` (for relative
+    tolerances and reports); ``unit`` converts those units to the user's (reports and absolute
+    tolerances are in the user's units). ``start_knots``/``ring_knots`` continue an earlier run.
+    Returns the best iteration, the per-iteration reports and why the loop stopped.
+    """
+    options.validate()
+    rng_seed = options.seed
+    tol = options.tolerance * (diagonal if options.relative else 1.0 / unit)
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    if start_knots is None:
+        # size the start so that the first fit uses about a tenth of the budget
+        # DCB has about 2.4 times as many functions per knot as TCB
+        per = 12 if options.mode == "tcb" else 30
+        n0 = options.initial_knots or int(np.clip(options.max_control_points / per, 8, 400))
+        n0 = int(min(n0, max(len(uv) // 8, 6)))
+        interior = initial_knots(uv, points, n0, seed=rng_seed)
+    else:
+        interior = np.asarray(start_knots, dtype=np.float64)
+    if ring_knots is None:
+        h = np.sqrt(np.prod(np.maximum(hi - lo, 1e-12)) / max(len(interior), 1))
+        pad = 1e-6 * float(np.max(hi - lo))
+        ring_knots = border_rings(lo - pad, hi + pad, h, rings=ring_count(options.degree),
+                                  seed=rng_seed)
+    cost = PlaneFitCost(uv, points) if (options.feature_sensitive and options.mode == "tcb") else None
+
+    history: list[dict] = []
+    best: IterationState | None = None
+    n_before, pending = len(interior), np.zeros((0, 2))
+    reason = "iteration limit"
+    t_start = time.perf_counter()
+    for it in range(options.max_iterations):
+        t0 = time.perf_counter()
+        for extra in range(3):
+            knots = np.vstack([interior, ring_knots])
+            space = make_space(knots, options.degree, options.mode, cost, len(interior))
+            # the budget is strict: insert fewer knots until the space fits in it
+            while space.n_basis > options.max_control_points and len(pending):
+                pending = pending[: len(pending) // 2]
+                interior = np.vstack([interior[: n_before], pending])
+                knots = np.vstack([interior, ring_knots])
+                space = make_space(knots, options.degree, options.mode, cost, len(interior))
+            # the first space too: fewer initial knots (a random subset: still well spread)
+            while (it == 0 and start_knots is None and space.n_basis > options.max_control_points
+                   and len(interior) > 6):
+                interior = interior[: max(6, len(interior) // 2)]
+                knots = np.vstack([interior, ring_knots])
+                space = make_space(knots, options.degree, options.mode, cost, len(interior))
+            if space.n_basis > options.max_control_points and it > 0:
+                break
+            t_space = time.perf_counter() - t0
+            try:
+                fit = fit_control_points(space, uv, points, weights, options.smoothness)
+                break
+            except BorderError:
+                if extra == 2:
+                    raise
+                # safety net (method.md section 3 measured one more ring being needed at times)
+                ring_knots = _add_ring(ring_knots, seed=rng_seed + extra + 1)
+        if space.n_basis > options.max_control_points and it > 0:
+            reason = "control-point budget reached"
+            break
+        state = IterationState(knots, len(interior), space, fit)
+        if best is None or fit.rms < best.fit.rms:
+            best = state
+        value = fit.rms if options.criterion == "rms" else fit.max
+        report = {
+            "iteration": history_offset + it + 1,
+            "knots": int(len(knots)),
+            "interior_knots": int(len(interior)),
+            "control_points": int(space.n_basis),
+            "rms": fit.rms * unit,
+            "max": fit.max * unit,
+            "rms_rel": fit.rms / diagonal,
+            "max_rel": fit.max / diagonal,
+            "seconds": time.perf_counter() - t0,
+            "elapsed": time.perf_counter() - t_start,
+            "phases": {"configurations": t_space, **fit.timings},
+        }
+        history.append(report)
+        if callback is not None and callback(dict(report)):
+            reason = "cancelled"
+            break
+        if value <= tol:
+            reason = "tolerance reached"
+            break
+        if it == options.max_iterations - 1:
+            break
+        # how many knots the budget allows: control points grow about linearly with knots
+        per_knot = space.n_basis / len(knots)
+        room = int((options.max_control_points - space.n_basis) / max(per_knot, 1e-9))
+        want = options.knots_per_iteration or max(10, int(np.ceil(0.15 * len(interior))))
+        count = min(want, room)
+        if count < 1:
+            reason = "control-point budget reached"
+            break
+        new = insertion_points(knots, space.configurations.triangles[0], uv, fit.errors, count,
+                               options.criterion)
+        if len(new) == 0:
+            reason = "no triangle has enough data to refine"
+            break
+        n_before, pending = len(interior), new
+        interior = np.vstack([interior, new])
+    assert best is not None
+    if best.space.n_basis > options.max_control_points and len(history) == 1:
+        raise InvalidInputError(
+            f"even the coarsest surface needs {best.space.n_basis} control points, more than "
+            f"the maximum of {options.max_control_points}; allow more control points"
+        )
+    return best, history, reason
+

@@ -1,0 +1,465 @@
+"""The fitted surface: :class:`TCBSurface` and :func:`fit_surface` (method.md sections 4-7).
+
+Like scipy's ``BSpline``, a surface is a small immutable object (knots, configurations, degree,
+control points, parameterization) that is callable on parameters and built by a free function::
+
+    surf = fit_surface(points)              # (N, 3) cloud, or points + faces of a disk mesh
+    xyz = surf(uv)                          # (m, 2) parameters -> (m, 3) points
+    verts, faces = surf.tessellate(64)
+    net_points, net_faces = surf.control_net()
+    surf.save("a.npz"); TCBSurface.load("a.npz")
+
+The fit runs in normalized coordinates ``q = (p - c) / s`` (bounding-box centre and half
+diagonal); since the basis is a partition of unity, the control points are mapped back with the
+same affine map, so the surface is exactly the fit in the user's units.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import Delaunay, cKDTree
+
+from .configurations import Configurations
+from .errors import FileFormatError, InvalidInputError
+from .parameterize import Parameterization, normalize, parameterize
+from .refine import RefineOptions, adaptive_fit
+from .spline_space import SplineSpace
+
+__all__ = ["TCBSurface", "fit_surface", "FORMAT_VERSION"]
+
+FORMAT_VERSION = 1
+_PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes")
+
+
+def _readonly(a):
+    a = np.array(a, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+class TCBSurface:
+    """A TCB (or DCB) spline surface ``S(x) = sum_I c_I B_I(x)`` fitted to data.
+
+    Attributes
+    ----------
+    space : SplineSpace (knots, configurations, degree, basis)
+    control_points : (n_basis, 3) float64, read-only, in the data's units
+    parameterization : Parameterization of the data it was fitted to
+    errors : (N,) float64, ``|S(x_j) - p_j|`` of the last fit (NaN for unused mesh vertices)
+    report : dict, statistics of the fit (knots, control points, rms, max, history, ...)
+    n_interior : int, the first ``n_interior`` knots are interior knots, the rest border rings
+    """
+
+    def __init__(
+        self,
+        space: SplineSpace,
+        control_points: np.ndarray,
+        parameterization: Parameterization,
+        errors: np.ndarray,
+        report: dict,
+        n_interior: int,
+        options: RefineOptions | None = None,
+    ):
+        control_points = np.asarray(control_points, dtype=np.float64)
+        if control_points.shape != (space.n_basis, 3):
+            raise InvalidInputError(
+                f"control_points must have shape ({space.n_basis}, 3), got {control_points.shape}"
+            )
+        if not np.all(np.isfinite(control_points)):
+            raise InvalidInputError("control points must be finite")
+        self._space = space
+        self._c = _readonly(control_points)
+        self._param = parameterization
+        self._errors = _readonly(errors)
+        self._report = report
+        self._n_interior = int(n_interior)
+        self._options = options or RefineOptions(degree=space.degree, mode=space.mode)
+        self._tess_cache: dict = {}
+
+    # ---- read-only state ----------------------------------------------------------------
+    space = property(lambda self: self._space)
+    control_points = property(lambda self: self._c)
+    parameterization = property(lambda self: self._param)
+    errors = property(lambda self: self._errors)
+    report = property(lambda self: dict(self._report))
+    n_interior = property(lambda self: self._n_interior)
+    options = property(lambda self: self._options)
+    degree = property(lambda self: self._space.degree)
+    mode = property(lambda self: self._space.mode)
+    knots = property(lambda self: self._space.knots)
+
+    @property
+    def configurations(self) -> Configurations:
+        return self._space.configurations
+
+    # ---- evaluation --------------------------------------------------------------------
+    def evaluation_matrix(self, uv, derivative=(0, 0)) -> sp.csr_matrix:
+        """Sparse (m, n_basis) matrix ``M`` with ``surface(uv) = M @ control_points``."""
+        return self._space.evaluate(uv, derivative)
+
+    def __call__(self, uv) -> np.ndarray:
+        """Surface points (m, 3) at parameters ``uv`` (m, 2)."""
+        return self.evaluation_matrix(uv) @ self._c
+
+    def derivative(self, uv, derivative=(1, 0)) -> np.ndarray:
+        """Partial derivative ``d^(du+dv) S / du^du dv^dv`` (m, 3); ``du + dv <= 2``."""
+        return self.evaluation_matrix(uv, derivative) @ self._c
+
+    def normals(self, uv) -> np.ndarray:
+        """Unit normals ``S_u x S_v / |S_u x S_v|`` (m, 3)."""
+        n = np.cross(self.derivative(uv, (1, 0)), self.derivative(uv, (0, 1)))
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+    def domain_contains(self, uv) -> np.ndarray:
+        """Mask of parameters inside the data's parameter domain."""
+        return self._param.contains(uv)
+
+    # ---- meshes ------------------------------------------------------------------------
+    def tessellation_uv(self, resolution: int = 64) -> tuple[np.ndarray, np.ndarray]:
+        """Parameters (V, 2) and CCW triangles (F, 3) covering exactly the data's domain.
+
+        The domain is the disk polygon for meshes and the convex hull of the parameters for
+        clouds, trimmed to where data is (triangles farther than a few data spacings from any
+        data parameter are dropped). ``resolution`` grid steps span the longer side.
+        """
+        resolution = int(resolution)
+        if resolution < 2:
+            raise InvalidInputError("the tessellation resolution must be at least 2")
+        if resolution in self._tess_cache:
+            return self._tess_cache[resolution]
+        poly = np.asarray(self._param.domain_polygon, dtype=np.float64)
+        lo, hi = poly.min(axis=0), poly.max(axis=0)
+        d = float(np.max(hi - lo)) / resolution
+        # boundary: every polygon edge resampled at spacing ~d (keeping the corners)
+        nxt = np.roll(poly, -1, axis=0)
+        seg = np.linalg.norm(nxt - poly, axis=1)
+        nseg = np.maximum(np.ceil(seg / d).astype(int), 1)
+        t = np.concatenate([np.arange(n) / n for n in nseg])
+        start = np.repeat(np.arange(len(poly)), nseg)
+        boundary = poly[start] + t[:, None] * (nxt[start] - poly[start])
+        # interior: grid points inside the polygon, away from the boundary
+        gu = np.arange(lo[0] + d / 2, hi[0], d)
+        gv = np.arange(lo[1] + d / 2, hi[1], d)
+        grid = np.stack(np.meshgrid(gu, gv), -1).reshape(-1, 2)
+        inside = self._param.contains(grid) & (_distance_to_polygon(grid, poly) > 0.3 * d)
+        uv = np.vstack([boundary, grid[inside]])
+        tri = Delaunay(uv).simplices
+        cen = uv[tri].mean(axis=1)
+        keep = self._param.contains(cen)
+        if self._param.kind == "plane":
+            data = self._param.uv
+            tree = cKDTree(data)
+            sample = data[:: max(1, len(data) // 5000)]
+            spacing = float(np.median(tree.query(sample, k=2)[0][:, 1]))
+            keep &= tree.query(cen)[0] <= max(4 * spacing, 1.5 * d)
+        tri = tri[keep]
+        a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
+        det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+        tri = np.where((det < 0)[:, None], tri[:, [0, 2, 1]], tri)
+        used = np.unique(tri)
+        remap = np.full(len(uv), -1)
+        remap[used] = np.arange(len(used))
+        result = (_readonly(uv[used]), _readonly(remap[tri]))
+        self._tess_cache[resolution] = result
+        return result
+
+    def tessellate(self, resolution: int = 64) -> tuple[np.ndarray, np.ndarray]:
+        """Vertices (V, 3) and triangles (F, 3) of the surface over the data's domain."""
+        uv, faces = self.tessellation_uv(resolution)
+        return self(uv), faces.copy()
+
+    def control_net(self) -> tuple[np.ndarray, np.ndarray]:
+        """Control points (n_basis, 3) and the control-net triangles (f, 3) (method.md 7).
+
+        For DCB surfaces the net is ambiguous (several control points share a Greville point)
+        and no faces are returned.
+        """
+        return self._c.copy(), self._space.net_faces.copy()
+
+    # ---- editing -----------------------------------------------------------------------
+    def with_control_points(self, control_points) -> "TCBSurface":
+        """A new surface with other control points (same space); this one is unchanged."""
+        return TCBSurface(
+            self._space, control_points, self._param, self._errors, self._report,
+            self._n_interior, self._options,
+        )
+
+    # ---- distances ---------------------------------------------------------------------
+    def closest_parameters(self, points, iterations: int = 4) -> np.ndarray:
+        """Parameters (m, 2) of the surface points closest to ``points`` (m, 3).
+
+        Start at the nearest vertex of a fine tessellation, then Gauss-Newton steps on
+        ``|S(x) - p|^2`` (2x2 normal equations per point, vectorized), kept in the domain's box.
+        """
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        uv_t, _ = self.tessellation_uv(96)
+        verts = self(uv_t)
+        _, nearest = cKDTree(verts).query(p)
+        x = uv_t[nearest].copy()
+        lo, hi = uv_t.min(axis=0), uv_t.max(axis=0)
+        for _ in range(iterations):
+            r = self(x) - p
+            su, sv = self.derivative(x, (1, 0)), self.derivative(x, (0, 1))
+            a, b, c = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
+            g1, g2 = (su * r).sum(1), (sv * r).sum(1)
+            det = a * c - b * b
+            ok = det > 1e-300
+            step = np.zeros_like(x)
+            step[ok, 0] = (c[ok] * g1[ok] - b[ok] * g2[ok]) / det[ok]
+            step[ok, 1] = (a[ok] * g2[ok] - b[ok] * g1[ok]) / det[ok]
+            cand = np.clip(x - step, lo, hi)
+            better = np.linalg.norm(self(cand) - p, axis=1) <= np.linalg.norm(r, axis=1)
+            x[better] = cand[better]
+        return x
+
+    def distances(self, points) -> np.ndarray:
+        """Distance (m,) of ``points`` (m, 3) to the surface (closest point, see above)."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return np.linalg.norm(self(self.closest_parameters(p)) - p, axis=1)
+
+    # ---- refinement --------------------------------------------------------------------
+    def refine(self, points, faces=None, callback=None, **changes) -> "TCBSurface":
+        """Continue the adaptive loop from this surface on the same data.
+
+        ``points`` (and ``faces``) must be the data this surface was fitted to (same count);
+        ``changes`` override settings, e.g. ``tolerance=``, ``max_control_points=``,
+        ``max_iterations=`` (default: 5 more iterations).
+        """
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or len(points) != len(self._param.uv):
+            raise InvalidInputError(
+                "refine() needs the points this surface was fitted to "
+                f"({len(self._param.uv)} points, got {len(points)})"
+            )
+        fields = self._options.__dict__ | {"max_iterations": 5} | changes
+        options = RefineOptions(**fields)
+        return _run(points, self._param, options, callback,
+                    start=self.knots[: self._n_interior], rings=self.knots[self._n_interior:],
+                    history=self._report.get("history", []))
+
+    # ---- files -------------------------------------------------------------------------
+    def to_bytes(self) -> bytes:
+        """The surface as a versioned ``.npz`` archive in memory (see :meth:`save`)."""
+        arrays = {
+            "format_version": np.array(FORMAT_VERSION),
+            "degree": np.array(self.degree),
+            "mode": np.array(self.mode),
+            "knots": self.knots,
+            "n_interior": np.array(self._n_interior),
+            "control_points": self._c,
+            "errors": self._errors,
+            "report": np.array(json.dumps(self._report)),
+            "options": np.array(json.dumps(self._options.__dict__)),
+            "param_kind": np.array(self._param.kind),
+            "param_scale": np.array(np.nan if self._param.scale is None else self._param.scale),
+        }
+        for lvl, (T, I) in enumerate(zip(self.configurations.triangles, self.configurations.interior)):
+            arrays[f"triangles_{lvl}"] = T
+            arrays[f"interior_{lvl}"] = I
+        arrays["open_links"] = np.array(self.configurations.open_links)
+        for name in _PARAM_FIELDS:
+            value = getattr(self._param, name)
+            if value is not None:
+                arrays[f"param_{name}"] = value
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **arrays)
+        return buf.getvalue()
+
+    @classmethod
+    def from_bytes(cls, data: bytes, what: str = "the data") -> "TCBSurface":
+        """Inverse of :meth:`to_bytes`; raises :class:`FileFormatError` on bad content."""
+        try:
+            with np.load(io.BytesIO(data), allow_pickle=False) as z:
+                arrays = {k: z[k] for k in z.files}
+        except Exception as exc:  # zipfile / numpy raise many kinds on corrupt input
+            raise FileFormatError(f"{what} is not a readable TCB surface file ({exc})") from None
+        try:
+            version = int(arrays["format_version"])
+        except KeyError:
+            raise FileFormatError(f"{what} is not a TCB surface file (no format version)") from None
+        if version > FORMAT_VERSION:
+            raise FileFormatError(
+                f"{what} was written by a newer TCB Surface (format {version}; this version "
+                f"reads up to {FORMAT_VERSION}): update the add-on"
+            )
+        try:
+            degree = int(arrays["degree"])
+            knots = arrays["knots"]
+            configs = Configurations(
+                knots=knots,
+                triangles=[arrays[f"triangles_{lvl}"] for lvl in range(degree + 1)],
+                interior=[arrays[f"interior_{lvl}"] for lvl in range(degree + 1)],
+                open_links=[int(v) for v in arrays["open_links"]],
+            )
+            space = SplineSpace(knots, degree, str(arrays["mode"]), configs)
+            scale = float(arrays["param_scale"])
+            param = Parameterization(
+                kind=str(arrays["param_kind"]),
+                scale=None if np.isnan(scale) else scale,
+                **{name: arrays.get(f"param_{name}") for name in _PARAM_FIELDS},
+            )
+            options = RefineOptions(**json.loads(str(arrays["options"])))
+            return cls(space, arrays["control_points"], param, arrays["errors"],
+                       json.loads(str(arrays["report"])), int(arrays["n_interior"]), options)
+        except FileFormatError:
+            raise
+        except Exception as exc:
+            raise FileFormatError(f"{what} is damaged or incomplete ({type(exc).__name__}: {exc})") from None
+
+    def save(self, path) -> None:
+        """Write a versioned ``.npz``; atomically (temporary file, then rename)."""
+        path = Path(path)
+        data = self.to_bytes()
+        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent or ".")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise
+
+    @classmethod
+    def load(cls, path) -> "TCBSurface":
+        """Read a surface written by :meth:`save`."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileFormatError(f"no such file: {path}")
+        return cls.from_bytes(path.read_bytes(), what=str(path))
+
+    def __repr__(self) -> str:
+        r = self._report
+        return (
+            f"TCBSurface(mode={self.mode!r}, degree={self.degree}, knots={len(self.knots)}, "
+            f"control_points={self._space.n_basis}, rms_rel={r.get('rms_rel', float('nan')):.3g})"
+        )
+
+
+def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Distance (m,) from points to the boundary of a polygon (vectorized over edges)."""
+    a = poly
+    b = np.roll(poly, -1, axis=0)
+    ab = b - a
+    t = ((x[:, None, :] - a[None]) * ab[None]).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-300)
+    t = np.clip(t, 0.0, 1.0)
+    proj = a[None] + t[..., None] * ab[None]
+    return np.sqrt(((x[:, None, :] - proj) ** 2).sum(-1)).min(axis=1)
+
+
+def _run(points, param, options, callback, start=None, rings=None, history=()):
+    t0 = time.perf_counter()
+    used = np.asarray(param.used, dtype=bool)
+    q, norm = normalize(points[used])
+    diag_norm = 2.0  # normalize() maps the bounding box to half-diagonal 1
+    uv = np.asarray(param.uv)[used]
+    best, hist, reason = adaptive_fit(
+        uv, q, options, diagonal=diag_norm, start_knots=start, ring_knots=rings,
+        callback=callback, history_offset=len(history), unit=norm.scale,
+    )
+    # back to the user's units (affine, exact up to rounding: partition of unity)
+    C = norm.undo(best.fit.control_points)
+    errors = np.full(len(points), np.nan)
+    errors[used] = best.fit.errors * norm.scale
+    diagonal = 2.0 * norm.scale
+    report = {
+        "mode": options.mode,
+        "degree": options.degree,
+        "points": int(used.sum()),
+        "knots": int(len(best.knots)),
+        "interior_knots": int(best.n_interior),
+        "control_points": int(best.space.n_basis),
+        "iterations": len(history) + len(hist),
+        "rms": float(best.fit.rms * norm.scale),
+        "max": float(best.fit.max * norm.scale),
+        "rms_rel": float(best.fit.rms / diag_norm),
+        "max_rel": float(best.fit.max / diag_norm),
+        "diagonal": float(diagonal),
+        "seconds": time.perf_counter() - t0,
+        "stop_reason": reason,
+        "history": list(history) + hist,
+    }
+    return TCBSurface(best.space, C, param, errors, report, best.n_interior, options)
+
+
+def fit_surface(
+    points,
+    faces=None,
+    degree: int = 2,
+    mode: str = "tcb",
+    tolerance: float = 1e-3,
+    relative: bool = True,
+    max_control_points: int = 2000,
+    max_iterations: int = 20,
+    smoothness: float = 1e-4,
+    callback=None,
+    *,
+    criterion: str = "rms",
+    initial_knots: int | None = None,
+    knots_per_iteration: int | None = None,
+    feature_sensitive: bool = True,
+    seed: int = 0,
+) -> TCBSurface:
+    """Fit a TCB-spline surface to a point cloud or a disk-like mesh (method.md sections 4-6).
+
+    Parameters
+    ----------
+    points : (N, 3) float
+        Scanned points, or mesh vertices.
+    faces : (F, 3) int, optional
+        Triangles of a disk-topology mesh (then the mesh is parameterized over the unit disk;
+        otherwise the cloud is projected on its best-fit plane).
+    degree : 2 (C^1, default) or 3 (C^2)
+    mode : "tcb" (feature-sensitive configurations) or "dcb" (Delaunay configurations)
+    tolerance : float
+        Stop when the RMS (or max, see ``criterion``) error is at most this; relative to the
+        bounding-box diagonal when ``relative`` is True, else in the data's units.
+    max_control_points : int
+        Budget of control points; knot insertion stops before exceeding it.
+    max_iterations : int
+        Fits at most this many times.
+    smoothness : float
+        Fairing weight relative to the data term (method.md section 5).
+    callback : callable, optional
+        ``callback(report: dict) -> bool``: called after every iteration with keys
+        ``iteration, knots, control_points, rms, max, rms_rel, max_rel, seconds``; return True to
+        cancel (the best surface so far is returned).
+    criterion : "rms" or "max"
+    initial_knots, knots_per_iteration : int, optional
+        Override the automatic sizes (about 1/12 of the budget to start; 15% more per iteration).
+    feature_sensitive : bool
+        TCB only: choose ``Gamma_0`` and the link triangulations from the data (default) or use
+        Delaunay ones.
+    seed : int
+        Seed of the random choices (knot sampling, jitter): same input, same surface.
+
+    Raises
+    ------
+    InvalidInputError, TopologyError, ParameterizationError
+        Bad input, with a message that says what to do.
+    SingularSystemError, BorderError
+        The fit cannot be trusted (never returns NaN).
+    """
+    options = RefineOptions(
+        degree=degree, mode=mode, tolerance=tolerance, relative=relative, criterion=criterion,
+        max_control_points=int(max_control_points), max_iterations=int(max_iterations),
+        smoothness=smoothness, initial_knots=initial_knots,
+        knots_per_iteration=knots_per_iteration, feature_sensitive=feature_sensitive, seed=seed,
+    )
+    options.validate()
+    try:
+        points = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError("points must be an (N, 3) array of numbers") from None
+    param = parameterize(points, faces)
+    return _run(points, param, options, callback)
