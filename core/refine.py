@@ -353,6 +353,7 @@ def adaptive_fit(
     history: list[dict] = []
     best: IterationState | None = None
     n_before, pending = len(interior), np.zeros((0, 2))
+    last_round = False
     reason = "iteration limit"
     t_start = time.perf_counter()
     for it in range(options.max_iterations):
@@ -412,6 +413,9 @@ def adaptive_fit(
             break
         if it == options.max_iterations - 1:
             break
+        if last_round:
+            reason = "control-point budget reached"
+            break
         # how many knots the budget allows: control points grow about linearly with knots
         per_knot = space.n_basis / len(knots)
         room = int((options.max_control_points - space.n_basis) / max(per_knot, 1e-9))
@@ -420,6 +424,8 @@ def adaptive_fit(
         if count < 1:
             reason = "control-point budget reached"
             break
+        # the budget limits this insertion: it is the last one (no crawl of tiny steps)
+        last_round = count < want
         new = insertion_points(knots, space.configurations.triangles[0], uv, fit.errors, count,
                                options.criterion)
         if len(new) == 0:

@@ -160,10 +160,12 @@ class TCBSurface:
             sample = data[:: max(1, len(data) // 5000)]
             spacing = float(np.median(tree.query(sample, k=2)[0][:, 1]))
             keep &= tree.query(cen)[0] <= max(4 * spacing, 1.5 * d)
-        tri = tri[keep]
         a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
         det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-        tri = np.where((det < 0)[:, None], tri[:, [0, 2, 1]], tri)
+        # Delaunay joins collinear points of a straight boundary stretch into zero-area
+        # triangles: they cover nothing and have no normal, drop them
+        keep &= np.abs(det) > 1e-9 * d * d
+        tri = np.where((det < 0)[:, None], tri[:, [0, 2, 1]], tri)[keep]
         used = np.unique(tri)
         remap = np.full(len(uv), -1)
         remap[used] = np.arange(len(used))
@@ -196,14 +198,26 @@ class TCBSurface:
     def closest_parameters(self, points, iterations: int = 4) -> np.ndarray:
         """Parameters (m, 2) of the surface points closest to ``points`` (m, 3).
 
-        Start at the nearest vertex of a fine tessellation, then Gauss-Newton steps on
-        ``|S(x) - p|^2`` (2x2 normal equations per point, vectorized), kept in the domain's box.
+        Start at each of the 3 nearest vertices of a fine tessellation, take Gauss-Newton steps
+        on ``|S(x) - p|^2`` (2x2 normal equations per point, vectorized, only steps that improve
+        are taken), kept in the domain's box; the best of the three is returned.
         """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         uv_t, _ = self.tessellation_uv(96)
         verts = self(uv_t)
-        _, nearest = cKDTree(verts).query(p)
-        x = uv_t[nearest].copy()
+        _, nearest = cKDTree(verts).query(p, k=3)
+        best_x, best_d = None, None
+        for j in range(nearest.shape[1]):
+            x = self._newton_closest(p, uv_t[nearest[:, j]].copy(), uv_t, iterations)
+            d = np.linalg.norm(self(x) - p, axis=1)
+            if best_x is None:
+                best_x, best_d = x, d
+            else:
+                better = d < best_d
+                best_x[better], best_d[better] = x[better], d[better]
+        return best_x
+
+    def _newton_closest(self, p, x, uv_t, iterations):
         lo, hi = uv_t.min(axis=0), uv_t.max(axis=0)
         for _ in range(iterations):
             r = self(x) - p
@@ -357,20 +371,50 @@ def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return np.sqrt(((x[:, None, :] - proj) ** 2).sum(-1)).min(axis=1)
 
 
+def mesh_samples(points, uv, faces, count: int, seed: int = 0):
+    """Points sampled on the triangles of a parameterized mesh, with their parameters.
+
+    ``count`` samples, allotted to the faces in proportion to their 3D area; each at random
+    barycentric coordinates (seeded), where the mesh and its parameterization are both linear:
+    ``p = sum b_i p_i``, ``uv = sum b_i uv_i``. Fitting these as well as the vertices fits the
+    mesh as a surface instead of interpolating a few hundred vertices (method.md section 5).
+    """
+    rng = np.random.default_rng(seed)
+    a, b, c = (points[faces[:, j]] for j in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    if not area.sum() > 0:
+        return np.zeros((0, 3)), np.zeros((0, 2))
+    face = rng.choice(len(faces), size=count, p=area / area.sum())
+    r1, r2 = rng.random(count), rng.random(count)
+    s = np.sqrt(r1)
+    bary = np.stack([1 - s, s * (1 - r2), s * r2], axis=1)
+    tri = faces[face]
+    p = np.einsum("nk,nkj->nj", bary, points[tri])
+    x = np.einsum("nk,nkj->nj", bary, uv[tri])
+    return p, x
+
+
 def _run(points, param, options, callback, start=None, rings=None, history=()):
     t0 = time.perf_counter()
     used = np.asarray(param.used, dtype=bool)
     q, norm = normalize(points[used])
     diag_norm = 2.0  # normalize() maps the bounding box to half-diagonal 1
     uv = np.asarray(param.uv)[used]
+    fit_uv, fit_q = uv, q
+    if param.faces is not None:
+        # fit the mesh's surface: vertices plus points sampled on its faces
+        count = int(np.clip(20 * len(points), 5_000, 200_000))
+        sp_, su_ = mesh_samples(norm.apply(points), np.asarray(param.uv), param.faces, count,
+                                seed=options.seed)
+        fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
     best, hist, reason = adaptive_fit(
-        uv, q, options, diagonal=diag_norm, start_knots=start, ring_knots=rings,
+        fit_uv, fit_q, options, diagonal=diag_norm, start_knots=start, ring_knots=rings,
         callback=callback, history_offset=len(history), unit=norm.scale,
     )
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)
     errors = np.full(len(points), np.nan)
-    errors[used] = best.fit.errors * norm.scale
+    errors[used] = best.fit.errors[: len(uv)] * norm.scale
     diagonal = 2.0 * norm.scale
     report = {
         "mode": options.mode,
@@ -380,10 +424,11 @@ def _run(points, param, options, callback, start=None, rings=None, history=()):
         "interior_knots": int(best.n_interior),
         "control_points": int(best.space.n_basis),
         "iterations": len(history) + len(hist),
-        "rms": float(best.fit.rms * norm.scale),
-        "max": float(best.fit.max * norm.scale),
-        "rms_rel": float(best.fit.rms / diag_norm),
-        "max_rel": float(best.fit.max / diag_norm),
+        # errors at the user's points (for meshes the fit also used samples on the faces)
+        "rms": float(np.sqrt(np.mean(errors[used] ** 2))),
+        "max": float(errors[used].max()),
+        "rms_rel": float(np.sqrt(np.mean(errors[used] ** 2)) / diagonal),
+        "max_rel": float(errors[used].max() / diagonal),
         "diagonal": float(diagonal),
         "seconds": time.perf_counter() - t0,
         "stop_reason": reason,

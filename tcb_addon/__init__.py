@@ -1,21 +1,37 @@
 """Blender side of TCB Surface: properties, operators, panels and the bpy <-> numpy bridge.
 
-Thin by design: all mathematics lives in ``core``. For now (spline-space milestone) it registers
-nothing; the operators and panels arrive with the Blender-extension issue.
+Thin by design: all mathematics lives in ``core`` (imported lazily by the operators, as the
+extension's own subpackage). Modules:
+
+- ``bridge``: read the selection into numpy arrays, write meshes and attributes;
+- ``properties``: fit settings (scene) and result data (``object.tcb``);
+- ``operators``: ``bpy.ops.tcb.*`` (fit, refine, re-tessellate, deviation map, net, export);
+- ``ui``: the View3D > Sidebar > TCB panels.
 """
 
-_classes: tuple = ()
+
+def _classes():
+    from . import operators, properties, ui
+
+    return (*properties.classes, *operators.classes, *ui.classes)
 
 
 def register():
     import bpy
 
-    for cls in _classes:
+    from . import properties
+
+    for cls in _classes():
         bpy.utils.register_class(cls)
+    properties.register_props()
 
 
 def unregister():
     import bpy
 
-    for cls in reversed(_classes):
+    from . import operators, properties
+
+    operators.clear_cache()
+    properties.unregister_props()
+    for cls in reversed(_classes()):
         bpy.utils.unregister_class(cls)

@@ -1,0 +1,288 @@
+"""bpy <-> numpy: read the selection as arrays, write result meshes and attributes.
+
+Everything here moves data; no mathematics. Geometry is read with ``foreach_get`` into float32 /
+int32 buffers and written with ``foreach_set`` through the attribute API (``position``,
+``.corner_vert``, ``loop_start``); no Python lists of tuples for large data.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+# Object types whose evaluated geometry can hold points. EMPTY and the curve-like types count
+# only through what they produce (collection instances, Geometry Nodes): checked after
+# evaluation.
+POINT_TYPES = {"MESH", "POINTCLOUD"}
+GEOMETRY_TYPES = POINT_TYPES | {"CURVE", "SURFACE", "META", "FONT", "CURVES", "EMPTY"}
+
+_TYPE_NAMES = {
+    "CAMERA": "a camera", "LIGHT": "a light", "LIGHT_PROBE": "a light probe",
+    "SPEAKER": "a speaker", "ARMATURE": "an armature", "LATTICE": "a lattice",
+    "VOLUME": "a volume", "GREASEPENCIL": "a Grease Pencil object", "EMPTY": "an empty",
+    "CURVE": "a curve", "CURVES": "a hair curves object", "SURFACE": "a NURBS surface",
+    "META": "a metaball", "FONT": "a text object",
+}  # fmt: skip
+
+
+class SelectionError(Exception):
+    """The selection cannot be fitted; the message is shown to the user as is."""
+
+
+@dataclass
+class InputData:
+    """The merged, world-space input of a fit."""
+
+    points: np.ndarray  # (n, 3) float64
+    faces: np.ndarray | None  # (f, 3) int64, or None for a point cloud
+    sources: list = field(default_factory=list)  # original bpy.types.Object, in selection order
+    counts: dict = field(default_factory=dict)  # source name -> number of points read
+
+    @property
+    def name(self) -> str:
+        names = [o.name for o in self.sources]
+        return names[0] if len(names) == 1 else f"{names[0]} +{len(names) - 1}"
+
+    def digest(self) -> str:
+        """A content hash, so a redo with the same input can reuse the last fit."""
+        h = hashlib.blake2b(digest_size=16)
+        h.update(np.ascontiguousarray(self.points).tobytes())
+        if self.faces is not None:
+            h.update(np.ascontiguousarray(self.faces).tobytes())
+        return h.hexdigest()
+
+
+def _kind(obj) -> str:
+    return _TYPE_NAMES.get(obj.type, f"a {obj.type.lower()} object")
+
+
+def selection_problem(context) -> str | None:
+    """A cheap check for the panel (no evaluation): why the Fit button is disabled, or None."""
+    if context.mode != "OBJECT":
+        return "Switch to Object Mode to fit"
+    selected = list(getattr(context, "selected_objects", None) or [])
+    if not selected:
+        return "Select a mesh or point-cloud object"
+    for obj in selected:
+        if obj.type not in GEOMETRY_TYPES:
+            return f"'{obj.name}' is {_kind(obj)}, not a mesh or point cloud"
+    return None
+
+
+def _world(positions: np.ndarray, matrix) -> np.ndarray:
+    m = np.array(matrix, dtype=np.float64)
+    return positions.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+
+
+def read_positions(data) -> np.ndarray:
+    """(n, 3) float32 positions of a Mesh or PointCloud datablock."""
+    attr = data.attributes.get("position")
+    n = len(attr.data) if attr is not None else 0
+    buf = np.empty(n * 3, dtype=np.float32)
+    if n:
+        attr.data.foreach_get("vector", buf)
+    return buf.reshape(n, 3)
+
+
+def read_triangles(mesh) -> np.ndarray:
+    """(t, 3) int32 vertex indices of the mesh's triangulated faces."""
+    tris = mesh.loop_triangles
+    buf = np.empty(len(tris) * 3, dtype=np.int32)
+    if len(tris):
+        tris.foreach_get("vertices", buf)
+    return buf.reshape(-1, 3)
+
+
+def read_selection(context, objects=None) -> InputData:
+    """World-space points (and faces) of the selected objects, after modifiers.
+
+    Meshes are read evaluated (modifiers and Geometry Nodes applied), point clouds directly, and
+    geometry that Geometry Nodes or collection instancing produce through
+    ``depsgraph.object_instances``. Several objects are merged; faces are kept only when a
+    single mesh is the whole input (merged meshes are fitted as a point cloud).
+    Raises :class:`SelectionError` with a message for the user.
+    """
+    if objects is None:
+        objects = list(getattr(context, "selected_objects", None) or [])
+    objects = [o for o in objects if o is not None]
+    if not objects:
+        raise SelectionError("Nothing selected: select a mesh or point-cloud object to fit")
+    for obj in objects:
+        if obj.type not in GEOMETRY_TYPES:
+            raise SelectionError(
+                f"'{obj.name}' is {_kind(obj)}, not a mesh or point cloud: "
+                "select the mesh or point-cloud object to fit"
+            )
+
+    wanted = {o.as_pointer(): o for o in objects}
+    depsgraph = context.evaluated_depsgraph_get()
+    parts: dict[int, list] = {k: [] for k in wanted}  # owner -> [(points, faces|None)]
+    for inst in depsgraph.object_instances:
+        owner = inst.parent.original if inst.is_instance else inst.object.original
+        key = owner.as_pointer()
+        if key not in parts:
+            continue
+        ob = inst.object
+        if ob.type == "MESH":
+            mesh = ob.data
+            pts = read_positions(mesh)
+            tris = read_triangles(mesh) if len(mesh.polygons) else None
+        elif ob.type == "POINTCLOUD":
+            pts, tris = read_positions(ob.data), None
+        else:
+            continue
+        if len(pts):
+            parts[key].append((_world(pts, inst.matrix_world), tris))
+
+    points, faces, counts = [], [], {}
+    for key, obj in wanted.items():
+        got = parts[key]
+        n = sum(len(p) for p, _ in got)
+        if n == 0:
+            what = "vertices" if obj.type == "MESH" else "points"
+            raise SelectionError(f"'{obj.name}' has no {what}: nothing to fit")
+        bad = sum(int((~np.isfinite(p).all(axis=1)).sum()) for p, _ in got)
+        if bad:
+            what = "vertex has" if bad == 1 else "vertices have"
+            raise SelectionError(
+                f"'{obj.name}': {bad} of {n} {what} NaN or infinite coordinates (after "
+                "modifiers): delete or fix them and try again"
+            )
+        counts[obj.name] = n
+        points += [p for p, _ in got]
+        faces += [f for _, f in got]
+
+    pts = np.concatenate(points) if len(points) > 1 else points[0]
+    tri = faces[0] if len(faces) == 1 and faces[0] is not None else None
+    return InputData(points=pts, faces=None if tri is None else tri.astype(np.int64),
+                     sources=list(wanted.values()), counts=counts)  # fmt: skip
+
+
+# --- writing -------------------------------------------------------------------------------
+
+
+def new_mesh(name: str, verts: np.ndarray, faces: np.ndarray | None = None) -> bpy.types.Mesh:
+    """A mesh from (n, 3) positions and (f, k) polygon vertex indices (k = 3 or 4)."""
+    verts = np.ascontiguousarray(verts, dtype=np.float32).reshape(-1, 3)
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(verts))
+    if len(verts):
+        mesh.attributes["position"].data.foreach_set("vector", verts.ravel())
+    if faces is not None and len(faces):
+        faces = np.ascontiguousarray(faces, dtype=np.int32)
+        nf, k = faces.shape
+        mesh.loops.add(nf * k)
+        mesh.polygons.add(nf)
+        mesh.polygons.foreach_set("loop_start", np.arange(0, nf * k, k, dtype=np.int32))
+        mesh.attributes[".corner_vert"].data.foreach_set("value", faces.ravel())
+    mesh.update(calc_edges=True)
+    return mesh
+
+
+def set_positions(mesh, verts: np.ndarray) -> None:
+    mesh.attributes["position"].data.foreach_set(
+        "vector", np.ascontiguousarray(verts, dtype=np.float32).ravel()
+    )
+    mesh.update()
+
+
+def set_float_attribute(data, name: str, values: np.ndarray, domain: str = "POINT") -> None:
+    attr = data.attributes.get(name)
+    if attr is not None and (attr.data_type != "FLOAT" or attr.domain != domain):
+        data.attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = data.attributes.new(name, "FLOAT", domain)
+    attr.data.foreach_set("value", np.ascontiguousarray(values, dtype=np.float32).ravel())
+
+
+def set_color_attribute(mesh, name: str, rgba: np.ndarray) -> None:
+    """A per-vertex float color attribute, made the active and render color."""
+    attr = mesh.color_attributes.get(name)
+    if attr is not None and (attr.data_type != "FLOAT_COLOR" or attr.domain != "POINT"):
+        mesh.color_attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = mesh.color_attributes.new(name, "FLOAT_COLOR", "POINT")
+    attr.data.foreach_set("color", np.ascontiguousarray(rgba, dtype=np.float32).ravel())
+    mesh.color_attributes.active_color = attr
+    mesh.color_attributes.render_color_index = mesh.color_attributes.active_color_index
+
+
+def read_world_positions(obj, depsgraph=None) -> np.ndarray:
+    """(n, 3) float64 world-space positions of a mesh object's vertices (evaluated, with
+    modifiers, when a depsgraph is given)."""
+    if depsgraph is not None:
+        obj = obj.evaluated_get(depsgraph)
+    return _world(read_positions(obj.data), obj.matrix_world)
+
+
+def replace_mesh(obj, mesh) -> None:
+    """Give ``obj`` a new mesh datablock, keeping its materials; free the old one if unused."""
+    old = obj.data
+    for mat in old.materials:
+        mesh.materials.append(mat)
+    obj.data = mesh
+    if old.users == 0:
+        bpy.data.meshes.remove(old)
+
+
+def result_collection(context, name: str) -> bpy.types.Collection:
+    coll = bpy.data.collections.new(name)
+    context.scene.collection.children.link(coll)
+    return coll
+
+
+def link_new_object(coll, name: str, data) -> bpy.types.Object:
+    obj = bpy.data.objects.new(name, data)
+    coll.objects.link(obj)
+    return obj
+
+
+# --- deviation colors (presentation) ---------------------------------------------------------
+
+# blue -> cyan -> green -> yellow -> red over [0, 1]; the panel legend uses the same stops.
+RAMP_STOPS = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+RAMP_COLORS = np.array(
+    [[0.05, 0.15, 0.9], [0.0, 0.75, 0.9], [0.1, 0.8, 0.1], [0.95, 0.85, 0.05], [0.9, 0.05, 0.05]]
+)
+LEGEND_ICONS = ("SEQUENCE_COLOR_05", "SEQUENCE_COLOR_06", "SEQUENCE_COLOR_04",
+                "SEQUENCE_COLOR_03", "SEQUENCE_COLOR_01")  # fmt: skip
+
+
+def ramp_colors(values: np.ndarray, vmax: float) -> np.ndarray:
+    """(n, 4) RGBA for ``values`` in [0, vmax] on the legend's color ramp."""
+    t = np.clip(np.asarray(values, dtype=np.float64) / (vmax if vmax > 0 else 1.0), 0.0, 1.0)
+    rgba = np.ones((len(t), 4), dtype=np.float32)
+    for c in range(3):
+        rgba[:, c] = np.interp(t, RAMP_STOPS, RAMP_COLORS[:, c])
+    return rgba
+
+
+def nearest_distances(query: np.ndarray, data: np.ndarray) -> np.ndarray:
+    """Distance from each query point to its nearest data point (scipy's k-d tree)."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(data).query(query, k=1)[0]
+
+
+def deviation_material(name: str = "TCB Deviation", attribute: str = "tcb_deviation"):
+    """A material that shows a color attribute (for renders and Material Preview)."""
+    mat = bpy.data.materials.get(name)
+    if mat is not None:
+        return mat
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:  # Blender < 5.0 (5.0 materials always have a node tree)
+        mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    bsdf = next((n for n in nodes if n.type == "BSDF_PRINCIPLED"), None)
+    if bsdf is None:
+        bsdf = nodes.new("ShaderNodeBsdfPrincipled")
+    attr = nodes.new("ShaderNodeVertexColor")
+    attr.layer_name = attribute
+    attr.location = (bsdf.location.x - 300, bsdf.location.y)
+    links.new(attr.outputs["Color"], bsdf.inputs["Base Color"])
+    return mat

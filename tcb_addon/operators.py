@@ -1,0 +1,625 @@
+"""Operators (``bpy.ops.tcb.*``): fit, refine, re-tessellate, deviation map, net, export.
+
+Thin: the fit is ``core.fit_surface`` / ``TCBSurface.refine``; this module reads the selection
+(``bridge``), runs the engine and writes the results. Long runs: ``invoke`` starts the engine
+in a worker thread and a modal timer polls it (status text, progress cursor, Esc cancels; only
+the main thread touches bpy); ``execute`` runs synchronously (background mode, scripts, redo).
+Errors become ``self.report({'ERROR'}, message)`` and ``{'CANCELLED'}`` with nothing changed.
+"""
+
+from __future__ import annotations
+
+import base64
+import threading
+import time
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
+from bpy_extras.io_utils import ExportHelper
+
+from . import bridge, live
+from .properties import FIT_KEYS, FitSettings
+
+# Custom property of the surface object: TCBSurface.to_bytes() as base64 text. (Raw bytes
+# ID properties lose everything after the first NUL byte when an existing one is reassigned.)
+SPLINE_KEY = "tcb_spline"
+DEVIATION_ATTR = "tcb_deviation"
+
+
+def _core():
+    from .. import core  # the extension's own engine (bl_ext.<repo>.tcb_surface.core)
+
+    return core
+
+
+def _user_errors():
+    """Exceptions whose message is shown to the user as is."""
+    core = _core()
+    return (bridge.SelectionError, core.TCBError, ValueError)
+
+
+# --- a small cache so that redo (Adjust Last Operation) does not refit what did not change ---
+
+_FIT_CACHE: dict = {}
+_FIT_CACHE_SIZE = 2
+
+
+def _cache_get(key):
+    return _FIT_CACHE.get(key)
+
+
+def _cache_put(key, surf):
+    _FIT_CACHE.pop(key, None)
+    _FIT_CACHE[key] = surf
+    while len(_FIT_CACHE) > _FIT_CACHE_SIZE:
+        _FIT_CACHE.pop(next(iter(_FIT_CACHE)))
+
+
+def clear_cache():
+    _FIT_CACHE.clear()
+
+
+# --- helpers ----------------------------------------------------------------------------------
+
+
+def progress_text(report: dict | None, what: str = "Fitting") -> str:
+    if not report:
+        return f"TCB: {what}... (Esc to cancel)"
+    parts = [f"TCB: {what}", f"iteration {report.get('iteration', '?')}"]
+    if "control_points" in report:
+        parts.append(f"{report['control_points']} control points")
+    if "max_rel" in report:
+        parts.append(f"max {report['max_rel']:.3g} of diagonal")
+    return ", ".join(parts) + " (Esc to cancel)"
+
+
+def result_objects(obj):
+    """(surface, net) of a result object (either one may be given), or (None, None)."""
+    if obj is None:
+        return None, None
+    role = obj.tcb.role
+    if role == "SURFACE":
+        return obj, obj.tcb.net
+    if role in {"NET", "DEVIATION", "WEIGHTS"} and obj.tcb.surface is not None:
+        return obj.tcb.surface, obj.tcb.surface.tcb.net
+    return None, None
+
+
+def active_surface(context):
+    return result_objects(getattr(context, "active_object", None))[0]
+
+
+def stored_surface(surface_obj, use_net: bool = True):
+    """The spline stored with a result; with ``use_net``, the net's current vertices as controls."""
+    core = _core()
+    blob = surface_obj.get(SPLINE_KEY)
+    if blob is None:
+        raise bridge.SelectionError(
+            f"'{surface_obj.name}' carries no spline data: fit it again from the source"
+        )
+    try:
+        data = base64.b64decode(blob, validate=True)
+    except (TypeError, ValueError):
+        raise bridge.SelectionError(
+            f"The spline data stored with '{surface_obj.name}' is damaged: fit it again"
+        ) from None
+    surf = core.TCBSurface.from_bytes(data, what=f"the spline stored with '{surface_obj.name}'")
+    net = surface_obj.tcb.net
+    if use_net and net is not None and net.type == "MESH":
+        ctrl = bridge.read_world_positions(net)
+        if len(ctrl) == len(surf.control_points) and not np.allclose(
+            ctrl, surf.control_points, rtol=0, atol=1e-6 * (1 + np.abs(surf.control_points).max())
+        ):
+            surf = surf.with_control_points(ctrl)
+    return surf
+
+
+def store_spline(surface_obj, surf) -> None:
+    surface_obj[SPLINE_KEY] = base64.b64encode(surf.to_bytes()).decode("ascii")
+
+
+def source_data(context, surface_obj) -> bridge.InputData:
+    sources = [s.object for s in surface_obj.tcb.sources]
+    if not sources or any(s is None for s in sources):
+        raise bridge.SelectionError(
+            f"The source object of '{surface_obj.name}' was deleted: refining and the deviation "
+            "map need the input data"
+        )
+    return bridge.read_selection(context, sources)
+
+
+def store_stats(tcb, surf, settings: dict) -> None:
+    rep = dict(getattr(surf, "report", {}) or {})
+    tcb.knots = int(rep.get("knots", 0))
+    tcb.control_points = int(rep.get("control_points", len(surf.control_points)))
+    tcb.iterations = int(rep.get("iterations", 0))
+    for key in ("rms", "max", "rms_rel", "max_rel", "seconds"):
+        setattr(tcb, key, float(rep.get(key, 0.0)))
+    for key, value in settings.items():
+        if hasattr(tcb, key):
+            setattr(tcb, key, str(value) if key in {"degree", "mode", "criterion"} else value)
+
+
+def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = None):
+    verts, faces = surf.tessellate(resolution)
+    mesh = bridge.new_mesh(name or surface_obj.data.name, verts, faces)
+    mesh.shade_smooth()
+    bridge.replace_mesh(surface_obj, mesh)
+    surface_obj.tcb.has_deviation = False
+
+
+def write_net_mesh(net_obj, surf, name: str | None = None):
+    pts, faces = surf.control_net()
+    bridge.replace_mesh(net_obj, bridge.new_mesh(name or net_obj.data.name, pts, faces))
+
+
+def _summary(surf) -> str:
+    rep = dict(getattr(surf, "report", {}) or {})
+    n = rep.get("control_points", len(surf.control_points))
+    return (
+        f"TCB: {n} control points, RMS {rep.get('rms', float('nan')):.4g}, "
+        f"max {rep.get('max', float('nan')):.4g} ({100 * rep.get('max_rel', float('nan')):.3g}% "
+        f"of the diagonal), {rep.get('seconds', 0.0):.2f} s"
+    )
+
+
+# --- the worker-thread job and the modal/execute skeleton --------------------------------------
+
+
+class _Job:
+    """Runs ``fn(**kwargs, callback=...)`` in a thread; the main thread polls it."""
+
+    def __init__(self, fn, kwargs):
+        self.fn, self.kwargs = fn, kwargs
+        self.progress: dict | None = None
+        self.cancel = False
+        self.result = None
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, name="tcb-fit", daemon=True)
+
+    def _callback(self, report):
+        self.progress = dict(report)
+        return self.cancel
+
+    def _run(self):
+        try:
+            self.result = self.fn(**self.kwargs, callback=self._callback)
+        except BaseException as ex:  # noqa: BLE001 (handed to the main thread)
+            self.error = ex
+
+    def start(self):
+        self.thread.start()
+        return self
+
+    @property
+    def done(self):
+        return not self.thread.is_alive()
+
+
+def _print_progress(report):
+    print(progress_text(report).replace(" (Esc to cancel)", ""), flush=True)
+
+
+class _EngineOperator:
+    """Shared execute/invoke/modal. Subclasses define ``prepare`` and ``finish``.
+
+    ``prepare(context)`` returns ``("done", surface)`` (nothing to compute, e.g. a cache hit) or
+    ``("run", fn, kwargs)``; ``finish(context, surface)`` writes the result and returns the
+    operator's return set. Both may raise the user errors of :func:`_user_errors`.
+    """
+
+    _what = "Fitting"
+
+    def execute(self, context):
+        errors = _user_errors()
+        try:
+            task = self.prepare(context)
+            if task[0] == "done":
+                surf = task[1]
+            else:
+                _, fn, kwargs = task
+                cb = _print_progress if bpy.app.background else None
+                surf = fn(**kwargs, callback=cb)
+            return self.finish(context, surf)
+        except errors as ex:
+            self.report({"ERROR"}, str(ex))
+            return {"CANCELLED"}
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        try:
+            task = self.prepare(context)
+        except _user_errors() as ex:
+            self.report({"ERROR"}, str(ex))
+            return {"CANCELLED"}
+        if task[0] == "done":
+            return self._finish_safely(context, task[1])
+        self._job = _Job(task[1], task[2]).start()
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.progress_begin(0, 100)
+        self._t0 = time.perf_counter()
+        self._status(context, progress_text(None, self._what))
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        job = self._job
+        if event.type == "ESC" and event.value == "PRESS" and not job.cancel:
+            job.cancel = True
+            self._status(context, "TCB: cancelling...")
+            return {"RUNNING_MODAL"}
+        if event.type != "TIMER":
+            # let the user look around while the engine works; everything else waits
+            if event.type in {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN",
+                              "TRACKPADZOOM", "MOUSEMOVE", "INBETWEEN_MOUSEMOVE"}:  # fmt: skip
+                return {"PASS_THROUGH"}
+            return {"RUNNING_MODAL"}
+        if not job.done:
+            if not job.cancel:
+                self._status(context, progress_text(job.progress, self._what))
+            it = (job.progress or {}).get("iteration", 0)
+            maxit = max(1, getattr(self, "max_iterations", 20))
+            context.window_manager.progress_update(min(99, int(100 * it / maxit)))
+            return {"RUNNING_MODAL"}
+        self._cleanup(context)
+        if job.cancel:
+            self.report({"WARNING"}, "TCB: cancelled; nothing was changed")
+            return {"CANCELLED"}
+        if job.error is not None:
+            if isinstance(job.error, _user_errors()):
+                self.report({"ERROR"}, str(job.error))
+                return {"CANCELLED"}
+            raise job.error
+        return self._finish_safely(context, job.result)
+
+    def _finish_safely(self, context, surf):
+        try:
+            return self.finish(context, surf)
+        except _user_errors() as ex:
+            self.report({"ERROR"}, str(ex))
+            return {"CANCELLED"}
+
+    def cancel(self, context):  # Blender calls this when the modal is aborted (e.g. file load)
+        if getattr(self, "_job", None) is not None:
+            self._job.cancel = True
+            self._cleanup(context)
+
+    def _status(self, context, text):
+        if context.workspace is not None:
+            context.workspace.status_text_set(text)
+
+    def _cleanup(self, context):
+        wm = context.window_manager
+        if getattr(self, "_timer", None) is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        self._status(context, None)
+
+
+# --- Fit ----------------------------------------------------------------------------------------
+
+
+class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
+    """Fit a smooth TCB-spline surface and its control net to the selected meshes / point clouds"""
+
+    bl_idname = "tcb.fit_surface"
+    bl_label = "Fit Surface"
+    bl_options = {"REGISTER", "UNDO"}
+
+    show_net: BoolProperty(name="Show Net", default=True)
+    live_net: BoolProperty(
+        name="Live Net",
+        description="Moving control-net vertices updates the surface (Geometry Nodes modifier)",
+        default=True,
+    )
+
+    @classmethod
+    def poll(cls, context):
+        # Permissive on purpose: a wrong selection gets a specific error message (the panel
+        # disables the button and shows the reason).
+        return context.mode == "OBJECT"
+
+    def _fit_kwargs(self):
+        return dict(
+            degree=int(self.degree), mode=self.mode.lower(), tolerance=self.tolerance,
+            relative=self.relative, max_control_points=self.max_control_points,
+            max_iterations=self.max_iterations, smoothness=self.smoothness,
+            criterion=self.criterion.lower(),
+        )  # fmt: skip
+
+    def prepare(self, context):
+        data = bridge.read_selection(context)
+        self._data = data
+        kwargs = self._fit_kwargs()
+        self._key = (data.digest(), tuple(sorted(kwargs.items())))
+        cached = _cache_get(self._key)
+        if cached is not None:
+            return ("done", cached)
+        core = _core()
+        return ("run", core.fit_surface, dict(points=data.points, faces=data.faces, **kwargs))
+
+    def finish(self, context, surf):
+        _cache_put(self._key, surf)
+        data = self._data
+        name = data.name
+        coll = bridge.result_collection(context, f"TCB {name}")
+
+        verts, faces = surf.tessellate(self.resolution)
+        smesh = bridge.new_mesh(f"{name} TCB Surface", verts, faces)
+        smesh.shade_smooth()
+        surface = bridge.link_new_object(coll, f"{name} TCB Surface", smesh)
+        pts, nfaces = surf.control_net()
+        net = bridge.link_new_object(
+            coll, f"{name} TCB Net", bridge.new_mesh(f"{name} TCB Net", pts, nfaces)
+        )
+        net.display_type = "WIRE"
+        net.show_in_front = True
+        net.hide_set(not self.show_net)
+
+        store_spline(surface, surf)
+        st = surface.tcb
+        st.role = "SURFACE"
+        for src in data.sources:
+            st.sources.add().object = src
+        st.net = net
+        net.tcb.role = "NET"
+        net.tcb.surface = surface
+        store_stats(st, surf, {k: getattr(self, k) for k in FIT_KEYS})
+        if self.live_net:
+            live.attach(surface, net, surf, self.resolution)
+
+        for obj in context.selected_objects:
+            obj.select_set(False)
+        surface.select_set(True)
+        context.view_layer.objects.active = surface
+        self.report({"INFO"}, _summary(surf))
+        return {"FINISHED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column()
+        row = col.row(align=True)
+        row.prop(self, "tolerance")
+        row.prop(self, "relative", text="", icon="DRIVER_DISTANCE")
+        for key in ("criterion", "max_control_points", "max_iterations", "degree", "mode",
+                    "smoothness", "resolution", "show_net", "live_net"):  # fmt: skip
+            col.prop(self, key)
+
+
+# --- Refine -------------------------------------------------------------------------------------
+
+
+class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
+    """Continue the adaptive fit of the active TCB surface with a tighter tolerance or budget"""
+
+    bl_idname = "tcb.refine"
+    bl_label = "Refine Surface"
+    bl_options = {"REGISTER", "UNDO"}
+    _what = "Refining"
+
+    tolerance: FloatProperty(
+        name="Tolerance", description="New tolerance (0: half of the previous one)",
+        default=0.0, min=0.0, precision=6, step=0.01,
+    )  # fmt: skip
+    relative: BoolProperty(name="Relative", default=True,
+                           description="Tolerance is a fraction of the bounding-box diagonal")  # fmt: skip
+    max_control_points: IntProperty(
+        name="Max Control Points", default=0, min=0,
+        description="New budget (0: twice the current number of control points)",
+    )  # fmt: skip
+    max_iterations: IntProperty(name="Max Iterations", default=20, min=1)
+
+    @classmethod
+    def poll(cls, context):
+        return context.mode == "OBJECT" and active_surface(context) is not None
+
+    def prepare(self, context):
+        surface = active_surface(context)
+        if surface is None:
+            raise bridge.SelectionError("Select a TCB surface (or its control net) to refine")
+        st = surface.tcb
+        self._surface = surface
+        tol = self.tolerance if self.tolerance > 0 else 0.5 * st.tolerance
+        rel = self.relative if self.properties.is_property_set("relative") else st.relative
+        budget = self.max_control_points or max(st.max_control_points, 2 * st.control_points)
+        self._settings = dict(tolerance=tol, relative=rel, max_control_points=budget,
+                              max_iterations=self.max_iterations)  # fmt: skip
+        data = source_data(context, surface)
+        surf = stored_surface(surface)
+        return ("run", surf.refine, dict(points=data.points, faces=data.faces, **self._settings))
+
+    def finish(self, context, surf):
+        surface = self._surface
+        st = surface.tcb
+        write_surface_mesh(surface, surf, st.resolution)
+        if st.net is not None:
+            write_net_mesh(st.net, surf)
+            if st.weights is not None:
+                live.attach(surface, st.net, surf, st.resolution)
+        store_spline(surface, surf)
+        store_stats(st, surf, self._settings)
+        self.report({"INFO"}, _summary(surf))
+        return {"FINISHED"}
+
+
+# --- Re-tessellate, deviation map, net visibility, export ---------------------------------------
+
+
+class TCB_OT_retessellate(bpy.types.Operator):
+    """Rebuild the surface mesh of the active TCB surface from its stored spline"""
+
+    bl_idname = "tcb.retessellate"
+    bl_label = "Re-tessellate"
+    bl_options = {"REGISTER", "UNDO"}
+
+    resolution: IntProperty(name="Resolution", default=64, min=2, soft_max=512, max=4096)
+
+    @classmethod
+    def poll(cls, context):
+        return context.mode == "OBJECT" and active_surface(context) is not None
+
+    def invoke(self, context, event):
+        surface = active_surface(context)
+        if surface is not None and not self.properties.is_property_set("resolution"):
+            self.resolution = surface.tcb.resolution or self.resolution
+        return self.execute(context)
+
+    def execute(self, context):
+        surface = active_surface(context)
+        try:
+            if surface is None:
+                raise bridge.SelectionError("Select a TCB surface (or its control net)")
+            surf = stored_surface(surface)
+            write_surface_mesh(surface, surf, self.resolution)
+            if surface.tcb.net is not None and surface.tcb.weights is not None:
+                live.attach(surface, surface.tcb.net, surf, self.resolution)
+        except _user_errors() as ex:
+            self.report({"ERROR"}, str(ex))
+            return {"CANCELLED"}
+        surface.tcb.resolution = self.resolution
+        return {"FINISHED"}
+
+
+class TCB_OT_deviation_map(bpy.types.Operator):
+    """Color the active TCB surface by its distance to the input data, and store the distance of
+    every input point to the surface on a copy of the input points"""
+
+    bl_idname = "tcb.deviation_map"
+    bl_label = "Deviation Map"
+    bl_options = {"REGISTER", "UNDO"}
+
+    points_copy: BoolProperty(
+        name="Copy of Input Points", default=True,
+        description="Also create a point object with the distance of each input point to the surface",
+    )  # fmt: skip
+
+    @classmethod
+    def poll(cls, context):
+        return context.mode == "OBJECT" and active_surface(context) is not None
+
+    def execute(self, context):
+        surface = active_surface(context)
+        try:
+            if surface is None:
+                raise bridge.SelectionError("Select a TCB surface (or its control net)")
+            data = source_data(context, surface)
+            surf = stored_surface(surface)
+            data_dist = np.abs(np.asarray(surf.distances(data.points), dtype=np.float64))
+        except _user_errors() as ex:
+            self.report({"ERROR"}, str(ex))
+            return {"CANCELLED"}
+
+        verts = bridge.read_world_positions(surface, context.evaluated_depsgraph_get())
+        surf_dist = bridge.nearest_distances(verts, data.points)
+        vmax = float(max(surf_dist.max(initial=0.0), data_dist.max(initial=0.0)))
+        bridge.set_float_attribute(surface.data, DEVIATION_ATTR, surf_dist)
+        bridge.set_color_attribute(
+            surface.data, DEVIATION_ATTR + "_color", bridge.ramp_colors(surf_dist, vmax)
+        )
+        mat = bridge.deviation_material(attribute=DEVIATION_ATTR + "_color")
+        if mat.name not in surface.data.materials:
+            surface.data.materials.append(mat)
+
+        st = surface.tcb
+        if self.points_copy:
+            pts_obj = st.deviation_points
+            mesh = bridge.new_mesh(f"{surface.name} Deviation Points", data.points)
+            bridge.set_float_attribute(mesh, DEVIATION_ATTR, data_dist)
+            bridge.set_color_attribute(
+                mesh, DEVIATION_ATTR + "_color", bridge.ramp_colors(data_dist, vmax)
+            )
+            if pts_obj is None:
+                coll = (
+                    surface.users_collection[0]
+                    if surface.users_collection
+                    else context.scene.collection
+                )
+                pts_obj = bridge.link_new_object(coll, f"{surface.name} Deviation Points", mesh)
+                pts_obj.tcb.role = "DEVIATION"
+                pts_obj.tcb.surface = surface
+                st.deviation_points = pts_obj
+            else:
+                bridge.replace_mesh(pts_obj, mesh)
+
+        st.has_deviation = True
+        st.deviation_max = vmax
+        st.deviation_rms = float(np.sqrt(np.mean(data_dist**2))) if len(data_dist) else 0.0
+        st.rms = st.deviation_rms
+        st.max = float(data_dist.max(initial=0.0))
+        _show_attribute_colors(context)
+        self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.rms:.4g}, max {st.max:.4g}; "
+                              f"color range 0 - {vmax:.4g}")  # fmt: skip
+        return {"FINISHED"}
+
+
+def _show_attribute_colors(context):
+    screen = getattr(context, "screen", None)
+    if screen is None:
+        return
+    for area in screen.areas:
+        if area.type == "VIEW_3D":
+            for space in area.spaces:
+                if space.type == "VIEW_3D" and space.shading.type == "SOLID":
+                    space.shading.color_type = "VERTEX"
+
+
+class TCB_OT_toggle_net(bpy.types.Operator):
+    """Show or hide the control net of the active TCB surface"""
+
+    bl_idname = "tcb.toggle_net"
+    bl_label = "Show/Hide Control Net"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        surface, net = result_objects(getattr(context, "active_object", None))
+        return surface is not None and net is not None
+
+    def execute(self, context):
+        _, net = result_objects(context.active_object)
+        if net.name not in context.view_layer.objects:
+            self.report({"ERROR"}, f"'{net.name}' is not in the current view layer")
+            return {"CANCELLED"}
+        net.hide_set(not net.hide_get())
+        return {"FINISHED"}
+
+
+class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
+    """Save the spline of the active TCB surface (knots, configuration, control points) as .npz"""
+
+    bl_idname = "tcb.export_spline"
+    bl_label = "Export Spline (.npz)"
+    filename_ext = ".npz"
+    filter_glob: StringProperty(default="*.npz", options={"HIDDEN"})
+
+    @classmethod
+    def poll(cls, context):
+        return active_surface(context) is not None
+
+    def execute(self, context):
+        try:
+            surface = active_surface(context)
+            if surface is None:
+                raise bridge.SelectionError("Select a TCB surface (or its control net)")
+            stored_surface(surface).save(self.filepath)
+        except (*_user_errors(), OSError) as ex:
+            self.report({"ERROR"}, str(ex))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"TCB: saved {self.filepath}")
+        return {"FINISHED"}
+
+
+classes = (
+    TCB_OT_fit_surface,
+    TCB_OT_refine,
+    TCB_OT_retessellate,
+    TCB_OT_deviation_map,
+    TCB_OT_toggle_net,
+    TCB_OT_export_spline,
+)

@@ -1,0 +1,155 @@
+"""Properties: the fit settings (shared by the panel and the operators) and per-object result data.
+
+``FitSettings`` is a mixin of annotations used twice: by :class:`TCB_PG_settings` (the panel's
+values, stored on the scene) and by the Fit operator, so every tunable is an operator property
+(*Adjust Last Operation* works) and the panel passes its values to the button.
+
+A fitted surface object carries ``object.tcb`` (:class:`TCB_PG_object`): its role, the source
+objects, the net/surface partner, the statistics of the last fit and the settings it used. The
+spline itself is stored as bytes in the custom property ``object["tcb_spline"]`` (see
+``operators.SPLINE_KEY``), so Refine and re-tessellation work after saving and reopening.
+"""
+
+import bpy
+from bpy.props import (
+    BoolProperty,
+    CollectionProperty,
+    EnumProperty,
+    FloatProperty,
+    IntProperty,
+    PointerProperty,
+    StringProperty,
+)
+
+
+class FitSettings:
+    """The tunables of a fit (annotations only; mixed into a PropertyGroup and an Operator)."""
+
+    tolerance: FloatProperty(
+        name="Tolerance",
+        description=(
+            "Largest allowed distance from the input points to the surface: relative to the "
+            "bounding-box diagonal of the input, or in scene units (see Relative)"
+        ),
+        default=1e-3, min=1e-9, soft_min=1e-6, soft_max=0.1, precision=6, step=0.01,
+    )  # fmt: skip
+    relative: BoolProperty(
+        name="Relative",
+        description="Tolerance is a fraction of the input's bounding-box diagonal, not a distance",
+        default=True,
+    )
+    criterion: EnumProperty(
+        name="Criterion",
+        description="Which error the tolerance bounds",
+        items=(("RMS", "RMS", "Root-mean-square distance of the input points"),
+               ("MAX", "Max", "Largest distance of an input point")),
+        default="RMS",
+    )  # fmt: skip
+    max_control_points: IntProperty(
+        name="Max Control Points",
+        description="Stop refining when the spline would have more control points than this",
+        default=2000, min=10, soft_max=20000,
+    )  # fmt: skip
+    max_iterations: IntProperty(
+        name="Max Iterations",
+        description="Largest number of refinement steps",
+        default=20, min=1, soft_max=100,
+    )  # fmt: skip
+    degree: EnumProperty(
+        name="Degree",
+        description="Polynomial degree of the spline",
+        items=(("2", "Quadratic", "Degree 2 (C1 smooth)"), ("3", "Cubic", "Degree 3 (C2 smooth)")),
+        default="2",
+    )
+    mode: EnumProperty(
+        name="Mode",
+        description="Spline space built on the knots",
+        items=(
+            ("TCB", "TCB", "Triangle configuration B-splines"),
+            ("DCB", "DCB", "Delaunay configuration B-splines"),
+        ),
+        default="TCB",
+    )
+    smoothness: FloatProperty(
+        name="Smoothness",
+        description="Weight of the smoothing term of the least-squares fit (0 = none)",
+        default=1e-4, min=0.0, soft_max=1.0, precision=6, step=0.001,
+    )  # fmt: skip
+    resolution: IntProperty(
+        name="Resolution",
+        description="Subdivisions of the output surface mesh along each side of the domain",
+        default=64, min=2, soft_max=512, max=4096,
+    )  # fmt: skip
+
+
+FIT_KEYS = (
+    "tolerance", "relative", "criterion", "max_control_points", "max_iterations", "degree", "mode",
+    "smoothness", "resolution",
+)  # fmt: skip
+
+
+class TCB_PG_settings(FitSettings, bpy.types.PropertyGroup):
+    """Fit settings shown in the sidebar (``scene.tcb_settings``)."""
+
+    show_net: BoolProperty(name="Show Net", default=True)
+    live_net: BoolProperty(
+        name="Live Net",
+        description="Moving control-net vertices updates the surface (Geometry Nodes modifier)",
+        default=True,
+    )
+
+
+class TCB_PG_source(bpy.types.PropertyGroup):
+    object: PointerProperty(type=bpy.types.Object, name="Source")
+
+
+class TCB_PG_object(bpy.types.PropertyGroup):
+    """Result data of a TCB surface / net object (``object.tcb``)."""
+
+    role: EnumProperty(
+        items=(("NONE", "None", ""), ("SURFACE", "Surface", ""), ("NET", "Control Net", ""),
+               ("DEVIATION", "Deviation Points", ""), ("WEIGHTS", "Live-Net Weights", "")),
+        default="NONE",
+    )  # fmt: skip
+    sources: CollectionProperty(type=TCB_PG_source)
+    surface: PointerProperty(type=bpy.types.Object, name="Surface")
+    net: PointerProperty(type=bpy.types.Object, name="Control Net")
+    deviation_points: PointerProperty(type=bpy.types.Object, name="Deviation Points")
+    weights: PointerProperty(type=bpy.types.Object, name="Live-Net Weights")
+
+    # statistics of the last fit / refine
+    knots: IntProperty(name="Knots")
+    control_points: IntProperty(name="Control Points")
+    iterations: IntProperty(name="Iterations")
+    rms: FloatProperty(name="RMS", precision=6)
+    max: FloatProperty(name="Max", precision=6)
+    rms_rel: FloatProperty(name="RMS (relative)", precision=6)
+    max_rel: FloatProperty(name="Max (relative)", precision=6)
+    seconds: FloatProperty(name="Seconds", precision=2)
+    # settings of the last fit / refine
+    tolerance: FloatProperty(precision=6)
+    relative: BoolProperty()
+    criterion: StringProperty()
+    max_control_points: IntProperty()
+    max_iterations: IntProperty()
+    degree: StringProperty()
+    mode: StringProperty()
+    smoothness: FloatProperty(precision=6)
+    resolution: IntProperty()
+    # deviation map (distance of the surface vertices to the data)
+    has_deviation: BoolProperty()
+    deviation_max: FloatProperty(precision=6)
+    deviation_rms: FloatProperty(precision=6)
+
+
+classes = (TCB_PG_settings, TCB_PG_source, TCB_PG_object)
+
+
+def register_props():
+    bpy.types.Scene.tcb_settings = PointerProperty(type=TCB_PG_settings)
+    bpy.types.Object.tcb = PointerProperty(type=TCB_PG_object)
+
+
+def unregister_props():
+    del bpy.types.Object.tcb
+    del bpy.types.Scene.tcb_settings

@@ -1,0 +1,110 @@
+"""Sidebar panels: View3D > Sidebar > TCB.
+
+They only read properties and place operator buttons; they must draw without errors whatever is
+selected (nothing, a camera, a result object, ...).
+"""
+
+import bpy
+
+from . import bridge
+from .operators import SPLINE_KEY, result_objects
+from .properties import FIT_KEYS
+
+
+class _TCBPanel:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "TCB"
+
+
+class TCB_PT_fit(_TCBPanel, bpy.types.Panel):
+    bl_label = "TCB Surface"
+    bl_idname = "TCB_PT_fit"
+
+    def draw(self, context):
+        layout = self.layout
+        settings = getattr(context.scene, "tcb_settings", None)
+        if settings is None:
+            layout.label(text="TCB settings are not registered", icon="ERROR")
+            return
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column()
+        row = col.row(align=True)
+        row.prop(settings, "tolerance")
+        row.prop(settings, "relative", text="", icon="DRIVER_DISTANCE")
+        col.prop(settings, "criterion")
+        col.prop(settings, "max_control_points", text="Max Control Pts")
+        col.prop(settings, "degree")
+        col.prop(settings, "mode")
+        col.prop(settings, "smoothness")
+        col.prop(settings, "resolution")
+        col.prop(settings, "max_iterations")
+        col.prop(settings, "show_net")
+        col.prop(settings, "live_net")
+
+        problem = bridge.selection_problem(context)
+        row = layout.row()
+        row.scale_y = 1.4
+        row.enabled = problem is None
+        op = row.operator("tcb.fit_surface", icon="MOD_SMOOTH")
+        for key in FIT_KEYS:
+            setattr(op, key, getattr(settings, key))
+        op.show_net = settings.show_net
+        op.live_net = settings.live_net
+        if problem:
+            layout.label(text=problem, icon="INFO")
+
+
+class TCB_PT_result(_TCBPanel, bpy.types.Panel):
+    bl_label = "Result"
+    bl_idname = "TCB_PT_result"
+    bl_parent_id = "TCB_PT_fit"
+
+    @classmethod
+    def poll(cls, context):
+        obj = getattr(context, "active_object", None)
+        return obj is not None and hasattr(obj, "tcb") and result_objects(obj)[0] is not None
+
+    def draw(self, context):
+        layout = self.layout
+        surface, net = result_objects(context.active_object)
+        st = surface.tcb
+        col = layout.column(align=True)
+        col.label(text=surface.name, icon="SURFACE_NSURFACE")
+        grid = col.grid_flow(columns=2, even_columns=True, align=True)
+        for label, value in (
+            ("Knots", f"{st.knots}"),
+            ("Control Points", f"{st.control_points}"),
+            ("Iterations", f"{st.iterations}"),
+            ("RMS", f"{st.rms:.4g}"),
+            ("Max", f"{st.max:.4g}"),
+            ("Max (of diagonal)", f"{100 * st.max_rel:.3g} %"),
+            ("Seconds", f"{st.seconds:.2f}"),
+        ):
+            grid.label(text=label)
+            grid.label(text=value)
+        if SPLINE_KEY not in surface:
+            col.label(text="No spline stored: refit from the source", icon="ERROR")
+
+        layout.separator()
+        row = layout.row(align=True)
+        row.operator("tcb.refine", icon="MOD_MULTIRES")
+        row.operator("tcb.retessellate", text="", icon="FILE_REFRESH")
+        if net is not None:
+            hidden = net.name in context.view_layer.objects and net.hide_get()
+            layout.operator("tcb.toggle_net", text="Show Net" if hidden else "Hide Net",
+                            icon="HIDE_ON" if hidden else "HIDE_OFF")  # fmt: skip
+        layout.operator("tcb.deviation_map", icon="MOD_VERTEX_WEIGHT")
+        if st.has_deviation:
+            box = layout.box()
+            box.label(text=f"Data to surface: RMS {st.deviation_rms:.4g}, max {st.max:.4g}")
+            n = len(bridge.RAMP_STOPS)
+            for i in reversed(range(n)):
+                lo = st.deviation_max * bridge.RAMP_STOPS[i]
+                box.label(text=f"{lo:.4g}" + (" (max)" if i == n - 1 else ""),
+                          icon=bridge.LEGEND_ICONS[i])  # fmt: skip
+        layout.operator("tcb.export_spline", icon="EXPORT")
+
+
+classes = (TCB_PT_fit, TCB_PT_result)

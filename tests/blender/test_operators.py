@@ -1,0 +1,488 @@
+"""The operators of the installed extension, driven as a script would (bpy.ops with
+temp_override) on real objects: fit, redo cache, refine, re-tessellate, deviation map, errors,
+save/reopen, panels."""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+ADDON = "bl_ext.user_default.tcb_surface"
+
+
+# --- scene helpers ------------------------------------------------------------------------------
+
+
+def grid(n=24, size=1.0, f=lambda x, y: 0.3 * (x * x - 0.5 * y * y)):
+    t = np.linspace(-size, size, n)
+    x, y = np.meshgrid(t, t, indexing="ij")
+    verts = np.c_[x.ravel(), y.ravel(), f(x, y).ravel()]
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()
+    return verts, np.c_[a, b, c, d]
+
+
+def add_mesh(bpy, name, verts, faces=None, location=(0.0, 0.0, 0.0)):
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(verts))
+    if len(verts):
+        mesh.attributes["position"].data.foreach_set(
+            "vector", np.asarray(verts, np.float32).ravel()
+        )
+    if faces is not None and len(faces):
+        faces = np.asarray(faces, np.int32)
+        mesh.loops.add(faces.size)
+        mesh.polygons.add(len(faces))
+        mesh.polygons.foreach_set(
+            "loop_start", np.arange(0, faces.size, faces.shape[1], dtype=np.int32)
+        )
+        mesh.attributes[".corner_vert"].data.foreach_set("value", faces.ravel())
+    mesh.update(calc_edges=True)
+    obj = bpy.data.objects.new(name, mesh)
+    obj.location = location
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def add_point_cloud(bpy, name, verts):
+    obj = add_mesh(bpy, name, verts)
+    with bpy.context.temp_override(**select(bpy, obj)):
+        assert bpy.ops.object.convert(target="POINTCLOUD") == {"FINISHED"}
+    assert obj.type == "POINTCLOUD" and len(obj.data.points) == len(verts)
+    return obj
+
+
+def select(bpy, *objs):
+    """A temp_override context with exactly ``objs`` selected (first one active)."""
+    bpy.context.view_layer.update()
+    for o in bpy.context.scene.objects:
+        o.select_set(False)
+    for o in objs:
+        o.select_set(True)
+    bpy.context.view_layer.objects.active = objs[0] if objs else None
+    return dict(selected_objects=list(objs), active_object=objs[0] if objs else None,
+                object=objs[0] if objs else None)  # fmt: skip
+
+
+def snapshot(obj) -> str:
+    """A digest of everything a fit must not change on its source object."""
+    h = hashlib.sha256()
+    data = obj.data
+    if obj.type in {"MESH", "POINTCLOUD"}:
+        attr = data.attributes["position"]
+        buf = np.empty(len(attr.data) * 3, np.float32)
+        attr.data.foreach_get("vector", buf)
+        h.update(buf.tobytes())
+        for name in sorted(a.name for a in data.attributes):
+            h.update(name.encode())
+    if obj.type == "MESH":
+        cv = np.empty(len(data.loops), np.int32)
+        data.attributes[".corner_vert"].data.foreach_get("value", cv)
+        h.update(cv.tobytes())
+    h.update(np.array(obj.matrix_world, np.float64).tobytes())
+    h.update(repr([(m.name, m.type) for m in getattr(obj, "modifiers", [])]).encode())
+    h.update(f"{obj.name}|{data.name if data else ''}|{sorted(obj.keys())}".encode())
+    return h.hexdigest()
+
+
+def fit(bpy, *objs, **props):
+    props.setdefault("tolerance", 2e-3)
+    props.setdefault("max_control_points", 400)
+    props.setdefault("resolution", 24)
+    with bpy.context.temp_override(**select(bpy, *objs)):
+        return bpy.ops.tcb.fit_surface(**props)
+
+
+def positions(obj) -> np.ndarray:
+    attr = obj.data.attributes["position"]
+    buf = np.empty(len(attr.data) * 3, np.float32)
+    attr.data.foreach_get("vector", buf)
+    return buf.reshape(-1, 3).astype(np.float64)
+
+
+def core_of(addon):
+    return sys.modules[ADDON + ".core"]
+
+
+def spline_of(addon, surface_obj):
+    """The spline stored with a result object (base64 text of TCBSurface.to_bytes())."""
+    import base64
+
+    return core_of(addon).TCBSurface.from_bytes(base64.b64decode(surface_obj["tcb_spline"]))
+
+
+def check_result(bpy, addon, source_name, points, tol_rel):
+    surface = bpy.context.view_layer.objects.active
+    assert surface.tcb.role == "SURFACE"
+    net = surface.tcb.net
+    assert net is not None and net.tcb.role == "NET" and net.tcb.surface == surface
+    coll = surface.users_collection[0]
+    assert coll.name == f"TCB {source_name}" and net.name in coll.objects
+    surf = spline_of(addon, surface)
+    # the net: one vertex per basis function, at the control points
+    assert len(net.data.vertices) == len(surf.control_points) == surface.tcb.control_points
+    assert np.allclose(positions(net), surf.control_points, atol=1e-5)
+    # the surface mesh is the stored spline's tessellation
+    verts, faces = surf.tessellate(surface.tcb.resolution)
+    assert len(surface.data.vertices) == len(verts) and len(surface.data.polygons) == len(faces)
+    assert np.allclose(positions(surface), verts, atol=1e-5)
+    # the surface lies within the tolerance (RMS criterion) of the input points
+    diag = np.linalg.norm(points.max(0) - points.min(0))
+    d = surf.distances(points)
+    assert np.sqrt(np.mean(d**2)) <= tol_rel * diag * 1.05
+    return surface, net, surf
+
+
+# --- fitting --------------------------------------------------------------------------------------
+
+
+def test_fit_point_cloud_object(clean_scene, addon):
+    bpy = clean_scene
+    verts, _ = grid(20)
+    rng = np.random.default_rng(1)
+    pts = verts + rng.normal(scale=1e-4, size=verts.shape)
+    cloud = add_point_cloud(bpy, "Scan", pts)
+    cloud.location = (1.0, 2.0, 0.5)
+    bpy.context.view_layer.update()
+    before = snapshot(cloud)
+    n_objects = len(bpy.data.objects)
+    assert fit(bpy, cloud, tolerance=1e-3) == {"FINISHED"}
+    assert len(bpy.data.objects) == n_objects + 3  # surface, net, hidden live-net weights
+    world = pts + np.array([1.0, 2.0, 0.5])
+    surface, _, _ = check_result(bpy, addon, "Scan", world, 1e-3)
+    assert surface.tcb.sources[0].object == cloud
+    assert snapshot(cloud) == before
+
+
+def test_fit_mesh_object_nefertiti(clean_scene, addon):
+    bpy = clean_scene
+    import importlib
+
+    meshio = importlib.import_module(ADDON + ".core.meshio")
+    verts, faces = meshio.read_geometry(ROOT / "data" / "nefertiti.off")
+    obj = add_mesh(bpy, "Nefertiti", verts, faces)
+    before = snapshot(obj)
+    assert fit(bpy, obj, tolerance=5e-3, max_control_points=600) == {"FINISHED"}
+    check_result(bpy, addon, "Nefertiti", np.asarray(verts, np.float64), 5e-3)
+    assert snapshot(obj) == before
+
+
+def test_fit_mesh_with_modifier_uses_evaluated_geometry(clean_scene, addon):
+    bpy = clean_scene
+    verts, faces = grid(12)
+    obj = add_mesh(bpy, "Deformed", verts, faces)
+    mod = obj.modifiers.new("Subdivide", "SUBSURF")
+    mod.levels = 1
+    mod.subdivision_type = "SIMPLE"
+    disp = obj.modifiers.new("Lift", "DISPLACE")
+    disp.strength = 0.5  # moves every vertex by 0.5 along its normal
+    disp.mid_level = 0.0
+    before = snapshot(obj)
+    bridge = sys.modules[ADDON + ".tcb_addon.bridge"]
+    with bpy.context.temp_override(**select(bpy, obj)):
+        data = bridge.read_selection(bpy.context)
+    assert len(data.points) == 23 * 23  # the subdivided grid, not the 12 x 12 original
+    assert data.points[:, 2].mean() > verts[:, 2].mean() + 0.4
+    assert fit(bpy, obj, tolerance=2e-3) == {"FINISHED"}
+    check_result(bpy, addon, "Deformed", data.points, 2e-3)
+    assert snapshot(obj) == before
+
+
+def test_fit_merges_several_objects(clean_scene, addon):
+    bpy = clean_scene
+    verts, _ = grid(20)
+    left = add_mesh(bpy, "Left", verts[verts[:, 0] <= 0])
+    right = add_mesh(bpy, "Right", verts[verts[:, 0] > 0])
+    assert fit(bpy, left, right, tolerance=2e-3) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    assert {s.object.name for s in surface.tcb.sources} == {"Left", "Right"}
+    check_result(bpy, addon, "Left +1", verts, 2e-3)
+
+
+def test_redo_with_new_resolution_reuses_the_fit(clean_scene, addon, monkeypatch):
+    bpy = clean_scene
+    core = core_of(addon)
+    calls = []
+    real = core.fit_surface
+
+    def counting(*a, **k):
+        calls.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(core, "fit_surface", counting)
+    verts, faces = grid(16)
+    obj = add_mesh(bpy, "Patch", verts, faces)
+    assert fit(bpy, obj, resolution=10, tolerance=3e-3) == {"FINISHED"}
+    first = bpy.context.view_layer.objects.active
+    assert fit(bpy, obj, resolution=20, tolerance=3e-3) == {"FINISHED"}
+    second = bpy.context.view_layer.objects.active
+    assert len(calls) == 1  # same input and fit settings: the cached surface is re-tessellated
+    assert len(second.data.vertices) > len(first.data.vertices)
+    assert fit(bpy, obj, resolution=20, tolerance=1e-3) == {"FINISHED"}
+    assert len(calls) == 2  # a fit setting changed: fitted again
+
+
+def test_background_invoke_runs_synchronously(clean_scene, addon):
+    bpy = clean_scene
+    assert bpy.app.background
+    verts, faces = grid(12)
+    obj = add_mesh(bpy, "Patch", verts, faces)
+    with bpy.context.temp_override(**select(bpy, obj)):
+        assert bpy.ops.tcb.fit_surface("INVOKE_DEFAULT", tolerance=5e-3, resolution=8) == {
+            "FINISHED"
+        }
+    assert bpy.context.view_layer.objects.active.tcb.role == "SURFACE"
+
+
+def test_worker_job_cancels_and_reports_progress(installed, addon):
+    ops = sys.modules[ADDON + ".tcb_addon.operators"]
+    core = core_of(addon)
+    verts, _ = grid(16)
+    job = ops._Job(core.fit_surface, dict(points=verts, tolerance=1e-9, max_control_points=2000))
+    job.cancel = True  # as Esc does: the engine stops at its first callback
+    job.start()
+    job.thread.join(120)
+    assert job.done and job.error is None
+    assert job.progress is not None and job.progress["iteration"] == 1
+    assert job.result is not None  # the best surface so far; the modal operator discards it
+
+
+# --- refine, re-tessellate, deviation map, save and reopen ------------------------------------------
+
+
+def test_refine_retessellate_deviation_and_reopen(clean_scene, addon, tmp_path):
+    bpy = clean_scene
+    verts, faces = grid(24, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y))
+    obj = add_mesh(bpy, "Wave", verts, faces)
+    assert fit(bpy, obj, tolerance=2e-2, max_control_points=400) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    n0, rms0 = surface.tcb.control_points, surface.tcb.rms_rel
+
+    with bpy.context.temp_override(**select(bpy, net)):  # refine from the net works too
+        assert bpy.ops.tcb.refine(tolerance=2e-3, max_control_points=800) == {"FINISHED"}
+    assert surface.tcb.control_points >= n0 and surface.tcb.rms_rel <= rms0
+    assert surface.tcb.tolerance == pytest.approx(2e-3)
+    surf = spline_of(addon, surface)
+    assert len(net.data.vertices) == len(surf.control_points)
+
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.retessellate(resolution=12) == {"FINISHED"}
+        assert len(surface.data.vertices) == len(surf.tessellate(12)[0])
+        assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
+    dev = surface.data.attributes["tcb_deviation"]
+    assert dev.domain == "POINT" and len(dev.data) == len(surface.data.vertices)
+    assert surface.data.color_attributes.get("tcb_deviation_color") is not None
+    pts_obj = surface.tcb.deviation_points
+    assert pts_obj is not None and len(pts_obj.data.vertices) == len(verts)
+    d = np.empty(len(verts), np.float32)
+    pts_obj.data.attributes["tcb_deviation"].data.foreach_get("value", d)
+    assert np.allclose(d, surf.distances(verts), atol=1e-5)
+    assert surface.tcb.has_deviation and surface.tcb.deviation_max > 0
+
+    path = tmp_path / "fit.blend"
+    name = surface.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    surface = bpy.data.objects[name]
+    assert surface.tcb.role == "SURFACE" and surface.tcb.net is not None
+    assert spline_of(addon, surface).control_points.shape == surf.control_points.shape
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.retessellate(resolution=16) == {"FINISHED"}
+        assert bpy.ops.tcb.refine(tolerance=1e-3, max_control_points=900) == {"FINISHED"}
+        out = tmp_path / "spline.npz"
+        assert bpy.ops.tcb.export_spline(filepath=str(out)) == {"FINISHED"}
+    assert core_of(addon).TCBSurface.load(out).control_points.shape[1] == 3
+
+
+# --- errors: a specific message, nothing changed ------------------------------------------------
+
+
+def _expect_error(bpy, objs, pattern):
+    n_obj, n_coll, n_mesh = len(bpy.data.objects), len(bpy.data.collections), len(bpy.data.meshes)
+    with pytest.raises(RuntimeError, match=pattern):
+        fit(bpy, *objs)
+    assert (len(bpy.data.objects), len(bpy.data.collections), len(bpy.data.meshes)) == (
+        n_obj,
+        n_coll,
+        n_mesh,
+    )
+
+
+def test_error_nothing_selected(clean_scene):
+    _expect_error(clean_scene, [], "Nothing selected")
+
+
+@pytest.mark.parametrize("kind", ["CAMERA", "LIGHT"])
+def test_error_camera_or_light(clean_scene, kind):
+    bpy = clean_scene
+    data = bpy.data.cameras.new("Cam") if kind == "CAMERA" else bpy.data.lights.new("Lamp", "POINT")
+    obj = bpy.data.objects.new(kind.title(), data)
+    bpy.context.scene.collection.objects.link(obj)
+    _expect_error(bpy, [obj], f"is a {kind.lower()}, not a mesh or point cloud")
+
+
+def test_error_empty_mesh(clean_scene):
+    bpy = clean_scene
+    _expect_error(bpy, [add_mesh(bpy, "Empty", np.zeros((0, 3)))], "'Empty' has no vertices")
+
+
+def test_error_closed_mesh(clean_scene):
+    bpy = clean_scene
+    v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    cube = add_mesh(bpy, "Box", v, quads)
+    before = snapshot(cube)
+    _expect_error(bpy, [cube], "(?i)closed")
+    assert snapshot(cube) == before
+
+
+def test_error_too_few_points(clean_scene):
+    bpy = clean_scene
+    _expect_error(
+        bpy, [add_mesh(bpy, "Few", np.random.default_rng(0).random((4, 3)))], "(?i)too few|at least"
+    )
+
+
+def test_error_nan_positions(clean_scene):
+    bpy = clean_scene
+    verts, _ = grid(10)
+    verts[5] = np.nan
+    _expect_error(bpy, [add_mesh(bpy, "Broken", verts)], "(?i)nan|finite")
+
+
+# --- panels -------------------------------------------------------------------------------------
+
+
+class MockLayout:
+    """Records what a panel draws; enough of UILayout for our panels."""
+
+    def __init__(self, log):
+        self.log = log
+        self.enabled = True
+        self.scale_y = 1.0
+        self.use_property_split = False
+        self.use_property_decorate = True
+
+    def _child(self, *a, **k):
+        return MockLayout(self.log)
+
+    row = column = box = grid_flow = split = _child
+
+    def prop(self, data, prop, **k):
+        assert prop in data.bl_rna.properties, prop
+        self.log.append(("prop", prop))
+
+    def operator(self, idname, **k):
+        self.log.append(("operator", idname, self.enabled))
+        return SimpleNamespace()
+
+    def label(self, text="", **k):
+        self.log.append(("label", text))
+
+    def separator(self, **k):
+        pass
+
+
+def draw_panels(bpy, objs):
+    log = []
+    with bpy.context.temp_override(**select(bpy, *objs)):
+        ctx = bpy.context
+        for cls in (bpy.types.TCB_PT_fit, bpy.types.TCB_PT_result):
+            if getattr(cls, "poll", None) and not cls.poll(ctx):
+                log.append(("hidden", cls.__name__))
+                continue
+            panel = SimpleNamespace(layout=MockLayout(log))
+            cls.draw(panel, ctx)
+    return log
+
+
+def test_panels_draw_for_any_selection(clean_scene):
+    bpy = clean_scene
+    log = draw_panels(bpy, [])
+    assert ("operator", "tcb.fit_surface", False) in log  # disabled, with a hint
+    assert any(e[0] == "label" and "Select a mesh" in e[1] for e in log)
+    assert ("hidden", "TCB_PT_result") in log
+
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    bpy.context.scene.collection.objects.link(cam)
+    log = draw_panels(bpy, [cam])
+    assert ("operator", "tcb.fit_surface", False) in log
+    assert any(e[0] == "label" and "is a camera" in e[1] for e in log)
+
+    verts, faces = grid(12)
+    obj = add_mesh(bpy, "Patch", verts, faces)
+    log = draw_panels(bpy, [obj])
+    assert ("operator", "tcb.fit_surface", True) in log
+
+    assert fit(bpy, obj, tolerance=5e-3, resolution=8) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    log = draw_panels(bpy, [surface])
+    assert ("hidden", "TCB_PT_result") not in log
+    assert ("operator", "tcb.refine", True) in log and (
+        "operator",
+        "tcb.deviation_map",
+        True,
+    ) in log
+    log = draw_panels(bpy, [surface.tcb.net])
+    assert ("operator", "tcb.refine", True) in log
+
+
+# --- live control net -----------------------------------------------------------------------------
+
+
+def evaluated_positions(bpy, obj):
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    return positions(obj.evaluated_get(depsgraph))
+
+
+def move_net_vertex(bpy, net, j, offset):
+    p = positions(net)
+    p[j] += offset
+    net.data.attributes["position"].data.foreach_set("vector", p.astype(np.float32).ravel())
+    net.data.update()
+    bpy.context.view_layer.update()
+    return p
+
+
+def test_live_net_moves_the_surface_locally_and_survives_reopen(clean_scene, addon, tmp_path):
+    bpy = clean_scene
+    verts, faces = grid(20)
+    obj = add_mesh(bpy, "Live", verts, faces)
+    assert fit(bpy, obj, tolerance=3e-3, resolution=20) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net, res = surface.tcb.net, surface.tcb.resolution
+    surf = spline_of(addon, surface)
+    assert surface.modifiers.get("TCB Live Net") is not None
+    before = evaluated_positions(bpy, surface)
+    assert np.allclose(before, surf.tessellate(res)[0], atol=1e-5)  # unmoved net: same surface
+
+    uv, _ = surf.tessellation_uv(res)
+    column = surf.evaluation_matrix(uv).tocsc()
+    j = int(np.argmax(np.diff(column.indptr)))  # a control point with the largest support
+    support = np.zeros(len(uv), bool)
+    support[column.indices[column.indptr[j] : column.indptr[j + 1]]] = True
+    moved = move_net_vertex(bpy, net, j, (0.0, 0.0, 0.2))
+    after = evaluated_positions(bpy, surface)
+    expected = surf.with_control_points(moved).tessellate(res)[0]
+    assert np.allclose(after, expected, atol=1e-4)
+    change = np.linalg.norm(after - before, axis=1)
+    assert change[support].max() > 1e-3  # near the moved control point: changed
+    assert change[~support].max() < 1e-5  # outside its support: unchanged
+
+    name = surface.name
+    path = tmp_path / "live.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    surface = bpy.data.objects[name]
+    net = surface.tcb.net
+    assert np.allclose(evaluated_positions(bpy, surface), expected, atol=1e-4)
+    moved = move_net_vertex(bpy, net, j, (0.0, 0.0, -0.4))
+    again = evaluated_positions(bpy, surface)
+    assert np.allclose(again, surf.with_control_points(moved).tessellate(res)[0], atol=1e-4)

@@ -1,0 +1,250 @@
+"""Reconstruction end to end (method.md sections 4-7): accuracy on known data, creases, disk
+meshes, local control, files, cancellation and bad input."""
+
+import numpy as np
+import pytest
+
+from core import (
+    FileFormatError,
+    InvalidInputError,
+    TCBError,
+    TCBSurface,
+    TopologyError,
+    build_space,
+    fit_surface,
+)
+from core.fit import fit_control_points
+from core.meshio import read_geometry
+from knotsets import knot_set
+
+DATA = __import__("pathlib").Path(__file__).resolve().parents[2] / "data"
+
+
+def franke(x, y):
+    return (
+        0.75 * np.exp(-((9 * x - 2) ** 2 + (9 * y - 2) ** 2) / 4)
+        + 0.75 * np.exp(-((9 * x + 1) ** 2) / 49 - (9 * y + 1) / 10)
+        + 0.5 * np.exp(-((9 * x - 7) ** 2 + (9 * y - 3) ** 2) / 4)
+        - 0.2 * np.exp(-((9 * x - 4) ** 2) - (9 * y - 7) ** 2)
+    )
+
+
+def ridge_cloud(n=6000, seed=0):
+    xy = np.random.default_rng(seed).random((n, 2))
+    return np.c_[xy, 0.25 * np.abs(xy[:, 1] - 0.5 - 0.15 * np.sin(4 * xy[:, 0]))]
+
+
+@pytest.fixture(scope="module")
+def nefertiti():
+    points, faces = read_geometry(DATA / "nefertiti.off")
+    return points, faces, fit_surface(points, faces, tolerance=1e-3)
+
+
+@pytest.mark.parametrize("degree", [2, 3])
+def test_polynomial_surface_in_the_parameters_is_reproduced(degree):
+    knots = knot_set("random", 50, degree, seed=1, rings=degree)
+    space = build_space(knots, degree)
+    uv = np.random.default_rng(2).random((20000, 2))
+    u, v = uv.T
+    z = 0.3 * u**2 - 0.5 * u * v + 0.2 * v - 0.1 + (0.4 * v**3 if degree == 3 else 0.0)
+    points = np.c_[u + 0.1 * v**2, v - 0.2 * u * v, z]
+    # without fairing (which would pull towards planes): pure least squares where there is
+    # data, fairing only for the control points no data determines
+    fit = fit_control_points(space, uv, points, smoothness=0.0)
+    # quadratics: 1e-8. The cubic TCB basis here is linearly dependent (rank 287 of 292 on the
+    # data, condition 1.5e17 measured with an SVD); a least-squares fit then reaches ~1.5e-7
+    # (an SVD solve reaches 3e-14, but is dense). See the note of issue 3.
+    assert fit.max < (1e-8 if degree == 2 else 1e-6)
+    assert np.all(np.isfinite(fit.control_points))
+    assert np.abs(fit.control_points).max() < 10  # the data-free ones stay near the surface
+
+
+def test_franke_20000_points_quadratic_within_600_control_points():
+    xy = np.random.default_rng(0).random((20000, 2))
+    z = franke(*xy.T)
+    surf = fit_surface(np.c_[xy, z], degree=2, max_control_points=600, tolerance=1e-4)
+    assert surf.report["control_points"] <= 600
+    assert surf.report["rms"] <= 1e-3 * np.ptp(z)
+    assert np.all(np.isfinite(surf.control_points))
+
+
+@pytest.mark.parametrize("name", ["ridge", "patch-01"])
+def test_crease_tcb_beats_dcb_at_equal_control_points(name):
+    """On sharp ridges TCB is more accurate than DCB for the same control-point budget.
+
+    (At equal *knots* DCB has ~2.4x as many functions and was measured more accurate; see
+    the note of issue 3 and benchmarks/compare.py.)
+    """
+    points, faces = ridge_cloud(), None
+    if name != "ridge":
+        points, faces = read_geometry(DATA / f"{name}.off")
+    rms = {}
+    for mode in ("tcb", "dcb"):
+        surf = fit_surface(points, faces, mode=mode, tolerance=0, max_control_points=300)
+        assert surf.report["control_points"] <= 300
+        rms[mode] = surf.report["rms_rel"]
+    assert rms["tcb"] < rms["dcb"], rms
+
+
+def test_disk_mesh_reconstructs_without_fold_overs(nefertiti):
+    points, faces, surf = nefertiti
+    assert surf.report["rms_rel"] <= 1e-2
+    assert np.nanmax(surf.errors) / surf.report["diagonal"] < 0.05
+    uv, tri = surf.tessellation_uv(64)
+    verts = surf(uv)
+    face_n = np.cross(verts[tri[:, 1]] - verts[tri[:, 0]], verts[tri[:, 2]] - verts[tri[:, 0]])
+    vert_n = surf.normals(uv)
+    assert np.all((face_n[:, None, :] * vert_n[tri]).sum(axis=2) > 0)
+    # the surface is oriented like the input mesh
+    pf = surf.parameterization.faces
+    mesh_n = np.cross(points[pf[:, 1]] - points[pf[:, 0]], points[pf[:, 2]] - points[pf[:, 0]])
+    assert np.all((mesh_n * surf.normals(surf.parameterization.uv[pf].mean(axis=1))).sum(1) > 0)
+    # the tessellation covers the disk polygon: its area equals the polygon's
+    a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
+    area = 0.5 * np.sum((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    poly = surf.parameterization.domain_polygon
+    poly_area = 0.5 * np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
+    assert area == pytest.approx(poly_area, rel=1e-9)
+
+
+def test_moving_one_control_point_changes_the_surface_only_on_its_support(nefertiti):
+    _, _, surf = nefertiti
+    uv, _ = surf.tessellation_uv(64)
+    i = surf.space.n_basis // 2
+    C = surf.control_points.copy()
+    C[i] += [0.0, 0.0, 1.0]
+    moved = surf.with_control_points(C)
+    change = np.linalg.norm(moved(uv) - surf(uv), axis=1)
+    support = surf.evaluation_matrix(uv)[:, i].toarray().ravel() > 0
+    assert support.any()
+    assert np.all(change[~support] == 0)
+    assert np.all(change[support] > 0)
+    # the original is unchanged and read-only
+    assert not np.array_equal(surf.control_points, C)
+    with pytest.raises(ValueError):
+        surf.control_points[0, 0] = 1.0
+
+
+def test_save_load_round_trips_bit_exactly(nefertiti, tmp_path):
+    _, _, surf = nefertiti
+    path = tmp_path / "surface.npz"
+    surf.save(path)
+    back = TCBSurface.load(path)
+    uv, _ = surf.tessellation_uv(32)
+    np.testing.assert_array_equal(back.control_points, surf.control_points)
+    np.testing.assert_array_equal(back.knots, surf.knots)
+    np.testing.assert_array_equal(back(uv), surf(uv))
+    np.testing.assert_array_equal(back.errors, surf.errors)
+    np.testing.assert_array_equal(back.control_net()[1], surf.control_net()[1])
+    assert back.report == surf.report
+    assert TCBSurface.from_bytes(surf.to_bytes()).report == surf.report
+
+
+def test_load_refuses_damaged_and_future_files(nefertiti, tmp_path):
+    _, _, surf = nefertiti
+    data = surf.to_bytes()
+    bad = tmp_path / "truncated.npz"
+    bad.write_bytes(data[: len(data) // 2])
+    with pytest.raises(FileFormatError, match="truncated.npz"):
+        TCBSurface.load(bad)
+    with pytest.raises(FileFormatError, match="no such file"):
+        TCBSurface.load(tmp_path / "missing.npz")
+    future = tmp_path / "future.npz"
+    arrays = dict(np.load(__import__("io").BytesIO(data)))
+    arrays["format_version"] = np.array(99)
+    np.savez(future, **arrays)
+    with pytest.raises(FileFormatError, match="newer"):
+        TCBSurface.load(future)
+
+
+def test_callback_sees_every_iteration_and_can_cancel():
+    points = ridge_cloud(3000)
+    seen = []
+
+    def callback(report):
+        seen.append(report)
+        return len(seen) == 2
+
+    surf = fit_surface(points, tolerance=0, max_iterations=10, callback=callback)
+    assert [r["iteration"] for r in seen] == [1, 2]
+    assert set(seen[0]) >= {"iteration", "knots", "control_points", "rms", "max", "rms_rel",
+                            "max_rel", "seconds"}
+    assert surf.report["stop_reason"] == "cancelled"
+    assert surf.report["rms"] == pytest.approx(min(r["rms"] for r in seen), rel=1e-9)
+
+
+def test_same_input_gives_the_same_surface():
+    points = ridge_cloud(2000)
+    a = fit_surface(points, max_iterations=3)
+    b = fit_surface(points, max_iterations=3)
+    np.testing.assert_array_equal(a.control_points, b.control_points)
+
+
+def test_refine_continues_with_a_tighter_tolerance():
+    points = ridge_cloud(3000)
+    coarse = fit_surface(points, max_iterations=2, tolerance=0)
+    fine = coarse.refine(points, max_iterations=3, tolerance=0)
+    assert fine.report["iterations"] == 5
+    assert fine.report["rms"] < coarse.report["rms"]
+    assert len(fine.knots) > len(coarse.knots)
+
+
+def closed_octahedron():
+    v = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    f = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+    return v, f
+
+
+def grid_with_hole(n=6):
+    g = np.arange(n, dtype=float)
+    v = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    v = np.c_[v, 0.1 * np.sin(v[:, 0])]
+    faces = []
+    for j in range(n - 1):
+        for i in range(n - 1):
+            if (i, j) == (2, 2):
+                continue  # the hole
+            a = j * n + i
+            faces += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
+    return v, np.array(faces)
+
+
+@pytest.mark.parametrize(
+    "case, error, words",
+    [
+        ("nan", InvalidInputError, "NaN"),
+        ("inf", InvalidInputError, "inf"),
+        ("few", InvalidInputError, "at least 10"),
+        ("identical", InvalidInputError, "identical"),
+        ("collinear", InvalidInputError, "line"),
+        ("duplicates", InvalidInputError, "distinct"),
+        ("closed", TopologyError, "closed"),
+        ("hole", TopologyError, "boundary loops"),
+        ("shape", InvalidInputError, r"\(N, 3\)"),
+    ],
+)
+def test_bad_input_raises_a_specific_error(case, error, words):
+    rng = np.random.default_rng(0)
+    faces = None
+    points = rng.random((200, 3))
+    if case == "nan":
+        points[5, 1] = np.nan
+    elif case == "inf":
+        points[7, 2] = np.inf
+    elif case == "few":
+        points = points[:9]
+    elif case == "identical":
+        points = np.ones((50, 3))
+    elif case == "collinear":
+        points = np.outer(np.linspace(0, 1, 50), [1.0, 2.0, 3.0])
+    elif case == "duplicates":
+        points = np.repeat(rng.random((5, 3)), 20, axis=0)
+    elif case == "closed":
+        points, faces = closed_octahedron()
+    elif case == "hole":
+        points, faces = grid_with_hole()
+    elif case == "shape":
+        points = rng.random((50, 2))
+    with pytest.raises(error, match=words) as info:
+        fit_surface(points, faces)
+    assert isinstance(info.value, (TCBError, ValueError))
