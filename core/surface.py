@@ -409,7 +409,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=()):
         fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
     best, hist, reason = adaptive_fit(
         fit_uv, fit_q, options, diagonal=diag_norm, start_knots=start, ring_knots=rings,
-        callback=callback, history_offset=len(history), unit=norm.scale,
+        callback=callback, history_offset=len(history), unit=norm.scale, n_measured=len(uv),
     )
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)

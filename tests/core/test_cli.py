@@ -1,0 +1,59 @@
+"""The command line ``python -m core fit`` end to end, including bad paths and files."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from core import TCBSurface
+from core.meshio import read_geometry
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def run(*args):
+    return subprocess.run(
+        [sys.executable, "-m", "core", *map(str, args)],
+        cwd=ROOT, capture_output=True, text=True, timeout=300,
+    )
+
+
+def test_fit_writes_surface_net_and_spline(tmp_path):
+    out, net, spline = tmp_path / "s.obj", tmp_path / "net.ply", tmp_path / "s.npz"
+    r = run("fit", ROOT / "data" / "nefertiti.off", "-o", out, "--net", net, "--spline", spline,
+            "--tolerance", "2e-3", "--resolution", "32")
+    assert r.returncode == 0, r.stderr
+    assert "control points" in r.stdout and "iteration" in r.stderr
+    verts, faces = read_geometry(out)
+    assert len(verts) > 100 and faces is not None and np.isfinite(verts).all()
+    surf = TCBSurface.load(spline)
+    net_pts, net_faces = read_geometry(net)
+    assert len(net_pts) == surf.space.n_basis
+    np.testing.assert_allclose(net_pts, surf.control_points)
+    assert surf.report["rms_rel"] <= 2e-3
+
+
+def test_point_cloud_input_with_absolute_tolerance(tmp_path):
+    xy = np.random.default_rng(0).random((3000, 2))
+    cloud = tmp_path / "cloud.xyz"
+    np.savetxt(cloud, np.c_[xy * 10, np.sin(3 * xy[:, 0]) + xy[:, 1] ** 2])
+    r = run("fit", cloud, "-o", tmp_path / "s.ply", "--absolute", "--tolerance", "0.01",
+            "--max-control-points", "800", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr == ""
+    assert len(read_geometry(tmp_path / "s.ply")[0]) > 100
+
+
+def test_bad_path_and_malformed_file_give_one_line_and_exit_2(tmp_path):
+    r = run("fit", tmp_path / "missing.ply", "-o", tmp_path / "s.obj")
+    assert r.returncode == 2
+    assert r.stderr.strip().count("\n") == 0 and "no such file" in r.stderr
+    bad = tmp_path / "bad.off"
+    bad.write_text("OFF\n3 1 0\n0 0 0\n")
+    r = run("fit", bad, "-o", tmp_path / "s.obj")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "truncated" in r.stderr
+    r = run("fit", ROOT / "data" / "nefertiti.off", "-o", tmp_path / "s.stl")
+    assert r.returncode == 2 and ".stl" in r.stderr
+    assert not (tmp_path / "s.obj").exists()
