@@ -23,15 +23,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
-
-def franke(x, y):
-    return (
-        0.75 * np.exp(-((9 * x - 2) ** 2 + (9 * y - 2) ** 2) / 4)
-        + 0.75 * np.exp(-((9 * x + 1) ** 2) / 49 - (9 * y + 1) / 10)
-        + 0.5 * np.exp(-((9 * x - 7) ** 2 + (9 * y - 3) ** 2) / 4)
-        - 0.2 * np.exp(-((9 * x - 4) ** 2) - (9 * y - 7) ** 2)
-    )
+from datasets import f1_franke as franke  # noqa: E402
 
 
 def dataset(name: str, n: int) -> np.ndarray:
@@ -57,7 +51,7 @@ def one(name: str, n: int, kind: str) -> dict:
     t_param = time.perf_counter() - t0
     t0 = time.perf_counter()
     if kind == "single":
-        surf = fit_surface(pts, max_iterations=1, initial_knots=2000, max_control_points=5000)
+        surf = fit_surface(pts, max_iterations=1, initial_knots=1500, max_control_points=5000)
     else:
         surf = fit_surface(pts, tolerance=1e-3, max_control_points=5000, max_iterations=20)
     total = time.perf_counter() - t0

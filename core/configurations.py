@@ -143,34 +143,46 @@ def _lawson_delaunay(pts, tris, max_flips=None):
 
     Only diagonals (edges shared by two triangles) are flipped, and only when the quadrilateral
     is strictly convex, so polygon edges stay fixed: the result is the constrained Delaunay
-    triangulation of the polygon.
+    triangulation of the polygon. An edge stack with an incrementally kept edge -> triangle map
+    (each flip pushes the four quad edges); at most ``max_flips`` flips (default ``4 m^2``),
+    which also stops a cycle between nearly co-circular choices.
     """
     tris = [list(t) for t in tris]
-    limit = max_flips if max_flips is not None else 10 * len(pts) ** 2
-    for _ in range(limit):
-        owner = {}
-        flipped = False
-        for ti, t in enumerate(tris):
+    owner: dict = {}
+    for ti, t in enumerate(tris):
+        for e in range(3):
+            owner[(t[e], t[(e + 1) % 3])] = ti
+    stack = [e for e in owner if (e[1], e[0]) in owner and e[0] < e[1]]
+    limit = max_flips if max_flips is not None else 4 * len(pts) ** 2
+    flips = 0
+    while stack and flips < limit:
+        a, b = stack.pop()
+        t1, t2 = owner.get((a, b)), owner.get((b, a))
+        if t1 is None or t2 is None:
+            continue
+        c = next(v for v in tris[t1] if v != a and v != b)
+        d = next(v for v in tris[t2] if v != a and v != b)
+        # t1 = (a, b, c) and t2 = (b, a, d) as cycles; flip ab -> cd if d in circle(a, b, c)
+        pa, pb, pc, pd = pts[a], pts[b], pts[c], pts[d]
+        if _orient(pa, pb, pc) < 0:  # t1 stores (b, a, c): swap roles
+            a, b = b, a
+            pa, pb = pb, pa
+            t1, t2 = t2, t1
+            c, d = d, c
+            pc, pd = pd, pc
+        if not _incircle(pa, pb, pc, pd) > 1e-14 * _scale4(pts, a, b, c, d):
+            continue
+        if not (_orient(pc, pa, pd) > 0 and _orient(pd, pb, pc) > 0):
+            continue
+        for t in (t1, t2):
             for e in range(3):
-                a, b = t[e], t[(e + 1) % 3]
-                other = owner.get((b, a))
-                if other is None:
-                    owner[(a, b)] = (ti, e)
-                    continue
-                tj, f = other
-                c = t[(e + 2) % 3]
-                d = tris[tj][(f + 2) % 3]
-                # triangles (a, b, c) and (b, a, d); flip ab -> cd if d in circle(a, b, c)
-                if _incircle(pts[a], pts[b], pts[c], pts[d]) > 1e-14 * _scale4(pts, a, b, c, d):
-                    if _orient(pts[c], pts[a], pts[d]) > 0 and _orient(pts[d], pts[b], pts[c]) > 0:
-                        tris[ti] = [c, a, d]
-                        tris[tj] = [d, b, c]
-                        flipped = True
-                        break
-            if flipped:
-                break
-        if not flipped:
-            return [tuple(t) for t in tris]
+                owner.pop((tris[t][e], tris[t][(e + 1) % 3]), None)
+        tris[t1], tris[t2] = [c, a, d], [d, b, c]
+        for t in (t1, t2):
+            for e in range(3):
+                owner[(tris[t][e], tris[t][(e + 1) % 3])] = t
+        flips += 1
+        stack.extend([(a, d), (d, b), (b, c), (c, a)])
     return [tuple(t) for t in tris]
 
 

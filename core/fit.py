@@ -66,14 +66,17 @@ def fairing_quadrature(space) -> tuple[np.ndarray, np.ndarray]:
     return q, w
 
 
-def _gram(space, q, w, derivatives, factors) -> sp.csr_matrix:
-    G = None
+def _grams(space, q, w) -> tuple[sp.csr_matrix, sp.csr_matrix | None]:
+    """``G1 = Du^T Q Du + Dv^T Q Dv`` and (degree >= 2) ``G2 = Duu^T Q Duu + 2 Duv^T Q Duv +
+    Dvv^T Q Dvv`` from one evaluation pass over the quadrature points."""
+    ders = [(1, 0), (0, 1)] + ([(2, 0), (1, 1), (0, 2)] if space.degree >= 2 else [])
+    D = space.evaluate_many(q, ders)
     W = sp.diags(w)
-    for der, f in zip(derivatives, factors):
-        D = space.evaluate(q, der)
-        term = (D.T @ W @ D) * f
-        G = term if G is None else G + term
-    return G.tocsr()
+    G1 = (D[0].T @ W @ D[0] + D[1].T @ W @ D[1]).tocsr()
+    if space.degree < 2:
+        return G1, None
+    G2 = (D[2].T @ W @ D[2] + 2.0 * (D[3].T @ W @ D[3]) + D[4].T @ W @ D[4]).tocsr()
+    return G1, G2
 
 
 def fit_control_points(
@@ -150,10 +153,9 @@ def fit_control_points(
         raise SingularSystemError("no data point lies in the support of any basis function")
     has_data = AtA.diagonal() > 0
     q, qw = fairing_quadrature(space)
-    G1 = _gram(space, q, qw, [(1, 0), (0, 1)], [1.0, 1.0])
+    G1, G2 = _grams(space, q, qw)
     G = (FIRST_ORDER_SHARE * data_trace / max(G1.diagonal().sum(), 1e-300)) * G1
-    if space.degree >= 2:
-        G2 = _gram(space, q, qw, [(2, 0), (1, 1), (0, 2)], [1.0, 2.0, 1.0])
+    if G2 is not None:
         G = G + (data_trace / max(G2.diagonal().sum(), 1e-300)) * G2
     G = G.tocsr()
     if not (has_data | (G.diagonal() > 0)).all():

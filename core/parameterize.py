@@ -48,6 +48,8 @@ _FOLD_NOISE_FACTOR = 4.0  # ... and farther off the local plane than this many s
 _FOLD_MIN_OFF_NEIGHBOURS = 0.25  # fraction of uv-neighbours off the surface for a point to count
 _FOLD_COHERENCE = 0.5  # fraction of suspect 3D neighbours for a point to be flagged
 _FOLD_MAX_FRACTION = 0.02  # fraction of flagged points above which the cloud is rejected
+_FOLD_RIM = 0.05  # "at the rim": within this fraction of the extent from the convex hull
+_FOLD_RIM_SHARE = 0.6  # steep points count as a fold when this share of them is at the rim
 _FOLD_MAX_SAMPLE = 100_000  # larger clouds are checked on a seeded random subset of this size
 _THIN_NEIGHBOURHOOD = 0.25  # lambda_0 / lambda_1 above this: local normal unreliable
 _COLLINEAR_RTOL = 1e-9  # RMS distance from the best line, relative to the scale
@@ -329,6 +331,20 @@ def _local_planes(q: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.nda
     return v[:, :, 0], np.sqrt(w[:, 0]), reliable, idx
 
 
+def _distance_to_hull(uv: np.ndarray, chunk: int = 20_000) -> np.ndarray:
+    """Distance (n,) of parameters to the boundary of their convex hull (chunked over points)."""
+    hull = uv[ConvexHull(uv).vertices]
+    a, b = hull, np.roll(hull, -1, axis=0)
+    ab = b - a
+    ab2 = np.maximum((ab * ab).sum(axis=1), 1e-300)
+    out = np.empty(len(uv))
+    for s in range(0, len(uv), chunk):
+        x = uv[s : s + chunk, None, :]
+        t = np.clip(((x - a) * ab).sum(-1) / ab2, 0.0, 1.0)
+        out[s : s + chunk] = np.sqrt(((x - a - t[..., None] * ab) ** 2).sum(-1)).min(axis=1)
+    return out
+
+
 def _fold_sample(q: np.ndarray) -> np.ndarray:
     """Indices of the (seeded) subset of at most 100 000 points used by the fold checks."""
     if len(q) > _FOLD_MAX_SAMPLE:
@@ -368,7 +384,10 @@ def _fold_fraction(
     :func:`_local_planes` (``k = 12`` neighbours):
 
     * steep: ``|n_i . n| < 0.2`` with ``n`` the normal of the best-fit plane (the surface is
-      nearly perpendicular to the plane; a fold turns through there);
+      nearly perpendicular to the plane; a fold turns through there). Counted only when at
+      least 60% of the steep points lie at the rim of the projection (within 5% of the extent
+      from the convex hull): a cap of 90 degrees or more turns over at its rim, while a steep
+      height field (Renka's F7) has steep stripes everywhere and projects without folding;
     * overlap: among the 12 nearest neighbours ``j`` of ``uv_i`` *in the parameter plane*, at
       least 3 whose 3D offset ``d = q_j - q_i`` leaves the local plane steeply and beyond the
       noise, ``|d . n_i| > max(sin 60deg |d|, 4 sigma_i)`` (the projection put points of another
@@ -393,9 +412,18 @@ def _fold_fraction(
     dlen = np.sqrt(np.einsum("nkj,nkj->nk", d, d))
     off = (dn > _FOLD_OFF_SURFACE_SIN * dlen) & (dn > _FOLD_NOISE_FACTOR * sigma[:, None])
     overlap = np.count_nonzero(off, axis=1) >= _FOLD_MIN_OFF_NEIGHBOURS * k
-    suspect = reliable & (steep | overlap)
     # folds are regions, noise flags isolated points: keep a flag only where it is coherent
-    flagged = np.count_nonzero(suspect[idx], axis=1) >= _FOLD_COHERENCE * (k + 1)
+    def coherent(mask):
+        return np.count_nonzero(mask[idx], axis=1) >= _FOLD_COHERENCE * (k + 1)
+
+    flagged = coherent(reliable & overlap)
+    steep_flag = coherent(reliable & steep)
+    if steep_flag.any():
+        # a sheet that turns over does so at the rim of its projection; steep stripes inside
+        # the domain are a steep height field (Renka's F7), which projects without folding
+        near_rim = _distance_to_hull(uv) < _FOLD_RIM * float(np.ptp(uv, axis=0).max())
+        if np.count_nonzero(steep_flag & near_rim) >= _FOLD_RIM_SHARE * np.count_nonzero(steep_flag):
+            flagged |= steep_flag
     return float(np.count_nonzero(flagged)) / len(q)
 
 

@@ -248,13 +248,16 @@ class SimplexBatch:
         -------
         (P,) float64
         """
+        return self.evaluate_many(x, sets, [derivative])[0]
+
+    def evaluate_many(self, x: np.ndarray, sets: np.ndarray, derivatives) -> list:
+        """:meth:`evaluate` for several derivative orders at once (one set of side tests)."""
         x = np.asarray(x, dtype=np.float64)
         sets = np.asarray(sets, dtype=np.int64)
-        du, dv = derivative
-        out = np.zeros(len(sets))
         k = self.degree
-        if du + dv > k or len(sets) == 0:
-            return out
+        outs = [np.zeros(len(sets)) for _ in derivatives]
+        if len(sets) == 0 or all(sum(d) > k for d in derivatives):
+            return outs
         V = self.V[sets]  # (P, n, 2)
         bits = np.zeros(len(sets), dtype=self.leaf_want.dtype)
         for e, (p, q) in enumerate(self.edges):
@@ -263,19 +266,28 @@ class SimplexBatch:
         hit = np.flatnonzero(inside.any(axis=1))  # pairs inside the support
         sets, inside = sets[hit], inside[hit]
         y = x[hit] - self.center[sets]
-        values = inside * self.leaf_value[sets]  # (P, L), the leaves in tree order
-        directions = [0] * du + [1] * dv
-        for depth in range(k - 1, -1, -1):
-            degree = k - depth
-            parent = np.empty((len(sets), len(self.nodes[depth])))
-            for i, (lam, mu) in enumerate(self.nodes[depth]):
-                child = values[:, 3 * i : 3 * i + 3]
-                if depth < len(directions):
-                    f = degree * mu[sets, :, directions[depth]]  # (P, 3) constants
-                else:
-                    c = lam[sets]  # (P, 3, 3)
-                    f = c[:, :, 0] + c[:, :, 1] * y[:, 0:1] + c[:, :, 2] * y[:, 1:2]
-                parent[:, i] = np.einsum("pj,pj->p", f, child)
-            values = parent
-        out[hit] = values[:, 0]
-        return out
+        leaves = inside * self.leaf_value[sets]  # (P, L), the leaves in tree order
+        # barycentric coordinates of the value levels, shared by all derivative orders
+        lam_cache: dict = {}
+        for out, (du, dv) in zip(outs, derivatives):
+            if du + dv > k:
+                continue
+            values = leaves
+            directions = [0] * du + [1] * dv
+            for depth in range(k - 1, -1, -1):
+                degree = k - depth
+                parent = np.empty((len(sets), len(self.nodes[depth])))
+                for i, (lam, mu) in enumerate(self.nodes[depth]):
+                    child = values[:, 3 * i : 3 * i + 3]
+                    if depth < len(directions):
+                        f = degree * mu[sets, :, directions[depth]]  # (P, 3) constants
+                    else:
+                        f = lam_cache.get((depth, i))
+                        if f is None:
+                            c = lam[sets]  # (P, 3, 3)
+                            f = c[:, :, 0] + c[:, :, 1] * y[:, 0:1] + c[:, :, 2] * y[:, 1:2]
+                            lam_cache[(depth, i)] = f
+                    parent[:, i] = np.einsum("pj,pj->p", f, child)
+                values = parent
+            out[hit] = values[:, 0]
+        return outs

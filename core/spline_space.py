@@ -217,25 +217,34 @@ class SplineSpace:
         ``derivative`` is ``(du, dv)`` with ``du + dv <= 2``. Pairs (point, configuration) come
         from the bucket-grid index; the values from :class:`~core.simplex.SimplexBatch`.
         """
-        der = tuple(int(d) for d in derivative)
-        if der not in _DERIVATIVES:
-            raise ValueError(f"derivative must be one of {sorted(_DERIVATIVES)}, got {derivative}")
+        return self.evaluate_many(uv, [derivative])[0]
+
+    def evaluate_many(self, uv, derivatives) -> list:
+        """:meth:`evaluate` for several derivative orders at the same points, in one pass."""
+        ders = [tuple(int(d) for d in der) for der in derivatives]
+        for der in ders:
+            if der not in _DERIVATIVES:
+                raise ValueError(f"derivative must be one of {sorted(_DERIVATIVES)}, got {der}")
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        rows, cols, vals = [], [], []
+        parts: list = [([], [], []) for _ in ders]
         for pt, cfg in self._index.pairs(uv):
-            v = self._batch.evaluate(uv[pt], cfg, der)
-            nz = v != 0
-            rows.append(pt[nz].astype(np.int32))
-            cols.append(self.config_basis[cfg[nz]].astype(np.int32))
-            vals.append(v[nz])
-        if rows:
-            r, c, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
-        else:
-            r = c = np.zeros(0, dtype=np.int32)
-            v = np.zeros(0)
-        A = sp.csr_matrix((v, (r, c)), shape=(len(uv), self.n_basis))
-        A.sum_duplicates()
-        return A
+            values = self._batch.evaluate_many(uv[pt], cfg, ders)
+            for (rows, cols, vals), v in zip(parts, values):
+                nz = v != 0
+                rows.append(pt[nz].astype(np.int32))
+                cols.append(self.config_basis[cfg[nz]].astype(np.int32))
+                vals.append(v[nz])
+        out = []
+        for rows, cols, vals in parts:
+            if rows:
+                r, c, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+            else:
+                r = c = np.zeros(0, dtype=np.int32)
+                v = np.zeros(0)
+            A = sp.csr_matrix((v, (r, c)), shape=(len(uv), self.n_basis))
+            A.sum_duplicates()
+            out.append(A)
+        return out
 
     def check_partition_of_unity(self, uv, tol: float = 1e-9, raise_error: bool = False):
         """See :func:`core.border.check_partition_of_unity`."""

@@ -21,6 +21,7 @@ import json
 import os
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,11 @@ from .spline_space import SplineSpace
 __all__ = ["TCBSurface", "fit_surface", "FORMAT_VERSION"]
 
 FORMAT_VERSION = 1
+# Larger inputs are fitted on a seeded random subset of this size (a RuntimeWarning says so);
+# 1e6 points fit in about 0.4 GiB, so this keeps the peak well under the 4 GiB budget.
+MAX_FIT_POINTS = 2_000_000
+# A parameter domain thinner than this (width / length) is a curve, not a surface.
+MIN_ASPECT = 1e-3
 _PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes")
 
 
@@ -198,30 +204,30 @@ class TCBSurface:
     def closest_parameters(self, points, iterations: int = 4) -> np.ndarray:
         """Parameters (m, 2) of the surface points closest to ``points`` (m, 3).
 
-        Start at each of the 3 nearest vertices of a fine tessellation, take Gauss-Newton steps
-        on ``|S(x) - p|^2`` (2x2 normal equations per point, vectorized, only steps that improve
-        are taken), kept in the domain's box; the best of the three is returned.
+        Start at the nearest vertex of a fine tessellation (and, for clouds, also at the point's
+        projection on the best-fit plane), take Gauss-Newton steps on ``|S(x) - p|^2`` (2x2
+        normal equations per point, vectorized, only steps that improve are taken), kept in the
+        domain's box; the better result is returned.
         """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         uv_t, _ = self.tessellation_uv(96)
         verts = self(uv_t)
-        _, nearest = cKDTree(verts).query(p, k=3)
-        best_x, best_d = None, None
-        for j in range(nearest.shape[1]):
-            x = self._newton_closest(p, uv_t[nearest[:, j]].copy(), uv_t, iterations)
-            d = np.linalg.norm(self(x) - p, axis=1)
-            if best_x is None:
-                best_x, best_d = x, d
-            else:
-                better = d < best_d
-                best_x[better], best_d[better] = x[better], d[better]
-        return best_x
+        _, nearest = cKDTree(verts).query(p)
+        x = self._newton_closest(p, uv_t[nearest].copy(), uv_t, iterations)
+        if self._param.kind == "plane" and self._param.origin is not None:
+            # a cloud's own projection is another good start; keep the better result
+            y = self._newton_closest(p, np.clip(self._param.project(p), uv_t.min(0), uv_t.max(0)),
+                                     uv_t, iterations)
+            better = np.linalg.norm(self(y) - p, axis=1) < np.linalg.norm(self(x) - p, axis=1)
+            x[better] = y[better]
+        return x
 
     def _newton_closest(self, p, x, uv_t, iterations):
         lo, hi = uv_t.min(axis=0), uv_t.max(axis=0)
         for _ in range(iterations):
-            r = self(x) - p
-            su, sv = self.derivative(x, (1, 0)), self.derivative(x, (0, 1))
+            S, Su, Sv = (M @ self._c for M in self._space.evaluate_many(x, [(0, 0), (1, 0), (0, 1)]))
+            r = S - p
+            su, sv = Su, Sv
             a, b, c = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
             g1, g2 = (su * r).sum(1), (sv * r).sum(1)
             det = a * c - b * b
@@ -397,10 +403,26 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0):
 def _run(points, param, options, callback, start=None, rings=None, history=()):
     t0 = time.perf_counter()
     used = np.asarray(param.used, dtype=bool)
+    extent = np.ptp(np.asarray(param.uv)[used], axis=0)
+    if extent.min() < MIN_ASPECT * extent.max():
+        raise InvalidInputError(
+            f"the points lie almost on a curve: their parameter domain is {extent.min() / extent.max():.1e} "
+            "times as wide as it is long; a surface needs points spread in two directions"
+        )
     q, norm = normalize(points[used])
     diag_norm = 2.0  # normalize() maps the bounding box to half-diagonal 1
     uv = np.asarray(param.uv)[used]
     fit_uv, fit_q = uv, q
+    subsampled = len(uv) > MAX_FIT_POINTS
+    if subsampled:
+        # the fit needs far fewer points than a huge scan has: a seeded random subset is fitted,
+        # the errors below are still those of every point
+        warnings.warn(
+            f"{len(uv)} points: fitting a random subset of {MAX_FIT_POINTS} (errors are reported "
+            "for all points)", RuntimeWarning, stacklevel=3,
+        )
+        pick = np.sort(np.random.default_rng(options.seed).choice(len(uv), MAX_FIT_POINTS, replace=False))
+        fit_uv, fit_q = uv[pick], q[pick]
     if param.faces is not None:
         # fit the mesh's surface: vertices plus points sampled on its faces
         count = int(np.clip(20 * len(points), 5_000, 200_000))
@@ -409,12 +431,20 @@ def _run(points, param, options, callback, start=None, rings=None, history=()):
         fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
     best, hist, reason = adaptive_fit(
         fit_uv, fit_q, options, diagonal=diag_norm, start_knots=start, ring_knots=rings,
-        callback=callback, history_offset=len(history), unit=norm.scale, n_measured=len(uv),
+        callback=callback, history_offset=len(history), unit=norm.scale,
+        n_measured=None if subsampled else len(uv),
     )
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)
     errors = np.full(len(points), np.nan)
-    errors[used] = best.fit.errors[: len(uv)] * norm.scale
+    if subsampled:
+        e = np.empty(len(uv))
+        for s in range(0, len(uv), 200_000):
+            A = best.space.evaluate(uv[s : s + 200_000])
+            e[s : s + 200_000] = np.linalg.norm(A @ best.fit.control_points - q[s : s + 200_000], axis=1)
+        errors[used] = e * norm.scale
+    else:
+        errors[used] = best.fit.errors[: len(uv)] * norm.scale
     diagonal = 2.0 * norm.scale
     report = {
         "mode": options.mode,
@@ -432,6 +462,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=()):
         "diagonal": float(diagonal),
         "seconds": time.perf_counter() - t0,
         "stop_reason": reason,
+        "subsampled": bool(subsampled),
         "history": list(history) + hist,
     }
     return TCBSurface(best.space, C, param, errors, report, best.n_interior, options)

@@ -82,6 +82,32 @@ class PlaneFitCost:
     def near(self, center, radius) -> np.ndarray:
         return np.asarray(self.tree.query_ball_point(center, radius), dtype=np.int64)
 
+    def grouped_costs(self, owner: np.ndarray, n_groups: int) -> np.ndarray:
+        """Costs of disjoint point groups (``owner[j]`` = group of point j, -1 none), (G,).
+
+        One pass: per-group moment sums with ``bincount`` in coordinates centred on each
+        group's mean (two passes over the points, no loop over groups).
+        """
+        ok = owner >= 0
+        o = owner[ok]
+        x, p = self.uv[ok], self.points[ok]
+        cnt = np.bincount(o, minlength=n_groups).astype(np.float64)
+        safe = np.maximum(cnt, 1.0)
+        mx = np.stack([np.bincount(o, x[:, j], n_groups) for j in range(2)], 1) / safe[:, None]
+        mp = np.stack([np.bincount(o, p[:, j], n_groups) for j in range(3)], 1) / safe[:, None]
+        x = x - mx[o]
+        p = p - mp[o]
+        phi = np.c_[x, np.ones(len(x))]
+        M = np.stack([np.bincount(o, phi[:, i] * phi[:, j], n_groups)
+                      for i in range(3) for j in range(3)], 1).reshape(-1, 3, 3)
+        R = np.stack([np.bincount(o, phi[:, i] * p[:, j], n_groups)
+                      for i in range(3) for j in range(3)], 1).reshape(-1, 3, 3)
+        Q = np.bincount(o, (p * p).sum(axis=1), n_groups)
+        scale = np.trace(M, axis1=1, axis2=2)[:, None, None] + 1e-300
+        sol = np.linalg.solve(M + 1e-12 * scale * np.eye(3), R)
+        ssr = Q - np.einsum("tij,tij->t", R, sol)
+        return np.where(cnt > 3, np.maximum(ssr, 0.0), 0.0)
+
     def costs(self, tri_pts: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Costs and point counts of triangles ``tri_pts`` (T, 3, 2) over the points ``idx``.
 
@@ -152,11 +178,7 @@ def feature_triangulation(
     order = np.argsort(owner, kind="stable")
     starts = np.searchsorted(owner[order], np.arange(len(tri) + 1))
     members = [order[starts[i] : starts[i + 1]] for i in range(len(tri))]
-    tri_cost = np.zeros(len(tri))
-    has_data = np.array([len(m) > 3 for m in members])
-    # costs of triangles with data, one batched call per triangle (cheap: few points each)
-    for i in np.flatnonzero(has_data):
-        tri_cost[i] = cost.costs(knots[tri[i]][None], members[i])[0][0]
+    tri_cost = cost.grouped_costs(owner, len(tri))
 
     tris = [list(t) for t in tri.tolist()]
     edge_owner: dict[tuple[int, int], int] = {}

@@ -262,11 +262,19 @@ def ramp_colors(values: np.ndarray, vmax: float) -> np.ndarray:
     return rgba
 
 
-def nearest_distances(query: np.ndarray, data: np.ndarray) -> np.ndarray:
-    """Distance from each query point to its nearest data point (scipy's k-d tree)."""
-    from scipy.spatial import cKDTree
+def nearest_distances(query: np.ndarray, data: np.ndarray, faces: np.ndarray | None = None):
+    """Distance from each query point to the data: to the data's triangles when ``faces`` are
+    given (``core.geometry.point_mesh_distance``, vectorized), else to the nearest data point.
+    With sparse meshes (a few hundred vertices) the distance to the vertices alone would mostly
+    measure the sampling gaps, not the deviation."""
+    from ..core.geometry import point_mesh_distance
 
-    return cKDTree(data).query(query, k=1)[0]
+    query = np.asarray(query, dtype=np.float64).reshape(-1, 3)
+    if faces is None or len(faces) == 0:
+        from scipy.spatial import cKDTree
+
+        return cKDTree(data).query(query, k=1)[0]
+    return point_mesh_distance(query, data, faces)
 
 
 def deviation_material(name: str = "TCB Deviation", attribute: str = "tcb_deviation"):

@@ -358,6 +358,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         )
         net.display_type = "WIRE"
         net.show_in_front = True
+        net.hide_render = True  # a viewport handle: its faces would hide the surface in renders
         net.hide_set(not self.show_net)
 
         store_spline(surface, surf)
@@ -516,7 +517,7 @@ class TCB_OT_deviation_map(bpy.types.Operator):
             return {"CANCELLED"}
 
         verts = bridge.read_world_positions(surface, context.evaluated_depsgraph_get())
-        surf_dist = bridge.nearest_distances(verts, data.points)
+        surf_dist = bridge.nearest_distances(verts, data.points, data.faces)
         vmax = float(max(surf_dist.max(initial=0.0), data_dist.max(initial=0.0)))
         bridge.set_float_attribute(surface.data, DEVIATION_ATTR, surf_dist)
         bridge.set_color_attribute(

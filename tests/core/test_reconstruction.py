@@ -248,3 +248,18 @@ def test_bad_input_raises_a_specific_error(case, error, words):
     with pytest.raises(error, match=words) as info:
         fit_surface(points, faces)
     assert isinstance(info.value, (TCBError, ValueError))
+
+
+def test_huge_inputs_are_fitted_on_a_subset_with_a_warning(monkeypatch):
+    import core.surface
+
+    monkeypatch.setattr(core.surface, "MAX_FIT_POINTS", 3000)
+    xy = np.random.default_rng(0).random((10000, 2))
+    points = np.c_[xy, np.sin(3 * xy[:, 0]) * xy[:, 1]]
+    with pytest.warns(RuntimeWarning, match="random subset of 3000"):
+        surf = fit_surface(points, max_iterations=2)
+    assert surf.report["subsampled"] and surf.report["points"] == 10000
+    # the errors are those of every input point, not only of the fitted subset
+    true = np.linalg.norm(surf(surf.parameterization.uv) - points, axis=1)
+    np.testing.assert_allclose(surf.errors, true, rtol=1e-9, atol=1e-12)
+    assert surf.report["rms"] == pytest.approx(np.sqrt(np.mean(true**2)), rel=1e-9)

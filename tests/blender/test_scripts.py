@@ -1,0 +1,102 @@
+"""scripts/fit_in_blender.py end to end, in a subprocess (its own bpy, its own temporary
+Blender user folders): a small fit with export and a tiny render, and bad input."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPT = ROOT / "scripts" / "fit_in_blender.py"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _need_bpy():
+    if importlib.util.find_spec("bpy") is None:
+        if os.environ.get("TCB_SKIP_BLENDER") == "1":
+            pytest.skip("TCB_SKIP_BLENDER=1: the bpy wheel is not installed")
+        pytest.fail("the bpy wheel is not installed (bash scripts/test installs it; set "
+                    "TCB_SKIP_BLENDER=1 to skip the Blender tests)", pytrace=False)  # fmt: skip
+
+
+def run_script(*args, timeout=300) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(SCRIPT), *map(str, args)],
+        capture_output=True, text=True, cwd=ROOT, timeout=timeout, check=False,
+    )  # fmt: skip
+
+
+def obj_counts(path: Path) -> tuple[int, int]:
+    v = f = 0
+    with open(path) as fh:
+        for line in fh:
+            if line.startswith("v "):
+                v += 1
+            elif line.startswith("f "):
+                f += 1
+    return v, f
+
+
+def test_fit_export_render_nefertiti(tmp_path):
+    blend, obj, png = tmp_path / "a" / "nef.blend", tmp_path / "nef.obj", tmp_path / "nef.png"
+    proc = run_script(
+        ROOT / "data" / "nefertiti.off", "-o", blend, "--tolerance", "1e-2",
+        "--max-control-points", "120", "--resolution", "16", "--export", obj,
+        "--render", png, "--render-size", "64x48", "--samples", "1",
+    )  # fmt: skip
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out
+    assert blend.is_file() and blend.stat().st_size > 0, out
+    assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", out
+    nv, nf = obj_counts(obj)
+    assert nv > 0 and nf > 0, out
+    # the report table
+    for row in ("knots", "control points", "RMS error", "max error", "total"):
+        assert row in proc.stdout, out
+    rows = [ln for ln in proc.stdout.splitlines() if ln.startswith("control points")]
+    cps = int(rows[0].split()[-1])
+    assert 0 < cps <= 120
+
+
+def test_fit_point_cloud_xyz_without_render(tmp_path):
+    import numpy as np
+
+    t = np.linspace(-1.0, 1.0, 15)
+    x, y = np.meshgrid(t, t)
+    pts = np.c_[x.ravel(), y.ravel(), 0.2 * (x * x - y * y).ravel()]
+    src = tmp_path / "saddle.xyz"
+    np.savetxt(src, pts)
+    blend, ply = tmp_path / "saddle.blend", tmp_path / "saddle.ply"
+    proc = run_script(src, "-o", blend, "--tolerance", "1e-2", "--max-control-points", "80",
+                      "--resolution", "8", "--export", ply, "--no-deviation")  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert blend.is_file() and ply.is_file() and ply.read_bytes().startswith(b"ply")
+
+
+def _error_line(proc) -> str:
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("fit_in_blender: error:")]
+    assert len(lines) == 1, proc.stderr
+    return lines[0]
+
+
+def test_missing_input_fails_with_one_line(tmp_path):
+    proc = run_script(tmp_path / "nope.off", "-o", tmp_path / "x.blend", timeout=60)
+    assert "input file not found" in _error_line(proc)
+    assert "Traceback" not in proc.stderr
+    assert not (tmp_path / "x.blend").exists()
+
+
+def test_closed_mesh_fails_with_one_line(tmp_path):
+    src = tmp_path / "tetra.off"
+    src.write_text("OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n")
+    proc = run_script(src, "-o", tmp_path / "t.blend")
+    line = _error_line(proc)
+    assert "closed" in line, line
+    assert "Traceback" not in proc.stderr
+    assert not (tmp_path / "t.blend").exists()

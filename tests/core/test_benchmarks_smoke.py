@@ -1,0 +1,30 @@
+"""Smoke test of the benchmark harness: ``benchmarks/compare.py --quick`` runs and prints every
+row (issue 5). The numbers themselves are not checked here."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+METHODS = ["TCB", "TCB-delaunay", "DCB", "Park-tensor", "FITPACK-LSQ", "FITPACK-smooth"]
+
+
+def test_compare_quick(tmp_path):
+    out = tmp_path / "compare.md"
+    res = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "compare.py"), "--quick", "--out", str(out)],
+        capture_output=True, text=True, timeout=400, cwd=ROOT,
+    )
+    assert res.returncode == 0, res.stderr[-3000:]
+    md = out.read_text()
+    rows = [line for line in md.splitlines() if line.startswith("| ")]
+    for dataset in ("F1-franke scattered", "crease scattered", "jacksboro DEM", "patch-01.off"):
+        got = [r for r in rows if r.startswith(f"| {dataset}")]
+        methods = {r.split("|")[2].strip() for r in got}
+        expect = METHODS if "off" not in dataset else METHODS[:4]
+        assert set(expect) <= methods, (dataset, methods)
+        assert not any("failed" in r for r in got), got
+        # TCB vs DCB rows: same knots and equal control points
+        labels = {r.split("|")[2].strip() for r in got}
+        assert {"equal cp", "same knots 1", "same knots 4"} <= labels, labels
+    assert "RMS ratio vs TCB" in md and "TCB/DCB RMS" in md
