@@ -107,7 +107,9 @@ def positions(obj) -> np.ndarray:
 
 
 def core_of(addon):
-    return sys.modules[ADDON + ".core"]
+    import importlib
+
+    return importlib.import_module(ADDON + ".core")
 
 
 def spline_of(addon, surface_obj):
@@ -251,6 +253,33 @@ def test_worker_job_cancels_and_reports_progress(installed, addon):
     assert job.done and job.error is None
     assert job.progress is not None and job.progress["iteration"] == 1
     assert job.result is not None  # the best surface so far; the modal operator discards it
+
+
+def test_core_error_mid_fit_leaves_the_scene_as_it_was(clean_scene, addon, monkeypatch):
+    """An exception raised by the engine during an iteration: ERROR report, CANCELLED, no new
+    objects, the source untouched (issue 6, interruption)."""
+    bpy = clean_scene
+    core = core_of(addon)
+    real = core.fit_surface
+
+    def failing(*args, **kwargs):
+        def callback(report):
+            if report["iteration"] == 2:
+                raise core.SingularSystemError("injected failure at iteration 2")
+            return False
+
+        kwargs["callback"] = callback
+        kwargs["max_iterations"] = 5
+        kwargs["tolerance"] = 0.0
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(core, "fit_surface", failing)
+    sys.modules[ADDON + ".tcb_addon.operators"].clear_cache()  # no cached fit may answer
+    verts, faces = grid(14)
+    obj = add_mesh(bpy, "Source", verts, faces)
+    before = snapshot(obj)
+    _expect_error(bpy, [obj], "injected failure at iteration 2")
+    assert snapshot(obj) == before
 
 
 # --- refine, re-tessellate, deviation map, save and reopen ------------------------------------------

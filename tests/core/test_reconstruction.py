@@ -263,3 +263,43 @@ def test_huge_inputs_are_fitted_on_a_subset_with_a_warning(monkeypatch):
     true = np.linalg.norm(surf(surf.parameterization.uv) - points, axis=1)
     np.testing.assert_allclose(surf.errors, true, rtol=1e-9, atol=1e-12)
     assert surf.report["rms"] == pytest.approx(np.sqrt(np.mean(true**2)), rel=1e-9)
+
+
+def test_knot_insertion_at_knots_on_knot_lines_and_at_the_border_stays_c1_and_sums_to_one():
+    """Errors concentrated exactly on knots, on knot lines and at the border of the data must
+    not make collinear configurations or break the partition of unity (issue 6, item 5)."""
+    from itertools import combinations
+
+    from core.refine import insertion_points, make_space, ring_count
+    from core.border import border_rings
+
+    rng = np.random.default_rng(3)
+    inner = rng.random((40, 2))
+    rings = border_rings([0, 0], [1, 1], 1 / np.sqrt(40), rings=ring_count(2), seed=3)
+    knots = np.vstack([inner, rings])
+    space = make_space(knots, 2, "tcb", None, len(inner))
+    tri = space.configurations.triangles[0]
+    # data exactly on the interior knots, on the midpoints of Gamma_0 edges, and on the border
+    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    mids = knots[edges].mean(axis=1)
+    border = np.c_[rng.random(200), rng.choice([0.0, 1.0], 200)]
+    uv = np.vstack([inner, mids, border, rng.random((3000, 2))])
+    uv = uv[((uv >= 0) & (uv <= 1)).all(axis=1)]
+    errors = np.zeros(len(uv))
+    errors[: len(uv) - 3000] = 1.0  # all the error sits on knots, knot lines and the border
+    for _ in range(3):
+        new = insertion_points(knots, tri, uv, errors, count=25)
+        assert len(new) > 0
+        inner = np.vstack([inner, new])
+        knots = np.vstack([inner, rings])
+        space = make_space(knots, 2, "tcb", None, len(inner))
+        tri = space.configurations.triangles[0]
+        assert space.check_partition_of_unity(uv, tol=1e-9).ok
+        V = knots[np.concatenate([space.config_triangles, space.config_interior], axis=1)]
+        worst = np.inf
+        for i, j, k in combinations(range(V.shape[1]), 3):
+            a, b, c = V[:, i], V[:, j], V[:, k]
+            det = np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+            L2 = np.maximum.reduce([((b - a) ** 2).sum(1), ((c - a) ** 2).sum(1), ((c - b) ** 2).sum(1)])
+            worst = min(worst, float((det / L2).min()))
+        assert worst > 1e-4  # no three (nearly) collinear knots in any configuration
