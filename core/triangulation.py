@@ -7,9 +7,9 @@ from the data so that knot lines follow creases (data-dependent triangulation, D
   least-squares affine map ``(u, v) -> (x, y, z)`` fitted to the data points whose parameters fall
   in it (0 with at most 3 points). Computed from moment sums, batched over many triangles.
 * :func:`feature_triangulation` -- ``Gamma_0``: Delaunay, then Lawson-style flips of interior
-  edges of strictly convex quadrilaterals when the two-triangle cost drops; only quads that touch
-  data are considered, each edge flips at most a few times, and new triangles must keep a minimum
-  angle (a triangle with <= 3 points costs 0 and would otherwise reward slivers).
+  edges of strictly convex quadrilaterals when the two-triangle cost drops, in batched rounds;
+  only quads that touch data are considered, and new triangles must keep a minimum angle (a
+  triangle with <= 3 points costs 0 and would otherwise reward slivers).
 * :class:`FeatureLinkTriangulator` -- link triangulator for the link-triangulation procedure
   (:mod:`core.configurations`): at levels below the degree, the minimum-cost triangulation of the
   link polygon by dynamic programming over its admissible diagonals (O(m^3)); at the last level
@@ -65,6 +65,28 @@ def _collinear_free(pts: np.ndarray) -> np.ndarray:
     return ok
 
 
+def grouped_plane_costs(x: np.ndarray, p: np.ndarray, group: np.ndarray, n_groups: int) -> np.ndarray:
+    """Plane-fit residual of every point group at once, (G,): ``Q - tr(R^T M^-1 R)`` from
+    per-group moment sums (``bincount``) in coordinates centred on each group's mean; groups
+    with at most 3 points cost 0. Points may appear in several groups (pass them repeated)."""
+    cnt = np.bincount(group, minlength=n_groups).astype(np.float64)
+    safe = np.maximum(cnt, 1.0)
+    mx = np.stack([np.bincount(group, x[:, j], n_groups) for j in range(2)], 1) / safe[:, None]
+    mp = np.stack([np.bincount(group, p[:, j], n_groups) for j in range(3)], 1) / safe[:, None]
+    x = x - mx[group]
+    p = p - mp[group]
+    phi = np.c_[x, np.ones(len(x))]
+    M = np.stack([np.bincount(group, phi[:, i] * phi[:, j], n_groups)
+                  for i in range(3) for j in range(3)], 1).reshape(-1, 3, 3)
+    R = np.stack([np.bincount(group, phi[:, i] * p[:, j], n_groups)
+                  for i in range(3) for j in range(3)], 1).reshape(-1, 3, 3)
+    Q = np.bincount(group, (p * p).sum(axis=1), n_groups)
+    scale = np.trace(M, axis1=1, axis2=2)[:, None, None] + 1e-300
+    sol = np.linalg.solve(M + 1e-12 * scale * np.eye(3), R)
+    ssr = Q - np.einsum("tij,tij->t", R, sol)
+    return np.where(cnt > 3, np.maximum(ssr, 0.0), 0.0)
+
+
 class PlaneFitCost:
     """Sum of squared residuals of the affine fit ``(u, v) -> p`` over the points of a triangle.
 
@@ -83,30 +105,9 @@ class PlaneFitCost:
         return np.asarray(self.tree.query_ball_point(center, radius), dtype=np.int64)
 
     def grouped_costs(self, owner: np.ndarray, n_groups: int) -> np.ndarray:
-        """Costs of disjoint point groups (``owner[j]`` = group of point j, -1 none), (G,).
-
-        One pass: per-group moment sums with ``bincount`` in coordinates centred on each
-        group's mean (two passes over the points, no loop over groups).
-        """
+        """Costs of disjoint point groups (``owner[j]`` = group of point j, -1 none), (G,)."""
         ok = owner >= 0
-        o = owner[ok]
-        x, p = self.uv[ok], self.points[ok]
-        cnt = np.bincount(o, minlength=n_groups).astype(np.float64)
-        safe = np.maximum(cnt, 1.0)
-        mx = np.stack([np.bincount(o, x[:, j], n_groups) for j in range(2)], 1) / safe[:, None]
-        mp = np.stack([np.bincount(o, p[:, j], n_groups) for j in range(3)], 1) / safe[:, None]
-        x = x - mx[o]
-        p = p - mp[o]
-        phi = np.c_[x, np.ones(len(x))]
-        M = np.stack([np.bincount(o, phi[:, i] * phi[:, j], n_groups)
-                      for i in range(3) for j in range(3)], 1).reshape(-1, 3, 3)
-        R = np.stack([np.bincount(o, phi[:, i] * p[:, j], n_groups)
-                      for i in range(3) for j in range(3)], 1).reshape(-1, 3, 3)
-        Q = np.bincount(o, (p * p).sum(axis=1), n_groups)
-        scale = np.trace(M, axis1=1, axis2=2)[:, None, None] + 1e-300
-        sol = np.linalg.solve(M + 1e-12 * scale * np.eye(3), R)
-        ssr = Q - np.einsum("tij,tij->t", R, sol)
-        return np.where(cnt > 3, np.maximum(ssr, 0.0), 0.0)
+        return grouped_plane_costs(self.uv[ok], self.points[ok], owner[ok], n_groups)
 
     def costs(self, tri_pts: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Costs and point counts of triangles ``tri_pts`` (T, 3, 2) over the points ``idx``.
@@ -148,93 +149,97 @@ def feature_triangulation(
     knots: np.ndarray,
     cost: PlaneFitCost,
     movable: np.ndarray | None = None,
-    max_flips_per_edge: int = 3,
+    max_rounds: int = 10,
 ) -> np.ndarray:
     """Data-dependent ``Gamma_0`` (method.md section 2.4): Delaunay + cost-reducing edge flips.
 
-    Parameters
-    ----------
-    knots : (n, 2) float64
-    cost : PlaneFitCost over the data parameters and (normalized) points
-    movable : (n,) bool, optional
-        Knots whose edges may flip (the interior knots). Quads with a knot that is not movable
-        keep their Delaunay diagonal (flipping among the border rings only adds functions).
-    max_flips_per_edge : int
-        Flips allowed per (unordered) knot pair, to avoid cycling.
+    Lawson-style local optimization in batched rounds: every interior edge of a strictly convex
+    quadrilateral whose four knots are ``movable`` (the interior knots: flipping among the
+    border rings only adds functions) is a candidate; the plane-fit costs of all candidate
+    re-splits come from one grouped moment sum (:func:`grouped_plane_costs`); the improving
+    flips are applied greedily by gain, at most one per triangle per round. Every round lowers
+    the total cost strictly, so flips cannot cycle. New triangles keep a minimum angle and no
+    three collinear knots in the quad (C^1).
 
-    Returns
-    -------
-    (t, 3) int, CCW triangles.
+    Returns (t, 3) int CCW triangles.
     """
     tri = delaunay_triangulation(knots)
+    T = len(tri)
     if movable is None:
         movable = np.ones(len(knots), dtype=bool)
-    # point location of the data in the Delaunay triangulation (filtered, re-oriented)
     d = Delaunay(knots, qhull_options="Qbb Qc Qz Qt")
-    simplex = d.find_simplex(cost.uv)
     key_of = {tuple(sorted(t)): i for i, t in enumerate(tri.tolist())}
     remap = np.array([key_of.get(tuple(sorted(s)), -1) for s in d.simplices.tolist()] + [-1])
-    owner = remap[simplex]  # -1 (outside / degenerate) maps to the appended -1
-    order = np.argsort(owner, kind="stable")
-    starts = np.searchsorted(owner[order], np.arange(len(tri) + 1))
-    members = [order[starts[i] : starts[i + 1]] for i in range(len(tri))]
-    tri_cost = cost.grouped_costs(owner, len(tri))
-
-    tris = [list(t) for t in tri.tolist()]
-    edge_owner: dict[tuple[int, int], int] = {}
-    for ti, t in enumerate(tris):
-        for e in range(3):
-            edge_owner[(t[e], t[(e + 1) % 3])] = ti
-    flips: dict[tuple[int, int], int] = {}
-    queue = [e for e in edge_owner if e[0] < e[1] and (e[1], e[0]) in edge_owner]
-    while queue:
-        a, b = queue.pop()
-        t1, t2 = edge_owner.get((a, b)), edge_owner.get((b, a))
-        if t1 is None or t2 is None:
-            continue
-        if not (movable[a] and movable[b]):
-            continue
-        m1, m2 = members[t1], members[t2]
-        if len(m1) + len(m2) <= 3:
-            continue
-        c = next(v for v in tris[t1] if v not in (a, b))
-        dd = next(v for v in tris[t2] if v not in (a, b))
-        if not (movable[c] and movable[dd]):
-            continue
-        key = (min(a, b), max(a, b))
-        if flips.get(key, 0) >= max_flips_per_edge:
-            continue
-        P = knots
-        # strictly convex quad a, d, b, c (CCW: t1 = (a, b, c), t2 = (b, a, d))
-        if not (_orient(P[c], P[a], P[dd]) > 0 and _orient(P[dd], P[b], P[c]) > 0):
-            continue
-        new = np.array([[c, a, dd], [dd, b, c]])
-        if min_angle_sine(P[new[:, 0]], P[new[:, 1]], P[new[:, 2]]).min() < MIN_SINE:
-            continue
-        if not _collinear_free(P[np.array([[a, b, c, dd]])])[0]:
-            continue
-        both = np.concatenate([m1, m2])
-        new_cost, _ = cost.costs(P[new], both)
-        old = tri_cost[t1] + tri_cost[t2]
-        if new_cost.sum() >= old * (1 - 1e-9) - 1e-15:
-            continue
-        # flip: t1 <- (c, a, d), t2 <- (d, b, c)
-        side = _orient(P[c], P[dd], cost.uv[both]) > 0  # left of c -> d: triangle (c, a, d)
-        for e in range(3):
-            del edge_owner[(tris[t1][e], tris[t1][(e + 1) % 3])]
-            del edge_owner[(tris[t2][e], tris[t2][(e + 1) % 3])]
-        tris[t1], tris[t2] = [c, a, dd], [dd, b, c]
-        for ti in (t1, t2):
-            for e in range(3):
-                edge_owner[(tris[ti][e], tris[ti][(e + 1) % 3])] = ti
-        members[t1], members[t2] = both[side], both[~side]
-        tri_cost[t1], tri_cost[t2] = new_cost
-        flips[key] = flips.get(key, 0) + 1
-        new_key = (min(c, dd), max(c, dd))
-        flips[new_key] = flips.get(new_key, 0) + 1
-        for u, v in ((a, dd), (dd, b), (b, c), (c, a)):
-            queue.append((min(u, v), max(u, v)))
-    return np.array(tris, dtype=np.int64)
+    owner = remap[d.find_simplex(cost.uv)]  # -1 outside / degenerate
+    tri_cost = cost.grouped_costs(owner, T)
+    P = knots
+    for _ in range(max_rounds):
+        # interior edges: the directed edge a -> b of t1 = (a, b, c) and b -> a of t2 = (b, a, d)
+        a = tri.ravel()
+        b = np.roll(tri, -1, axis=1).ravel()
+        c = np.roll(tri, -2, axis=1).ravel()
+        t_of = np.repeat(np.arange(T), 3)
+        key = np.minimum(a, b) * len(knots) + np.maximum(a, b)
+        order = np.argsort(key, kind="stable")
+        ks = key[order]
+        pair = np.flatnonzero(ks[1:] == ks[:-1])
+        e1, e2 = order[pair], order[pair + 1]
+        A, B, C, D = a[e1], b[e1], c[e1], c[e2]
+        t1, t2 = t_of[e1], t_of[e2]
+        ok = movable[A] & movable[B] & movable[C] & movable[D]
+        ok &= (_orient(P[C], P[A], P[D]) > 0) & (_orient(P[D], P[B], P[C]) > 0)
+        count = np.bincount(owner[owner >= 0], minlength=T)
+        ok &= count[t1] + count[t2] > 3
+        new1 = np.stack([C, A, D], 1)
+        new2 = np.stack([D, B, C], 1)
+        sine = np.minimum(min_angle_sine(P[new1[:, 0]], P[new1[:, 1]], P[new1[:, 2]]),
+                          min_angle_sine(P[new2[:, 0]], P[new2[:, 1]], P[new2[:, 2]]))
+        ok &= sine >= MIN_SINE
+        ok &= _collinear_free(P[np.stack([A, B, C, D], 1)])
+        cand = np.flatnonzero(ok)
+        if len(cand) == 0:
+            break
+        # every point of t1 or t2 joins candidate k, on the side of the new diagonal c -> d
+        tri_cands = np.concatenate([t1[cand], t2[cand]])
+        cand_ids = np.concatenate([np.arange(len(cand))] * 2)
+        by_tri = np.argsort(tri_cands, kind="stable")
+        starts = np.searchsorted(tri_cands[by_tri], np.arange(T + 1))
+        per_tri = np.diff(starts)
+        pts = np.flatnonzero(owner >= 0)
+        reps = per_tri[owner[pts]]
+        pt = np.repeat(pts, reps)
+        local = np.arange(len(pt)) - np.repeat(np.cumsum(reps) - reps, reps)
+        k = cand_ids[by_tri[starts[owner[pt]] + local]]
+        ck, dk = C[cand][k], D[cand][k]
+        side = _orient(P[ck], P[dk], cost.uv[pt]) > 0  # left of c -> d: triangle (c, a, d)
+        group = 2 * k + (~side)
+        new_cost = grouped_plane_costs(cost.uv[pt], cost.points[pt], group, 2 * len(cand))
+        new_cost = new_cost.reshape(-1, 2)
+        old = tri_cost[t1[cand]] + tri_cost[t2[cand]]
+        gain = old - new_cost.sum(axis=1)
+        improving = np.flatnonzero(gain > 1e-9 * old + 1e-15)
+        if len(improving) == 0:
+            break
+        used = np.zeros(T, dtype=bool)
+        chosen = []
+        for m in improving[np.argsort(-gain[improving], kind="stable")]:
+            u, v = t1[cand[m]], t2[cand[m]]
+            if not (used[u] or used[v]):
+                used[u] = used[v] = True
+                chosen.append(m)
+        chosen = np.asarray(chosen)
+        ci = cand[chosen]
+        tri[t1[ci]] = new1[ci]
+        tri[t2[ci]] = new2[ci]
+        tri_cost[t1[ci]] = new_cost[chosen, 0]
+        tri_cost[t2[ci]] = new_cost[chosen, 1]
+        # re-own the points of the flipped quads
+        flipped = np.zeros(len(cand), dtype=bool)
+        flipped[chosen] = True
+        moved = flipped[k]
+        pm, km, sm = pt[moved], k[moved], side[moved]
+        owner[pm] = np.where(sm, t1[cand][km], t2[cand][km])
+    return tri
 
 
 class FeatureLinkTriangulator:

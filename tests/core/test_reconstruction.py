@@ -90,7 +90,9 @@ def test_disk_mesh_reconstructs_without_fold_overs(nefertiti):
     points, faces, surf = nefertiti
     assert surf.report["rms_rel"] <= 1e-2
     assert np.nanmax(surf.errors) / surf.report["diagonal"] < 0.05
-    uv, tri = surf.tessellation_uv(64)
+    # 128 steps resolve the scan's rim, where the surface turns by ~90 degrees within 0.1 of
+    # the disk (at 64 steps one rim triangle spans that bend; it is not a fold of the map)
+    uv, tri = surf.tessellation_uv(128)
     verts = surf(uv)
     face_n = np.cross(verts[tri[:, 1]] - verts[tri[:, 0]], verts[tri[:, 2]] - verts[tri[:, 0]])
     vert_n = surf.normals(uv)
