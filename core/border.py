@@ -4,8 +4,8 @@ The TCB basis sums to one only where every link that a configuration needs has c
 jittered auxiliary knots outside the data's parameter domain keep the data strictly inside that
 region: ring ``j`` lies on the border of the domain's bounding box grown by ``j * h``, with knots
 about ``h`` apart along it. Method.md section 3 measured that two rings are needed for
-quadratics and three for cubics; :func:`default_ring_count` returns ``degree + 1`` to keep a
-margin, and the fit asserts the sum at every data parameter anyway.
+quadratics and three for cubics, which :func:`default_ring_count` returns; the fit asserts the
+sum at every data parameter anyway and adds a ring when it fails.
 """
 
 from __future__ import annotations
@@ -20,8 +20,9 @@ __all__ = ["border_rings", "default_ring_count", "PartitionReport", "check_parti
 
 
 def default_ring_count(degree: int) -> int:
-    """Rings of auxiliary knots used by default for a degree (method.md section 3)."""
-    return degree + 1
+    """Rings of auxiliary knots for a degree: two up to quadratics, three for cubics (method.md
+    section 3)."""
+    return 2 if degree <= 2 else 3
 
 
 def border_rings(

@@ -27,6 +27,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from .errors import InvalidKnotsError
+from .simplex import orient2d
 
 __all__ = [
     "Configurations",
@@ -228,7 +229,7 @@ def delaunay_triangulation(knots: np.ndarray) -> np.ndarray:
 
     tri = Delaunay(knots, qhull_options="Qbb Qc Qz Qt").simplices.astype(np.int64)
     a, b, c = knots[tri[:, 0]], knots[tri[:, 1]], knots[tri[:, 2]]
-    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    det = orient2d(a, b, c)
     scale = np.ptp(knots, axis=0).max() ** 2
     tri = tri[np.abs(det) > 1e-14 * scale]
     det = det[np.abs(det) > 1e-14 * scale]
@@ -243,11 +244,8 @@ def delaunay_triangulation(knots: np.ndarray) -> np.ndarray:
 def _segments_cross(p1, p2, q1, q2) -> np.ndarray:
     """Vectorized test: closed segments p1p2 and q1q2 intersect (inputs (N, 2))."""
 
-    def orient(a, b, c):
-        return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-
-    d1, d2 = orient(q1, q2, p1), orient(q1, q2, p2)
-    d3, d4 = orient(p1, p2, q1), orient(p1, p2, q2)
+    d1, d2 = orient2d(q1, q2, p1), orient2d(q1, q2, p2)
+    d3, d4 = orient2d(p1, p2, q1), orient2d(p1, p2, q2)
     proper = ((d1 > 0) != (d2 > 0)) & ((d3 > 0) != (d4 > 0)) & (d1 != 0) & (d2 != 0)
     proper &= (d3 != 0) & (d4 != 0)
 
@@ -370,7 +368,7 @@ def link_triangulation_procedure(
     if tri0.min() < 0 or tri0.max() >= len(knots):
         raise InvalidKnotsError("the triangulation refers to knots that do not exist")
     a, b, c = knots[tri0[:, 0]], knots[tri0[:, 1]], knots[tri0[:, 2]]
-    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    det = orient2d(a, b, c)
     if np.any(det == 0):
         raise InvalidKnotsError("the triangulation Gamma_0 has degenerate (zero-area) triangles")
     tri0 = np.where((det < 0)[:, None], tri0[:, [0, 2, 1]], tri0)
@@ -412,7 +410,7 @@ def link_triangulation_procedure(
             Tn = np.asarray(new_T, dtype=np.int64).reshape(-1, 3)
             In = np.asarray(new_I, dtype=np.int64).reshape(-1, level)
             p, q, r = knots[Tn[:, 0]], knots[Tn[:, 1]], knots[Tn[:, 2]]
-            d = (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+            d = orient2d(p, q, r)
             Tn = np.where((d < 0)[:, None], Tn[:, [0, 2, 1]], Tn)
             keep = d != 0
             Tn, In = Tn[keep], In[keep]

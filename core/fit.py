@@ -30,6 +30,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .errors import BorderError, InvalidInputError, SingularSystemError
+from .simplex import orient2d
 
 __all__ = ["FitResult", "fit_control_points", "fairing_quadrature", "PARTITION_TOL"]
 
@@ -59,7 +60,7 @@ def fairing_quadrature(space) -> tuple[np.ndarray, np.ndarray]:
     T = space.configurations.triangles[0]
     K = space.knots
     a, b, c = K[T[:, 0]], K[T[:, 1]], K[T[:, 2]]
-    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    area = 0.5 * np.abs(orient2d(a, b, c))
     pts = [(4 * a + b + c) / 6, (a + 4 * b + c) / 6, (a + b + 4 * c) / 6]
     q = np.stack(pts, axis=1).reshape(-1, 2)
     w = np.repeat(area / 3, 3)

@@ -25,6 +25,7 @@ from scipy.sparse.linalg import splu
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .errors import InvalidInputError, ParameterizationError, TopologyError
+from .simplex import orient2d
 
 __all__ = [
     "MIN_POINTS",
@@ -773,9 +774,7 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
 
     # fold-over check: det(a, b, c) > 0 for every uv triangle
     ua, ub, uc = uv[tris[:, 0]], uv[tris[:, 1]], uv[tris[:, 2]]
-    det = (ub[:, 0] - ua[:, 0]) * (uc[:, 1] - ua[:, 1]) - (ub[:, 1] - ua[:, 1]) * (
-        uc[:, 0] - ua[:, 0]
-    )
+    det = orient2d(ua, ub, uc)
     n_flipped = int(np.count_nonzero(~(det > 0.0)))
     if n_flipped:
         raise ParameterizationError(

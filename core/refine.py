@@ -21,18 +21,17 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .border import border_rings
+from .border import border_rings, default_ring_count
 from .configurations import link_triangulation_procedure
 from .errors import BorderError, InvalidInputError
 from .fit import FitResult, fit_control_points
-from .simplex import SimplexBatch
+from .simplex import SimplexBatch, orient2d
 from .spatial import BoxIndex
 from .spline_space import SplineSpace, build_space, validate_knots
 from .triangulation import FeatureLinkTriangulator, PlaneFitCost, feature_triangulation
 
 __all__ = [
     "RefineOptions",
-    "ring_count",
     "feature_measure",
     "initial_knots",
     "make_space",
@@ -40,11 +39,6 @@ __all__ = [
     "insertion_points",
     "adaptive_fit",
 ]
-
-
-def ring_count(degree: int) -> int:
-    """Border rings used by the fit: two for quadratics, three for cubics (method.md section 3)."""
-    return 2 if degree <= 2 else 3
 
 
 @dataclass(frozen=True)
@@ -230,7 +224,7 @@ def locate(knots: np.ndarray, triangles: np.ndarray, uv: np.ndarray) -> np.ndarr
     (method.md section 1), so point location is one evaluation pass over the bucket grid.
     """
     a, b, c = (knots[triangles[:, j]] for j in range(3))
-    w = np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    w = np.abs(orient2d(a, b, c))
     batch = SimplexBatch(knots, triangles, w)
     owner = np.full(len(uv), -1, dtype=np.int64)
     for p, t in BoxIndex(batch.bbox).pairs(uv):
@@ -277,12 +271,9 @@ def insertion_points(
     cv = np.bincount(o, weights=e2 * uv[ok, 1], minlength=T)
     cen = np.stack([cu, cv], axis=1)[worst] / np.maximum(wsum[worst], 1e-300)[:, None]
     a, b, c = (knots[triangles[worst, j]] for j in range(3))
-    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-
-    def cross(p, q, r):
-        return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
-
-    beta = np.stack([cross(cen, b, c), cross(a, cen, c), cross(a, b, cen)], axis=1) / det[:, None]
+    det = orient2d(a, b, c)
+    beta = np.stack([orient2d(cen, b, c), orient2d(a, cen, c), orient2d(a, b, cen)], axis=1)
+    beta /= det[:, None]
     beta = np.where(np.isfinite(beta), beta, 1.0 / 3.0)
     beta = np.maximum(beta, 0.15)
     beta /= beta.sum(axis=1, keepdims=True)
@@ -360,7 +351,7 @@ def adaptive_fit(
         # thin domains: ring knots at the interior spacing would be countless (1/h each)
         h = max(h, 0.01 * float(np.max(hi - lo)))
         pad = 1e-6 * float(np.max(hi - lo))
-        ring_knots = border_rings(lo - pad, hi + pad, h, rings=ring_count(options.degree),
+        ring_knots = border_rings(lo - pad, hi + pad, h, rings=default_ring_count(options.degree),
                                   seed=rng_seed)
     feature = options.feature_sensitive and options.mode == "tcb"
 

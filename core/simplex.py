@@ -26,18 +26,23 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["simplex_spline", "SimplexBatch", "DEGENERATE_RTOL"]
+__all__ = ["simplex_spline", "SimplexBatch", "orient2d", "DEGENERATE_RTOL"]
 
 # A knot triple whose |det| is below this fraction of the squared extent of its knot set is
 # treated as collinear (its degree-0 simplex spline is a line measure, i.e. zero as a function).
 DEGENERATE_RTOL = 1e-12
 
 
-def _det(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """``det(a, b, c) = (b - a) x (c - a)``, twice the signed area; broadcasts over leading axes."""
+def orient2d(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """``det(a, b, c) = (b - a) x (c - a)``, twice the signed area; broadcasts over leading axes.
+
+    The one vectorized orientation predicate of the engine (method.md, Notation)."""
     return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
         c[..., 0] - a[..., 0]
     )
+
+
+_det = orient2d
 
 
 def _edge_left(lo: np.ndarray, hi: np.ndarray, x: np.ndarray) -> np.ndarray:

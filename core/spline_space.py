@@ -25,7 +25,7 @@ from .configurations import (
     triangulate_polygon,
 )
 from .errors import InvalidKnotsError
-from .simplex import SimplexBatch
+from .simplex import SimplexBatch, orient2d
 from .spatial import BoxIndex
 
 __all__ = ["SplineSpace", "build_space", "validate_knots"]
@@ -149,7 +149,7 @@ class SplineSpace:
         self.n_basis = int(len(self.interior_sets))
         self.greville = knots[self.interior_sets].mean(axis=1) if self.n_basis else np.zeros((0, 2))
         p, q, r = knots[T[:, 0]], knots[T[:, 1]], knots[T[:, 2]]
-        weights = np.abs((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
+        weights = np.abs(orient2d(p, q, r))
         self._batch = SimplexBatch(knots, np.concatenate([T, I], axis=1), weights)
         self._index = BoxIndex(self._batch.bbox)
         self.net_faces = self._centroid_triangulation() if mode == "tcb" else np.zeros((0, 3), int)

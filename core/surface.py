@@ -33,6 +33,7 @@ from .errors import FileFormatError, InvalidInputError
 from .parameterize import Parameterization, normalize, parameterize
 from .refine import RefineOptions, adaptive_fit
 from .spline_space import SplineSpace
+from .simplex import orient2d
 
 __all__ = ["TCBSurface", "fit_surface", "FORMAT_VERSION"]
 
@@ -167,7 +168,7 @@ class TCBSurface:
             spacing = float(np.median(tree.query(sample, k=2)[0][:, 1]))
             keep &= tree.query(cen)[0] <= max(4 * spacing, 1.5 * d)
         a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
-        det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+        det = orient2d(a, b, c)
         # Delaunay joins collinear points of a straight boundary stretch into zero-area
         # triangles: they cover nothing and have no normal, drop them
         keep &= np.abs(det) > 1e-9 * d * d

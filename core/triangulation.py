@@ -27,6 +27,7 @@ import numpy as np
 from scipy.spatial import Delaunay, cKDTree
 
 from .configurations import constrained_delaunay, delaunay_triangulation
+from .simplex import orient2d
 
 __all__ = ["PlaneFitCost", "feature_triangulation", "FeatureLinkTriangulator", "min_angle_sine"]
 
@@ -36,10 +37,7 @@ MIN_SINE = 0.1
 COLLINEAR_RTOL = 1e-6
 
 
-def _orient(a, b, c):
-    return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
-        c[..., 0] - a[..., 0]
-    )
+_orient = orient2d  # (..., 2) arrays; the engine's one orientation predicate
 
 
 def min_angle_sine(a, b, c) -> np.ndarray:

@@ -19,7 +19,7 @@ from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
 from . import bridge, live
-from .properties import FIT_KEYS, FitSettings
+from .properties import FIT_KEYS, FitSettings, draw_fit_settings
 
 # Custom property of the surface object: TCBSurface.to_bytes() as base64 text. (Raw bytes
 # ID properties lose everything after the first NUL byte when an existing one is reassigned.)
@@ -381,16 +381,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         return {"FINISHED"}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        col = layout.column()
-        row = col.row(align=True)
-        row.prop(self, "tolerance")
-        row.prop(self, "relative", text="", icon="DRIVER_DISTANCE")
-        for key in ("criterion", "max_control_points", "max_iterations", "degree", "mode",
-                    "smoothness", "resolution", "show_net", "live_net"):  # fmt: skip
-            col.prop(self, key)
+        draw_fit_settings(self.layout, self)
 
 
 # --- Refine -------------------------------------------------------------------------------------

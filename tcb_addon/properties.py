@@ -153,3 +153,20 @@ def register_props():
 def unregister_props():
     del bpy.types.Object.tcb
     del bpy.types.Scene.tcb_settings
+
+
+def draw_fit_settings(layout, owner, short_labels: bool = False) -> None:
+    """Draw the fit settings of ``owner`` (the fit operator or the scene's settings): one
+    layout for the operator's redo panel and the sidebar."""
+    layout.use_property_split = True
+    layout.use_property_decorate = False
+    col = layout.column()
+    row = col.row(align=True)
+    row.prop(owner, "tolerance")
+    row.prop(owner, "relative", text="", icon="DRIVER_DISTANCE")
+    for key in ("criterion", "max_control_points", "max_iterations", "degree", "mode",
+                "smoothness", "resolution", "show_net", "live_net"):  # fmt: skip
+        if short_labels and key == "max_control_points":
+            col.prop(owner, key, text="Max Control Pts")
+        else:
+            col.prop(owner, key)

@@ -8,7 +8,7 @@ import bpy
 
 from . import bridge
 from .operators import SPLINE_KEY, result_objects
-from .properties import FIT_KEYS
+from .properties import FIT_KEYS, draw_fit_settings
 
 
 class _TCBPanel:
@@ -27,21 +27,7 @@ class TCB_PT_fit(_TCBPanel, bpy.types.Panel):
         if settings is None:
             layout.label(text="TCB settings are not registered", icon="ERROR")
             return
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        col = layout.column()
-        row = col.row(align=True)
-        row.prop(settings, "tolerance")
-        row.prop(settings, "relative", text="", icon="DRIVER_DISTANCE")
-        col.prop(settings, "criterion")
-        col.prop(settings, "max_control_points", text="Max Control Pts")
-        col.prop(settings, "degree")
-        col.prop(settings, "mode")
-        col.prop(settings, "smoothness")
-        col.prop(settings, "resolution")
-        col.prop(settings, "max_iterations")
-        col.prop(settings, "show_net")
-        col.prop(settings, "live_net")
+        draw_fit_settings(layout, settings, short_labels=True)
 
         problem = bridge.selection_problem(context)
         row = layout.row()

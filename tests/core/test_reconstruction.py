@@ -272,12 +272,12 @@ def test_knot_insertion_at_knots_on_knot_lines_and_at_the_border_stays_c1_and_su
     not make collinear configurations or break the partition of unity (issue 6, item 5)."""
     from itertools import combinations
 
-    from core.refine import insertion_points, make_space, ring_count
-    from core.border import border_rings
+    from core.border import border_rings, default_ring_count
+    from core.refine import insertion_points, make_space
 
     rng = np.random.default_rng(3)
     inner = rng.random((40, 2))
-    rings = border_rings([0, 0], [1, 1], 1 / np.sqrt(40), rings=ring_count(2), seed=3)
+    rings = border_rings([0, 0], [1, 1], 1 / np.sqrt(40), rings=default_ring_count(2), seed=3)
     knots = np.vstack([inner, rings])
     space = make_space(knots, 2, "tcb", None, len(inner))
     tri = space.configurations.triangles[0]
