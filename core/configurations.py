@@ -15,7 +15,9 @@ Link triangulators are pluggable: any callable
 ``triangulator(polygon, knots, J, level) -> sequence of (a, b, c)`` receiving the CCW polygon as a
 tuple of knot indices, all knots (n, 2), the interior set ``J`` (sorted tuple) and the level
 ``l + 1`` being built, and returning ``len(polygon) - 2`` knot-index triangles that triangulate
-the polygon (orientation is fixed here). Provided: :func:`ear_clipping`,
+the polygon (orientation is fixed here). A triangulator may also offer
+``triangulate_many(polygons, knots, Js, level)`` returning those lists for all links of a level in
+order; the procedure then calls it once per level (batched costs). Provided: :func:`ear_clipping`,
 :func:`constrained_delaunay` (the DCB choice) and :class:`RandomTriangulator` (for tests).
 """
 
@@ -394,10 +396,15 @@ def link_triangulation_procedure(
         )
         valid = _valid_polygons(knots, polys)
         new_T, new_I = [], []
-        for gi in np.flatnonzero(valid):
-            J = tuple(int(j) for j in groups[gi])
-            poly = polys[gi]
-            tris = triangulator(tuple(poly), knots, J, level)
+        chosen = np.flatnonzero(valid)
+        link_J = [tuple(int(j) for j in groups[gi]) for gi in chosen]
+        link_poly = [tuple(polys[gi]) for gi in chosen]
+        many = getattr(triangulator, "triangulate_many", None)
+        if many is not None:  # a triangulator that batches the links of a level
+            results = many(link_poly, knots, link_J, level)
+        else:
+            results = [triangulator(p, knots, J, level) for p, J in zip(link_poly, link_J)]
+        for J, poly, tris in zip(link_J, link_poly, results):
             if len(tris) != len(poly) - 2:
                 raise ValueError(
                     f"the link triangulator returned {len(tris)} triangles for a polygon with "

@@ -51,7 +51,7 @@ _FOLD_COHERENCE = 0.5  # fraction of suspect 3D neighbours for a point to be fla
 _FOLD_MAX_FRACTION = 0.02  # fraction of flagged points above which the cloud is rejected
 _FOLD_RIM = 0.05  # "at the rim": within this fraction of the extent from the convex hull
 _FOLD_RIM_SHARE = 0.6  # steep points count as a fold when this share of them is at the rim
-_FOLD_MAX_SAMPLE = 100_000  # larger clouds are checked on a seeded random subset of this size
+_FOLD_MAX_SAMPLE = 40_000  # larger clouds are checked on a seeded random subset of this size
 _THIN_NEIGHBOURHOOD = 0.25  # lambda_0 / lambda_1 above this: local normal unreliable
 _COLLINEAR_RTOL = 1e-9  # RMS distance from the best line, relative to the scale
 
@@ -347,7 +347,7 @@ def _distance_to_hull(uv: np.ndarray, chunk: int = 20_000) -> np.ndarray:
 
 
 def _fold_sample(q: np.ndarray) -> np.ndarray:
-    """Indices of the (seeded) subset of at most 100 000 points used by the fold checks."""
+    """Indices of the (seeded) subset of at most 40 000 points used by the fold checks (folds are regions of at least 2% of the cloud, which a sample of this size resolves)."""
     if len(q) > _FOLD_MAX_SAMPLE:
         return np.sort(np.random.default_rng(0).choice(len(q), _FOLD_MAX_SAMPLE, replace=False))
     return np.arange(len(q))
@@ -397,7 +397,7 @@ def _fold_fraction(
     Only points with a reliable local normal are suspects, and a point counts as flagged only
     when at least half of its 3D neighbourhood are suspects (folds are regions; noise makes
     isolated suspects), so noise and line-like neighbourhoods do not cause false alarms.
-    Clouds of more than 100 000 points are checked on a seeded (deterministic) random subset of
+    Clouds of more than 40 000 points are checked on a seeded (deterministic) random subset of
     that size; ``planes`` are the local planes of that subset when already computed.
     """
     sample = _fold_sample(q)

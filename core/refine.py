@@ -25,10 +25,9 @@ from .border import border_rings, default_ring_count
 from .configurations import link_triangulation_procedure
 from .errors import BorderError, InvalidInputError
 from .fit import FitResult, fit_control_points
-from .simplex import SimplexBatch, orient2d
-from .spatial import BoxIndex
+from .simplex import orient2d
 from .spline_space import SplineSpace, build_space, validate_knots
-from .triangulation import FeatureLinkTriangulator, PlaneFitCost, feature_triangulation
+from .triangulation import FeatureLinkTriangulator, PlaneFitCost, feature_triangulation, locate
 
 __all__ = [
     "RefineOptions",
@@ -162,75 +161,91 @@ def make_space(
 LINE_CLEARANCE = 0.08
 
 
-def _clearance(x: np.ndarray, pts: np.ndarray) -> float:
-    """min over pairs (a, b) of ``pts`` of ``|det(a, b, x)| / |ab|^2`` (distance to the line
-    ab in units of |ab|), for pairs not farther from ``x`` than ``|ab|``; ``inf`` if none."""
-    if len(pts) < 2:
-        return np.inf
-    i, j = np.triu_indices(len(pts), 1)
-    a, b = pts[i], pts[j]
+def _clearance(x: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
+    """For points ``x`` (M, 2) and their neighbour knots ``nbrs`` (M, K, 2; rows may be padded
+    with NaN): min over pairs (a, b) of ``|det(a, b, x)| / |ab|^2`` (distance to the line ab in
+    units of |ab|), over the pairs whose segment is near ``x`` (midpoint not farther than
+    ``|ab|``); ``inf`` where there is none. Vectorized over points and pairs, (M,)."""
+    K = nbrs.shape[1]
+    if K < 2:
+        return np.full(len(x), np.inf)
+    i, j = np.triu_indices(K, 1)
+    a, b = nbrs[:, i], nbrs[:, j]  # (M, P, 2)
     ab = b - a
-    L2 = (ab * ab).sum(axis=1)
-    det = np.abs(ab[:, 0] * (x[1] - a[:, 1]) - ab[:, 1] * (x[0] - a[:, 0]))
-    # only lines whose segment is near x matter for the configurations around x
+    L2 = (ab * ab).sum(axis=-1)
+    xa = x[:, None, :] - a
+    det = np.abs(ab[..., 0] * xa[..., 1] - ab[..., 1] * xa[..., 0])
     mid = 0.5 * (a + b)
-    near = ((mid - x) ** 2).sum(axis=1) <= L2
-    return float((det[near] / np.maximum(L2[near], 1e-300)).min(initial=np.inf))
+    with np.errstate(invalid="ignore"):
+        near = ((mid - x[:, None, :]) ** 2).sum(axis=-1) <= L2  # NaN padding: False
+    r = np.where(near, det / np.where(near, np.maximum(L2, 1e-300), 1.0), np.inf)
+    return r.min(axis=1)
 
 
 def place_clear_of_lines(
     candidates: np.ndarray, existing: np.ndarray, fallbacks: np.ndarray | None = None,
     neighbours: int = 10,
 ) -> np.ndarray:
-    """Move each candidate knot so it is not nearly collinear with two nearby knots.
+    """Move candidate knots so that none is nearly collinear with two nearby knots.
 
     For candidate ``x`` with fallback ``f`` (e.g. the centroid of its triangle), the positions
     ``x + t (f - x)``, ``t = 0, 0.25, 0.5, 0.75, 1`` are tried in order and the first whose
-    :data:`LINE_CLEARANCE` holds against its ``neighbours`` nearest knots (existing ones and the
-    candidates placed before it) is kept; if none does, the one with the best clearance. A loop
-    over the candidates (tens per iteration), each step vectorized over knot pairs.
+    :data:`LINE_CLEARANCE` holds against its ``neighbours`` nearest knots (the existing ones and
+    the other candidates) is kept; if none does, the one with the best clearance. All candidates
+    move together: each round tries the next ``t`` for the candidates not yet clear, against
+    everybody's current positions (one KD-tree query and one batched clearance per round), and
+    a second sweep revisits candidates that a later move brought too close to a line.
+
+    Among well-spread knots the criterion seldom holds everywhere (a knot lies near the line
+    through two opposite neighbours), so for most candidates this keeps the clearest of the
+    five positions; what it prevents is a knot almost on a line, e.g. lattice data. The
+    sequential loop this replaces gave the same clearances (5th percentile 0.001-0.002 of
+    ``|ab|`` on 50-1500 knots) 5x slower at 1500 knots.
     """
-    if fallbacks is None:
-        fallbacks = candidates
-    placed = []
-    pool = np.asarray(existing, dtype=np.float64)
-    tree = cKDTree(pool) if len(pool) else None
-    for x, f in zip(candidates, fallbacks):
-        best, best_c = x, -1.0
+    cand = np.asarray(candidates, dtype=np.float64).reshape(-1, 2)
+    fallbacks = cand if fallbacks is None else np.asarray(fallbacks, dtype=np.float64).reshape(-1, 2)
+    pool = np.asarray(existing, dtype=np.float64).reshape(-1, 2)
+    M, E = len(cand), len(pool)
+    if M == 0:
+        return cand.copy()
+    K = min(neighbours, E + M - 1)
+    pos = cand.copy()
+    todo = np.arange(M)
+    for _ in range(2):
+        best, best_c = pos[todo].copy(), np.full(len(todo), -1.0)
+        pending = np.ones(len(todo), dtype=bool)
         for t in (0.0, 0.25, 0.5, 0.75, 1.0):
-            y = x + t * (f - x)
-            near = []
-            if tree is not None:
-                _, idx = tree.query(y, k=min(neighbours, len(pool)))
-                near.append(pool[np.atleast_1d(idx)])
-            if placed:
-                P = np.asarray(placed)
-                near.append(P[np.argsort(((P - y) ** 2).sum(axis=1))[:neighbours]])
-            c = _clearance(y, np.concatenate(near)) if near else np.inf
-            if c >= LINE_CLEARANCE:
-                best = y
+            if not pending.any() or K < 2:
                 break
-            if c > best_c:
-                best, best_c = y, c
-        placed.append(best)
-    return np.asarray(placed).reshape(-1, 2)
-
-
-
-def locate(knots: np.ndarray, triangles: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Index of the (half-open) triangle holding each parameter, -1 outside; (N,) int.
-
-    The degree-0 simplex splines ``|det T| M(x | T)`` are the indicators of the triangles
-    (method.md section 1), so point location is one evaluation pass over the bucket grid.
-    """
-    a, b, c = (knots[triangles[:, j]] for j in range(3))
-    w = np.abs(orient2d(a, b, c))
-    batch = SimplexBatch(knots, triangles, w)
-    owner = np.full(len(uv), -1, dtype=np.int64)
-    for p, t in BoxIndex(batch.bbox).pairs(uv):
-        hit = batch.evaluate(uv[p], t) > 0.5
-        owner[p[hit]] = t[hit]
-    return owner
+            sel = todo[pending]
+            y = cand[sel] + t * (fallbacks[sel] - cand[sel])
+            pos[sel] = y
+            allp = np.concatenate([pool, pos])
+            _, nb = cKDTree(allp).query(y, k=K + 1)
+            nb = nb.reshape(len(sel), K + 1)
+            # drop the candidate itself (or the farthest neighbour if it is not among them)
+            own = nb == (E + sel)[:, None]
+            own[~own.any(axis=1), K] = True
+            nb = nb[~own].reshape(len(sel), K)
+            c = _clearance(y, allp[nb])
+            ps = np.flatnonzero(pending)
+            better = c > best_c[ps]
+            best[ps[better]], best_c[ps[better]] = y[better], c[better]
+            pending[ps[c >= LINE_CLEARANCE]] = False
+        pos[todo] = np.where(pending[:, None], best, pos[todo])
+        if K < 2:
+            break
+        # a later move may have put an earlier candidate next to a line: one more sweep for those
+        allp = np.concatenate([pool, pos])
+        _, nb = cKDTree(allp).query(pos, k=K + 1)
+        nb = nb.reshape(M, K + 1)
+        own = nb == (E + np.arange(M))[:, None]
+        own[~own.any(axis=1), K] = True
+        c = _clearance(pos, allp[nb[~own].reshape(M, K)])
+        todo = np.flatnonzero(c < LINE_CLEARANCE)
+        if len(todo) == 0:
+            break
+    return pos
 
 
 def insertion_points(

@@ -24,12 +24,15 @@ from __future__ import annotations
 from itertools import combinations
 
 import numpy as np
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import cKDTree
 
 from .configurations import constrained_delaunay, delaunay_triangulation
-from .simplex import orient2d
+from .simplex import SimplexBatch, orient2d
+from .spatial import BoxIndex
 
-__all__ = ["PlaneFitCost", "feature_triangulation", "FeatureLinkTriangulator", "min_angle_sine"]
+__all__ = [
+    "PlaneFitCost", "feature_triangulation", "FeatureLinkTriangulator", "min_angle_sine", "locate",
+]
 
 # Triangles of Gamma_0 made by flips must keep sin(min angle) above this (about 6 degrees).
 MIN_SINE = 0.1
@@ -79,10 +82,45 @@ def grouped_plane_costs(x: np.ndarray, p: np.ndarray, group: np.ndarray, n_group
     R = np.stack([np.bincount(group, phi[:, i] * p[:, j], n_groups)
                   for i in range(3) for j in range(3)], 1).reshape(-1, 3, 3)
     Q = np.bincount(group, (p * p).sum(axis=1), n_groups)
-    scale = np.trace(M, axis1=1, axis2=2)[:, None, None] + 1e-300
-    sol = np.linalg.solve(M + 1e-12 * scale * np.eye(3), R)
-    ssr = Q - np.einsum("tij,tij->t", R, sol)
+    ssr = Q - _spd3_quadratic_form(M, R)
     return np.where(cnt > 3, np.maximum(ssr, 0.0), 0.0)
+
+
+def _spd3_quadratic_form(M: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """``tr(R^T (M + eps I)^-1 R)`` for stacks of symmetric positive semidefinite 3x3 ``M``
+    (G, 3, 3) and ``R`` (G, 3, k), ``eps = 1e-12 trace(M)``: closed-form ``L D L^T`` (the form is
+    ``sum_i |(L^-1 R)_i|^2 / d_i``), vectorized over the stack. Not ``np.linalg.solve``: a LAPACK
+    call per 3x3 system, which under OpenBLAS threading on a loaded machine took 0.6-4 s for
+    5e4 systems instead of 0.03 s."""
+    eps = 1e-12 * np.trace(M, axis1=1, axis2=2) + 1e-300
+    a00, a11, a22 = M[:, 0, 0] + eps, M[:, 1, 1] + eps, M[:, 2, 2] + eps
+    a10, a20, a21 = M[:, 1, 0], M[:, 2, 0], M[:, 2, 1]
+    d0 = a00
+    l10, l20 = a10 / d0, a20 / d0
+    d1 = np.maximum(a11 - l10 * a10, eps)
+    l21 = (a21 - l20 * a10) / d1
+    d2 = np.maximum(a22 - l20 * a20 - l21 * l21 * d1, eps)
+    y0 = R[:, 0]
+    y1 = R[:, 1] - l10[:, None] * y0
+    y2 = R[:, 2] - l20[:, None] * y0 - l21[:, None] * y1
+    return ((y0**2).sum(1) / d0) + ((y1**2).sum(1) / d1) + ((y2**2).sum(1) / d2)
+
+
+def locate(knots: np.ndarray, triangles: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Index of the (half-open) triangle holding each parameter, -1 outside; (N,) int.
+
+    The degree-0 simplex splines ``|det T| M(x | T)`` are the indicators of the triangles
+    (method.md section 1), so point location is one evaluation pass over the bucket grid.
+    """
+    a, b, c = (knots[triangles[:, j]] for j in range(3))
+    w = np.abs(orient2d(a, b, c))
+    batch = SimplexBatch(knots, triangles, w)
+    owner = np.full(len(uv), -1, dtype=np.int64)
+    for p, t in BoxIndex(batch.bbox).pairs(uv):
+        hit = batch.evaluate(uv[p], t) > 0.5
+        owner[p[hit]] = t[hit]
+    return owner
+
 
 
 class PlaneFitCost:
@@ -111,36 +149,22 @@ class PlaneFitCost:
         """Costs and point counts of triangles ``tri_pts`` (T, 3, 2) over the points ``idx``.
 
         Membership uses closed triangles (a point on a shared edge counts for both sides, which
-        is harmless for a cost).
+        is harmless for a cost); one grouped moment sum over the (triangle, point) pairs.
         """
-        T = len(tri_pts)
-        if T == 0:
-            return np.zeros(0), np.zeros(0, dtype=np.int64)
-        if len(idx) == 0:
-            return np.zeros(T), np.zeros(T, dtype=np.int64)
-        x = self.uv[idx]
-        p = self.points[idx]
-        c_uv, c_p = x.mean(axis=0), p.mean(axis=0)
-        x = x - c_uv
-        p = p - c_p
-        a, b, c = (tri_pts[:, j] - c_uv for j in range(3))
-        sgn = np.sign(_orient(a, b, c))[:, None]
+        tri_pts = np.asarray(tri_pts, dtype=np.float64).reshape(-1, 3, 2)
+        idx = np.asarray(idx, dtype=np.int64)
+        T, n = len(tri_pts), len(idx)
+        t = np.repeat(np.arange(T), n)
+        j = np.tile(idx, T)
+        x = self.uv[j]
+        a, b, c = (tri_pts[t, k] for k in range(3))
+        sgn = np.sign(_orient(a, b, c))
         inside = (
-            (sgn * _orient(a[:, None], b[:, None], x[None]) >= 0)
-            & (sgn * _orient(b[:, None], c[:, None], x[None]) >= 0)
-            & (sgn * _orient(c[:, None], a[:, None], x[None]) >= 0)
-        ).astype(np.float64)  # (T, n)
-        phi = np.c_[x, np.ones(len(x))]
-        M = (inside @ (phi[:, :, None] * phi[:, None, :]).reshape(-1, 9)).reshape(T, 3, 3)
-        R = (inside @ (phi[:, :, None] * p[:, None, :]).reshape(-1, 9)).reshape(T, 3, 3)
-        Q = inside @ (p * p).sum(axis=1)
-        count = inside.sum(axis=1).astype(np.int64)
-        scale = np.trace(M, axis1=1, axis2=2)[:, None, None] + 1e-300
-        reg = 1e-12 * scale * np.eye(3)
-        sol = np.linalg.solve(M + reg, R)
-        ssr = Q - np.einsum("tij,tij->t", R, sol)
-        ssr = np.where(count > 3, np.maximum(ssr, 0.0), 0.0)
-        return ssr, count
+            (sgn * _orient(a, b, x) >= 0) & (sgn * _orient(b, c, x) >= 0) & (sgn * _orient(c, a, x) >= 0)
+        )
+        t, j = t[inside], j[inside]
+        count = np.bincount(t, minlength=T).astype(np.int64)
+        return grouped_plane_costs(self.uv[j], self.points[j], t, T), count
 
 
 def feature_triangulation(
@@ -165,10 +189,8 @@ def feature_triangulation(
     T = len(tri)
     if movable is None:
         movable = np.ones(len(knots), dtype=bool)
-    d = Delaunay(knots, qhull_options="Qbb Qc Qz Qt")
-    key_of = {tuple(sorted(t)): i for i, t in enumerate(tri.tolist())}
-    remap = np.array([key_of.get(tuple(sorted(s)), -1) for s in d.simplices.tolist()] + [-1])
-    owner = remap[d.find_simplex(cost.uv)]  # -1 outside / degenerate
+    # (not Qhull's find_simplex: with the 'Qz' option its walk took 10 s for 3e4 points)
+    owner = locate(knots, tri, cost.uv)  # -1 outside
     tri_cost = cost.grouped_costs(owner, T)
     P = knots
     for _ in range(max_rounds):
@@ -240,6 +262,98 @@ def feature_triangulation(
     return tri
 
 
+def _candidate_triangles(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For ``L`` CCW simple polygons ``P`` (L, m, 2): the admissible chords ``chord`` (L, m, m)
+    (``[l, i, j]``, ``i < j``: an edge of polygon ``l`` or a diagonal inside it), all index
+    triples ``trip`` (C, 3), ``i < k < j``, and ``ok`` (L, C): the triple's three sides are
+    admissible and it has positive area (then it is a CCW triangle inside the polygon)."""
+    L, m = P.shape[:2]
+    ii, jj = np.triu_indices(m, 1)
+    adjacent = (jj - ii == 1) | ((ii == 0) & (jj == m - 1))
+    ok = np.broadcast_to(adjacent, (L, len(ii))).copy()
+    diag = np.flatnonzero(~adjacent)
+    if len(diag):
+        di, dj = ii[diag], jj[diag]
+        A, B = P[:, di, None], P[:, dj, None]  # (L, D, 1, 2)
+        e0 = np.arange(m)
+        E0, E1 = P[:, None, e0], P[:, None, (e0 + 1) % m]  # (L, 1, m, 2)
+        o1, o2 = _orient(A, B, E0), _orient(A, B, E1)
+        o3, o4 = _orient(E0, E1, A), _orient(E0, E1, B)
+        touches_end = (e0[None] == di[:, None]) | (e0[None] == dj[:, None])
+        touches_end |= ((e0[None] + 1) % m == di[:, None]) | ((e0[None] + 1) % m == dj[:, None])
+        crosses = ((o1 * o2 <= 0) & (o3 * o4 <= 0) & ~touches_end).any(axis=2)
+        # locally inside at vertex i: between the edges (i-1 -> i) and (i -> i+1)
+        Ai, Bj = P[:, di], P[:, dj]
+        prev, nxt = P[:, (di - 1) % m], P[:, (di + 1) % m]
+        convex = _orient(prev, Ai, nxt) > 0
+        left_next = _orient(Ai, nxt, Bj) > 0
+        left_prev = _orient(prev, Ai, Bj) > 0
+        inside_cone = np.where(convex, left_next & left_prev, left_next | left_prev)
+        ok[:, diag] = ~crosses & inside_cone
+    chord = np.zeros((L, m, m), dtype=bool)
+    chord[:, ii, jj] = ok
+    trip = np.array(list(combinations(range(m), 3)))
+    tp = P[:, trip]  # (L, C, 3, 2)
+    good = chord[:, trip[:, 0], trip[:, 1]] & chord[:, trip[:, 1], trip[:, 2]]
+    good &= chord[:, trip[:, 0], trip[:, 2]]
+    good &= _orient(tp[..., 0, :], tp[..., 1, :], tp[..., 2, :]) > 0
+    return chord, trip, good
+
+
+def _min_cost_triangulations(poly: np.ndarray, chord: np.ndarray, trip: np.ndarray,
+                             tcost: np.ndarray) -> list:
+    """Dynamic programme over sub-polygons ``i..j`` for ``L`` polygons at once: the
+    triangulation of each polygon ``poly`` (L, m) with the least total triangle cost ``tcost``
+    (L, C) over the triples ``trip`` (inf: not allowed), as a list of knot-index triples, or
+    None where no allowed triangulation exists. O(m^3) array steps, each over all polygons."""
+    L, m = poly.shape
+    index = {tuple(t): n for n, t in enumerate(trip.tolist())}
+    best = np.full((L, m, m), np.inf)
+    arg = np.full((L, m, m), -1, dtype=np.int64)
+    for i in range(m - 1):
+        best[:, i, i + 1] = 0.0
+    rows = np.arange(L)
+    for span in range(2, m):
+        for i in range(0, m - span):
+            j = i + span
+            ks = np.arange(i + 1, j)
+            cand = best[:, i, ks] + best[:, ks, j] + tcost[:, [index[(i, k, j)] for k in ks]]
+            pick = cand.argmin(axis=1)
+            arg[:, i, j] = ks[pick]
+            best[:, i, j] = np.where(chord[:, i, j], cand[rows, pick], np.inf)
+    out: list = [None] * L
+    done = np.flatnonzero(np.isfinite(best[:, 0, m - 1]))
+    args, polys = arg[done].tolist(), poly[done].tolist()
+    for n, li in enumerate(done.tolist()):
+        a, pl, tris, stack = args[n], polys[n], [], [(0, m - 1)]
+        while stack:
+            i, j = stack.pop()
+            if j - i < 2:
+                continue
+            k = a[i][j]
+            tris.append((pl[i], pl[k], pl[j]))
+            stack.extend([(i, k), (k, j)])
+        out[li] = tris
+    return out
+
+
+def constrained_delaunay_many(poly: np.ndarray, knots: np.ndarray) -> list:
+    """Constrained Delaunay triangulations of ``L`` simple CCW polygons with ``m`` vertices each
+    (``poly`` (L, m) knot indices), in one array pass: the triangulation minimizing the integral
+    of the piecewise-linear interpolant of ``|x - x_0|^2`` (``x_0`` the polygon's centroid), i.e.
+    ``sum_T area(T) (|a|^2 + |b|^2 + |c|^2) / 3``. Every Lawson flip to a locally Delaunay edge
+    lowers that lifted volume, so its minimum is the constrained Delaunay triangulation (any
+    one of them for co-circular knots). None where it fails (then use
+    :func:`~core.configurations.constrained_delaunay`)."""
+    P = knots[poly]
+    P = P - P.mean(axis=1, keepdims=True)
+    chord, trip, good = _candidate_triangles(P)
+    tp = P[:, trip]  # (L, C, 3, 2)
+    area = _orient(tp[..., 0, :], tp[..., 1, :], tp[..., 2, :])
+    lift = (tp**2).sum(axis=(-1, -2)) / 3.0
+    return _min_cost_triangulations(poly, chord, trip, np.where(good, area * lift, np.inf))
+
+
 class FeatureLinkTriangulator:
     """Minimum-cost link triangulations (method.md section 2.4) for the link procedure.
 
@@ -250,6 +364,12 @@ class FeatureLinkTriangulator:
     towards well-shaped triangles, so on planar data the choice is Delaunay-like. Other levels,
     links without data, links touching knots that are not ``movable`` (the border rings), or
     links with no admissible triangulation fall back to constrained Delaunay.
+
+    :meth:`triangulate_many` does all the links of one level at once (the link procedure uses
+    it): links with the same number of vertices share one array pass for their admissible
+    diagonals, candidate triangles, collinearity tests and costs (one grouped moment sum over
+    all (triangle, point) pairs), and the dynamic programme runs over the sub-polygon spans
+    with every link of the group in one array.
     """
 
     def __init__(self, cost: PlaneFitCost, degree: int, movable: np.ndarray | None = None):
@@ -260,97 +380,113 @@ class FeatureLinkTriangulator:
         self.optimized = 0
 
     def __call__(self, polygon, knots, J=(), level=0):
-        self.calls += 1
-        if level >= self.degree:
-            return constrained_delaunay(polygon, knots, J, level)
-        poly = np.asarray(polygon, dtype=np.int64)
-        if self.movable is not None and not (self.movable[poly].all() and self.movable[list(J)].all()):
-            # links that touch the border rings keep their Delaunay choice: reaching into the
-            # rings with long triangles would shrink the region where the basis sums to one
-            return constrained_delaunay(polygon, knots, J, level)
-        P = knots[poly]
-        m = len(poly)
-        if m == 3:
-            return [tuple(polygon)]
-        lo, hi = P.min(axis=0), P.max(axis=0)
-        idx = self.cost.near(0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo)) * 1.0001)
-        if len(idx) <= 3:
-            return constrained_delaunay(polygon, knots, J, level)
-        # admissible chords (i, j), i < j: polygon edges or diagonals inside the polygon
-        ii, jj = np.triu_indices(m, 1)
-        adjacent = (jj - ii == 1) | ((ii == 0) & (jj == m - 1))
-        ok = adjacent.copy()
-        diag = np.flatnonzero(~adjacent)
-        if len(diag):
-            di, dj = ii[diag], jj[diag]
-            A, B = P[di], P[dj]
-            e0 = np.arange(m)
-            E0, E1 = P[e0], P[(e0 + 1) % m]
-            o1 = _orient(A[:, None], B[:, None], E0[None])
-            o2 = _orient(A[:, None], B[:, None], E1[None])
-            o3 = _orient(E0[None], E1[None], A[:, None])
-            o4 = _orient(E0[None], E1[None], B[:, None])
-            touches_end = (e0[None] == di[:, None]) | (e0[None] == dj[:, None])
-            touches_end |= ((e0[None] + 1) % m == di[:, None]) | ((e0[None] + 1) % m == dj[:, None])
-            crosses = (o1 * o2 <= 0) & (o3 * o4 <= 0) & ~touches_end
-            # locally inside at vertex i: between the edges (i-1 -> i) and (i -> i+1)
-            prev, nxt = P[(di - 1) % m], P[(di + 1) % m]
-            convex = _orient(prev, A, nxt) > 0
-            left_next = _orient(A, nxt, B) > 0
-            left_prev = _orient(prev, A, B) > 0
-            inside_cone = np.where(convex, left_next & left_prev, left_next | left_prev)
-            ok[diag] = ~crosses.any(axis=1) & inside_cone
-        chord = np.zeros((m, m), dtype=bool)
-        chord[ii[ok], jj[ok]] = True
-        # candidate triangles (i < k < j) with all three sides admissible
-        trip = np.array(list(combinations(range(m), 3)))
-        good = chord[trip[:, 0], trip[:, 1]] & chord[trip[:, 1], trip[:, 2]] & chord[trip[:, 0], trip[:, 2]]
-        trip = trip[good]
-        if len(trip) == 0:
-            return constrained_delaunay(polygon, knots, J, level)
-        tp = P[trip]  # (T, 3, 2), CCW since the polygon is CCW and i < k < j
-        if len(J):
-            withJ = np.concatenate([tp, np.broadcast_to(knots[list(J)], (len(tp), len(J), 2))], 1)
-        else:
-            withJ = tp
-        valid = _collinear_free(withJ) & (_orient(tp[:, 0], tp[:, 1], tp[:, 2]) > 0)
-        ssr, _ = self.cost.costs(tp, idx)
-        edges2 = sum(((tp[:, (j + 1) % 3] - tp[:, j]) ** 2).sum(-1) for j in range(3))
-        area = np.abs(_orient(tp[:, 0], tp[:, 1], tp[:, 2]))
-        shape = edges2 / np.maximum(area, 1e-300)
-        loc = self.cost.points[idx]
-        q = float(((loc - loc.mean(axis=0)) ** 2).sum())
-        tcost = np.where(valid, ssr + (1e-9 * q + 1e-15) * shape, np.inf)
-        cost_of = {tuple(t): c for t, c in zip(trip.tolist(), tcost.tolist())}
-        # DP over sub-polygons i..j
-        INF = float("inf")
-        best = [[INF] * m for _ in range(m)]
-        arg = [[-1] * m for _ in range(m)]
-        for i in range(m - 1):
-            best[i][i + 1] = 0.0
-        for span in range(2, m):
-            for i in range(0, m - span):
-                j = i + span
-                if not chord[i, j]:
-                    continue
-                bi = INF
-                for k in range(i + 1, j):
-                    c = cost_of.get((i, k, j))
-                    if c is None:
-                        continue
-                    v = best[i][k] + best[k][j] + c
-                    if v < bi:
-                        bi, arg[i][j] = v, k
-                best[i][j] = bi
-        if not np.isfinite(best[0][m - 1]):
-            return constrained_delaunay(polygon, knots, J, level)
-        out, stack = [], [(0, m - 1)]
-        while stack:
-            i, j = stack.pop()
-            if j - i < 2:
-                continue
-            k = arg[i][j]
-            out.append((int(poly[i]), int(poly[k]), int(poly[j])))
-            stack.extend([(i, k), (k, j)])
-        self.optimized += 1
+        return self.triangulate_many([tuple(polygon)], knots, [tuple(J)], level)[0]
+
+    def triangulate_many(self, polygons, knots, Js, level=0) -> list:
+        """Triangulations (lists of knot-index triples) of the link ``polygons`` (CCW tuples)
+        with centre sets ``Js`` at ``level``, in order."""
+        self.calls += len(polygons)
+        knots = np.asarray(knots, dtype=np.float64)
+        out: list = [None] * len(polygons)
+        if level < self.degree:
+            by_size: dict = {}
+            for li, (poly, J) in enumerate(zip(polygons, Js)):
+                if len(poly) == 3:
+                    out[li] = [tuple(poly)]
+                elif self.movable is None or (
+                    self.movable[list(poly)].all() and self.movable[list(J)].all()
+                ):
+                    by_size.setdefault(len(poly), []).append(li)
+                # links that touch the border rings keep their Delaunay choice: reaching into
+                # the rings with long triangles would shrink the region where the basis sums
+                # to one
+            for m, members in by_size.items():
+                polys = np.array([polygons[li] for li in members], dtype=np.int64).reshape(-1, m)
+                J = np.array([Js[li] for li in members], dtype=np.int64).reshape(len(members), -1)
+                for li, tris in zip(members, self._optimal(polys, J, knots)):
+                    out[li] = tris
+        # the rest (the last level, which does not change a TCB basis, links at the border
+        # rings, links without data): constrained Delaunay, batched by polygon size
+        rest: dict = {}
+        for li, tris in enumerate(out):
+            if tris is None and len(polygons[li]) == 3:
+                out[li] = [tuple(polygons[li])]
+            elif tris is None:
+                rest.setdefault(len(polygons[li]), []).append(li)
+        for m, members in rest.items():
+            polys = np.array([polygons[li] for li in members], dtype=np.int64).reshape(-1, m)
+            for li, tris in zip(members, constrained_delaunay_many(polys, knots)):
+                out[li] = tris if tris is not None else constrained_delaunay(
+                    polygons[li], knots, Js[li], level
+                )
+        return out
+
+    def _optimal(self, poly: np.ndarray, J: np.ndarray, knots: np.ndarray) -> list:
+        """Minimum-cost triangulations of ``L`` links with ``m`` vertices each (``poly`` (L, m),
+        ``J`` (L, level)); None for a link without data or without an admissible one."""
+        L, m = poly.shape
+        P = knots[poly]  # (L, m, 2)
+        out: list = [None] * L
+        # the data near each link: a ball around its bounding box
+        lo, hi = P.min(axis=1), P.max(axis=1)
+        radius = 0.5 * np.linalg.norm(hi - lo, axis=1) * 1.0001
+        near = self.cost.tree.query_ball_point(0.5 * (lo + hi), radius)
+        counts = np.array([len(x) for x in near], dtype=np.int64)
+        if counts.sum() == 0:
+            return out
+        flat = np.concatenate([np.asarray(x, dtype=np.int64) for x in near])
+        # keep the points in the closed polygon (even-odd rule, or on an edge): a candidate
+        # triangle lies inside its link polygon, so only those can be in one
+        link = np.repeat(np.arange(L), counts)
+        x = self.cost.uv[flat]
+        inside = np.zeros(len(flat), dtype=bool)
+        on_edge = np.zeros(len(flat), dtype=bool)
+        for e in range(m):
+            a, b = P[link, e], P[link, (e + 1) % m]
+            o = _orient(a, b, x)
+            on_edge |= (o == 0) & (np.minimum(a, b) <= x).all(axis=1) & (x <= np.maximum(a, b)).all(axis=1)
+            # the edge crosses the horizontal ray to the right of x: o > 0 for an upward edge
+            upward = b[:, 1] > a[:, 1]
+            inside ^= ((a[:, 1] > x[:, 1]) != (b[:, 1] > x[:, 1])) & ((o > 0) == upward)
+        keep = inside | on_edge
+        flat, link = flat[keep], link[keep]
+        counts = np.bincount(link, minlength=L)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        chord, trip, valid = _candidate_triangles(P)
+        C = len(trip)
+        tp = P[:, trip]  # (L, C, 3, 2)
+        valid &= (counts > 3)[:, None]
+        lt, ct = np.nonzero(valid)
+        withJ = np.concatenate([tp[lt, ct], knots[J[lt]]], axis=1)
+        valid[lt, ct] = _collinear_free(withJ)
+        lt, ct = np.nonzero(valid)
+        V = len(lt)
+        ssr = np.zeros(V)
+        corners = tp[lt, ct]  # (V, 3, 2)
+        if V:
+            # (triangle, point) pairs over each triangle's link's points; closed triangles
+            reps = counts[lt]
+            tri_of = np.repeat(np.arange(V), reps)
+            first = np.concatenate([[0], np.cumsum(reps)[:-1]])
+            pt = flat[np.arange(reps.sum()) - np.repeat(first, reps) + np.repeat(starts[lt], reps)]
+            inside = np.empty(len(pt), dtype=bool)
+            x_all = self.cost.uv[pt]
+            for s in range(0, len(pt), 1 << 21):
+                t, x = tri_of[s : s + (1 << 21)], x_all[s : s + (1 << 21)]
+                a, b, c = corners[t, 0], corners[t, 1], corners[t, 2]
+                inside[s : s + len(t)] = (
+                    (_orient(a, b, x) >= 0) & (_orient(b, c, x) >= 0) & (_orient(c, a, x) >= 0)
+                )
+            ssr = grouped_plane_costs(x_all[inside], self.cost.points[pt[inside]], tri_of[inside], V)
+        # tie-break towards well-shaped triangles, scaled by each link's data spread
+        pts = self.cost.points[flat]
+        mean = np.stack([np.bincount(link, pts[:, j], L) for j in range(3)], 1)
+        mean /= np.maximum(counts, 1)[:, None]
+        q = np.bincount(link, ((pts - mean[link]) ** 2).sum(axis=1), L)
+        edges2 = sum(((corners[:, (j + 1) % 3] - corners[:, j]) ** 2).sum(-1) for j in range(3))
+        area = np.abs(_orient(corners[:, 0], corners[:, 1], corners[:, 2]))
+        tcost = np.full((L, C), np.inf)
+        tcost[lt, ct] = ssr + (1e-9 * q[lt] + 1e-15) * edges2 / np.maximum(area, 1e-300)
+        out = _min_cost_triangulations(poly, chord, trip, tcost)
+        self.optimized += sum(t is not None for t in out)
         return out
