@@ -32,6 +32,7 @@ from .spatial import BoxIndex
 
 __all__ = [
     "PlaneFitCost", "feature_triangulation", "FeatureLinkTriangulator", "min_angle_sine", "locate",
+    "constrained_delaunay_many",
 ]
 
 # Triangles of Gamma_0 made by flips must keep sin(min angle) above this (about 6 degrees).

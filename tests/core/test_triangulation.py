@@ -1,0 +1,117 @@
+"""Feature-sensitive configurations (core/triangulation.py, method.md section 2.4)."""
+
+import numpy as np
+import pytest
+
+from core.border import border_rings
+from core.configurations import constrained_delaunay, delaunay_triangulation
+from core.refine import make_space
+from core.simplex import orient2d
+from core.triangulation import (
+    FeatureLinkTriangulator,
+    PlaneFitCost,
+    constrained_delaunay_many,
+    feature_triangulation,
+)
+from knotsets import FUNCTIONS, polar_form
+
+
+def star_polygons(count, m, seed):
+    """Random simple CCW polygons, star-shaped around the origin, non-convex in general."""
+    rng = np.random.default_rng(seed)
+    # jittered even angles: every gap is below pi, so the origin sees the whole polygon
+    ang = (np.arange(m) + 0.8 * rng.random((count, m))) * (2 * np.pi / m)
+    rad = 0.3 + rng.random((count, m))
+    return np.stack([rad * np.cos(ang), rad * np.sin(ang)], axis=-1)
+
+
+def tri_set(tris):
+    return sorted(tuple(sorted(t)) for t in tris)
+
+
+@pytest.mark.parametrize("m", [4, 5, 7, 10])
+def test_batched_constrained_delaunay_equals_the_per_polygon_one(m):
+    P = star_polygons(60, m, seed=m)
+    knots = P.reshape(-1, 2)
+    poly = np.arange(len(knots)).reshape(-1, m)
+    got = constrained_delaunay_many(poly, knots)
+    for row, tris in zip(poly, got):
+        assert tris is not None
+        assert tri_set(tris) == tri_set(constrained_delaunay(tuple(row), knots))
+
+
+def crease_data(n=6000, seed=0):
+    rng = np.random.default_rng(seed)
+    uv = rng.random((n, 2))
+    return uv, np.c_[uv, 0.25 * np.abs(uv[:, 1] - 0.3 - 0.4 * uv[:, 0])]
+
+
+def total_cost(cost, knots, tris):
+    ssr, _ = cost.costs(knots[np.asarray(tris)], np.arange(len(cost.uv)))
+    return ssr.sum()
+
+
+def test_gamma0_flips_lower_the_plane_fit_cost_and_keep_a_triangulation():
+    uv, P = crease_data()
+    rng = np.random.default_rng(1)
+    knots = np.r_[rng.random((60, 2)) * 0.96 + 0.02, border_rings([0, 0], [1, 1], 0.13, rings=2)]
+    movable = np.arange(len(knots)) < 60
+    cost = PlaneFitCost(uv, P)
+    dt = delaunay_triangulation(knots)
+    ft = feature_triangulation(knots, cost, movable=movable)
+    assert len(ft) == len(dt)
+    a, b, c = (knots[ft[:, j]] for j in range(3))
+    det = orient2d(a, b, c)
+    assert (det > 0).all()
+    # same area: still a triangulation of the convex hull
+    assert np.isclose(det.sum(), orient2d(*(knots[dt[:, j]] for j in range(3))).sum())
+    assert total_cost(cost, knots, ft) < 0.9 * total_cost(cost, knots, dt)
+
+
+def test_link_dp_is_never_costlier_than_constrained_delaunay():
+    uv, P = crease_data()
+    rng = np.random.default_rng(2)
+    knots = rng.random((80, 2))
+    cost = PlaneFitCost(uv, P)
+    tri = delaunay_triangulation(knots)
+    lt = FeatureLinkTriangulator(cost, degree=2)
+    # level-1 links: the one-rings of the interior knots
+    polys, Js = [], []
+    for v in range(len(knots)):
+        star = tri[(tri == v).any(axis=1)]
+        nxt = {}
+        for t in star.tolist():
+            i = t.index(v)
+            nxt[t[(i + 1) % 3]] = t[(i + 2) % 3]
+        start = next(iter(nxt))
+        ring = [start]
+        while nxt.get(ring[-1]) not in (None, start):
+            ring.append(nxt[ring[-1]])
+        if nxt.get(ring[-1]) == start and len(ring) >= 4:
+            polys.append(tuple(ring))
+            Js.append((v,))
+    assert len(polys) > 30
+    dp = lt.triangulate_many(polys, knots, Js, level=1)
+    assert lt.optimized > 0
+    worse = 0
+    for poly, J, tris in zip(polys, Js, dp):
+        assert len(tris) == len(poly) - 2
+        cdt = constrained_delaunay(poly, knots, J, 1)
+        worse += total_cost(cost, knots, tris) > total_cost(cost, knots, cdt) * (1 + 1e-9) + 1e-12
+    assert worse == 0
+
+
+@pytest.mark.parametrize("degree", [2, 3])
+def test_feature_sensitive_space_is_a_partition_of_unity_and_reproduces_polynomials(degree):
+    uv, P = crease_data(seed=degree)
+    rng = np.random.default_rng(degree)
+    inner = rng.random((50, 2)) * 0.96 + 0.02
+    knots = np.r_[inner, border_rings([0, 0], [1, 1], 0.14, rings=degree, seed=degree)]
+    space = make_space(knots, degree, "tcb", PlaneFitCost(uv, P), len(inner))
+    x = np.random.default_rng(7).random((3000, 2))
+    A = space.evaluate(x)
+    assert A.min() >= -1e-14
+    np.testing.assert_allclose(np.asarray(A.sum(axis=1)).ravel(), 1.0, rtol=0, atol=1e-12)
+    I = knots[space.interior_sets]
+    for name in ["u", "v", "uv", "uu"]:
+        np.testing.assert_allclose(A @ polar_form(name, I), FUNCTIONS[name](x), rtol=0, atol=1e-11)
