@@ -12,6 +12,7 @@ from core.triangulation import (
     PlaneFitCost,
     constrained_delaunay_many,
     feature_triangulation,
+    grouped_plane_costs,
 )
 from knotsets import FUNCTIONS, polar_form
 
@@ -40,15 +41,40 @@ def test_batched_constrained_delaunay_equals_the_per_polygon_one(m):
         assert tri_set(tris) == tri_set(constrained_delaunay(tuple(row), knots))
 
 
+@pytest.mark.parametrize("quadratic", [False, True])
+def test_grouped_fit_residuals_match_a_least_squares_solve_per_group(quadratic):
+    rng = np.random.default_rng(0)
+    x = rng.random((4000, 2)) * 3 + 5  # off-centre, so centring matters
+    p = np.c_[x, np.sin(3 * x[:, 0]) + x[:, 1] ** 2] + 0.01 * rng.standard_normal((4000, 3))
+    g = rng.integers(0, 40, 4000)
+    g[g == 7] = 8  # an empty group costs 0
+    got = grouped_plane_costs(x, p, g, 40, quadratic=quadratic)
+    for k in range(40):
+        xx = x[g == k]
+        A = np.c_[xx, np.ones(len(xx))]
+        if quadratic:
+            A = np.c_[A, xx[:, 0] ** 2, xx[:, 0] * xx[:, 1], xx[:, 1] ** 2]
+        ref = 0.0
+        if len(xx) > A.shape[1]:
+            c = np.linalg.lstsq(A, p[g == k], rcond=None)[0]
+            ref = ((A @ c - p[g == k]) ** 2).sum()
+        assert abs(got[k] - ref) <= 1e-8 * max(ref, 1.0)
+
+
 def crease_data(n=6000, seed=0):
     rng = np.random.default_rng(seed)
     uv = rng.random((n, 2))
     return uv, np.c_[uv, 0.25 * np.abs(uv[:, 1] - 0.3 - 0.4 * uv[:, 0])]
 
 
-def total_cost(cost, knots, tris):
-    ssr, _ = cost.costs(knots[np.asarray(tris)], np.arange(len(cost.uv)))
-    return ssr.sum()
+def total_cost(cost, knots, tris, quadratic=False):
+    """Sum over triangles of the affine (or quadratic) fit residual of the data inside."""
+    T = knots[np.asarray(tris)]
+    t = np.repeat(np.arange(len(T)), len(cost.uv))
+    j = np.tile(np.arange(len(cost.uv)), len(T))
+    a, b, c, x = T[t, 0], T[t, 1], T[t, 2], cost.uv[j]
+    inside = (orient2d(a, b, x) >= 0) & (orient2d(b, c, x) >= 0) & (orient2d(c, a, x) >= 0)
+    return grouped_plane_costs(x[inside], cost.points[j[inside]], t[inside], len(T), quadratic).sum()
 
 
 def test_gamma0_flips_lower_the_plane_fit_cost_and_keep_a_triangulation():
@@ -93,12 +119,14 @@ def test_link_dp_is_never_costlier_than_constrained_delaunay():
     assert len(polys) > 30
     dp = lt.triangulate_many(polys, knots, Js, level=1)
     assert lt.optimized > 0
-    worse = 0
+    worse = differ = 0
     for poly, J, tris in zip(polys, Js, dp):
         assert len(tris) == len(poly) - 2
         cdt = constrained_delaunay(poly, knots, J, 1)
-        worse += total_cost(cost, knots, tris) > total_cost(cost, knots, cdt) * (1 + 1e-9) + 1e-12
+        differ += tri_set(tris) != tri_set(cdt)
+        worse += total_cost(cost, knots, tris, True) > total_cost(cost, knots, cdt, True) * (1 + 1e-9) + 1e-12
     assert worse == 0
+    assert differ >= 5  # the data made real choices
 
 
 @pytest.mark.parametrize("degree", [2, 3])
