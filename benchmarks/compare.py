@@ -72,17 +72,11 @@ def dataset_list(quick: bool, cfg: dict) -> list[dict]:
         return [ds.height_field("F1-franke", n), ds.height_field("crease", n),
                 ds.dem(cfg["dem_step"]), ds.mesh("patch-01")]
     out = []
-    # F7 and F10 at their own scale fold over the best-fit plane of fit_surface's cloud
-    # parameterization (ParameterizationError): one row each records that, the scaled
-    # versions are compared
-    scales = {"F7-trig": 0.1, "F10-cospeak": 0.5}
     for name in ("F1-franke", "F2-cliff", "F6-sphere", "F7-trig", "F10-cospeak", "crease"):
-        if name in scales:
-            out.append(ds.height_field(name, n, "scattered"))
         # grid samples for the smooth reference and the crease (the DEM is a grid too)
         samplings = ("scattered", "grid") if name in ("F1-franke", "crease") else ("scattered",)
         for sampling in samplings:
-            out.append(ds.height_field(name, n, sampling, scale=scales.get(name, 1.0)))
+            out.append(ds.height_field(name, n, sampling))
     out.append(ds.dem(cfg["dem_step"]))
     for name in ("nefertiti", "three_peaks", "patch-01"):
         out.append(ds.mesh(name))

@@ -79,10 +79,7 @@ FUNCTIONS = {
 def height_field(name: str, n: int, sampling: str = "scattered", seed: int = 0,
                  scale: float = 1.0) -> dict:
     """``n`` samples (scattered: uniform random; grid: ``round(sqrt(n))^2`` lattice points) of
-    one of :data:`FUNCTIONS` over the unit square, heights multiplied by ``scale``.
-
-    ``scale < 1`` makes the steep F7 and F10 gentle enough for ``fit_surface``'s point-cloud
-    parameterization (projection on the best-fit plane rejects them as folded at scale 1)."""
+    one of :data:`FUNCTIONS` over the unit square, heights multiplied by ``scale``."""
     f = FUNCTIONS[name]
     if sampling == "scattered":
         xy = np.random.default_rng(seed).random((n, 2))

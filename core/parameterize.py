@@ -353,14 +353,16 @@ def _fold_sample(q: np.ndarray) -> np.ndarray:
     return np.arange(len(q))
 
 
-def _projection_normal(q: np.ndarray, pca_normal: np.ndarray, planes) -> np.ndarray:
-    """The projection direction that makes the cloud most like a height field.
+def _projection_normals(q: np.ndarray, pca_normal: np.ndarray, planes) -> list:
+    """Projection directions to try, best first: the one that makes the cloud most like a
+    height field, then the other candidates by score.
 
     Candidates: the PCA normal, the mean of the local normals (oriented towards the PCA
     normal) and the three coordinate axes. Score: the 2nd percentile of ``|n_i . n|`` over the
     reliable local normals (how steep the steepest parts are). A height field whose height range
     is comparable to its width tilts the PCA plane (Franke's function: 45 degrees) and makes
-    its flanks look nearly perpendicular; the mean normal or the vertical axis does not.
+    its flanks look nearly perpendicular; the mean normal or the vertical axis does not. The
+    PCA normal comes first unless another direction is clearly (0.05) less steep.
     """
     normals, _, reliable, _ = planes
     nr = normals[reliable] if reliable.any() else normals
@@ -370,10 +372,30 @@ def _projection_normal(q: np.ndarray, pca_normal: np.ndarray, planes) -> np.ndar
     if np.linalg.norm(mean) > 1e-12:
         cands.append(mean / np.linalg.norm(mean))
     cands.extend(np.eye(3))
-    scores = [np.quantile(np.abs(nr @ c), 0.02) for c in cands]
-    # prefer the PCA plane unless another direction is clearly less steep
+    scores = np.array([np.quantile(np.abs(nr @ c), 0.02) for c in cands])
     best = int(np.argmax(scores))
-    return cands[0] if scores[best] <= scores[0] + 0.05 else cands[best]
+    first = 0 if scores[best] <= scores[0] + 0.05 else best
+    rest = [i for i in np.argsort(-scores, kind="stable") if i != first]
+    return [cands[i] for i in [first] + rest]
+
+
+def _project(q: np.ndarray, m: np.ndarray, vt: np.ndarray, n: np.ndarray):
+    """Axes ``(a_u, a_v, n)`` (3, 3), centre ``c`` and scale ``s`` of the projection of the
+    centred cloud along ``n``, and the parameters ``uv = ((q - m) . [a_u, a_v] - c) / s``."""
+    # u along the largest principal direction projected into the plane
+    a_u = vt[0] - (vt[0] @ n) * n
+    if np.linalg.norm(a_u) < 1e-8:
+        a_u = vt[1] - (vt[1] @ n) * n
+    a_u /= np.linalg.norm(a_u)
+    # deterministic signs: largest |component| positive for a_u and for the normal
+    a_u *= np.sign(a_u[np.argmax(np.abs(a_u))])
+    if n[np.argmax(np.abs(n))] < 0.0:
+        n = -n
+    axes = np.stack([a_u, np.cross(n, a_u), n])
+    proj = (q - m) @ axes[:2].T
+    c = 0.5 * (proj.min(axis=0) + proj.max(axis=0))
+    s = 0.5 * float(np.ptp(proj, axis=0).max())
+    return axes, c, s, (proj - c) / s
 
 
 def _fold_fraction(
@@ -432,16 +454,20 @@ def parameterize_points(points: np.ndarray) -> Parameterization:
     """Parameterize a point cloud by orthogonal projection on its best-fit plane.
 
     The projection normal ``n`` is the PCA normal (SVD of the centred points) unless another
-    direction makes the cloud clearly less steep (see :func:`_projection_normal`: for height
+    direction makes the cloud clearly less steep (see :func:`_projection_normals`: for height
     fields whose height range is comparable to their width, the mean local normal or the
-    vertical axis); ``a_u`` is the largest principal direction projected into that plane and
+    vertical axis); if the cloud folds over that plane, the other candidate directions are
+    tried in turn and the first over which it does not fold is used (a steep height field much
+    taller than wide has a vertical PCA plane); ``a_u`` is the largest principal direction
+    projected into that plane and
     ``a_v = n x a_u`` (right-handed, signs fixed so that the largest components of ``a_u`` and
     ``n`` are positive). The parameters are
     ``uv = ((p - o) . [a_u, a_v]) / s`` where ``o`` and ``s`` centre the projected bounding box
     at 0 and scale its longer side to ``[-1, 1]`` (method.md section 4). On a plane the map is an
     isometry up to the factor ``s``.
 
-    Folds are detected as in :func:`_fold_fraction`; more than 2 % flagged points is an error.
+    Folds are detected as in :func:`_fold_fraction`; more than 2 % flagged points over every
+    candidate plane is an error (reported for the first one).
 
     Args:
         points: ``(n, 3)`` points, ``n >= 10`` distinct, not all on a line.
@@ -451,31 +477,23 @@ def parameterize_points(points: np.ndarray) -> Parameterization:
 
     Raises:
         InvalidInputError: bad input (see :func:`normalize`).
-        ParameterizationError: the cloud folds over its best-fit plane.
+        ParameterizationError: the cloud folds over every candidate plane.
     """
     q, norm = normalize(points)
     m = q.mean(axis=0)
     _, _, vt = np.linalg.svd(q - m, full_matrices=False)
     sample = _fold_sample(q)
     planes = _local_planes(q[sample], min(_FOLD_NEIGHBOURS, len(sample) - 1))
-    n = _projection_normal(q[sample], np.cross(vt[0], vt[1]), planes)
-    # u along the largest principal direction projected into the plane
-    a_u = vt[0] - (vt[0] @ n) * n
-    if np.linalg.norm(a_u) < 1e-8:
-        a_u = vt[1] - (vt[1] @ n) * n
-    a_u /= np.linalg.norm(a_u)
-    # deterministic signs: largest |component| positive for a_u and for the normal
-    a_u *= np.sign(a_u[np.argmax(np.abs(a_u))])
-    if n[np.argmax(np.abs(n))] < 0.0:
-        n = -n
-    a_v = np.cross(n, a_u)
-    axes = np.stack([a_u, a_v, n])
-    proj = (q - m) @ axes[:2].T
-    c = 0.5 * (proj.min(axis=0) + proj.max(axis=0))
-    s = 0.5 * float(np.ptp(proj, axis=0).max())
-    uv = (proj - c) / s
-
-    frac = _fold_fraction(q, uv, axes[2], planes)
+    # the most height-field-like direction first; if the cloud folds over that plane, the
+    # other candidates (a steep height field far taller than wide, Renka's F7, has a vertical
+    # PCA plane and folds over it, but not over the horizontal one)
+    fractions = []
+    for n in _projection_normals(q[sample], np.cross(vt[0], vt[1]), planes):
+        axes, c, s, uv = _project(q, m, vt, n)
+        fractions.append(_fold_fraction(q, uv, axes[2], planes))
+        if fractions[-1] <= _FOLD_MAX_FRACTION:
+            break
+    frac = fractions[-1] if fractions[-1] <= _FOLD_MAX_FRACTION else fractions[0]
     if frac > _FOLD_MAX_FRACTION:
         raise ParameterizationError(
             f"the point cloud folds over its best-fit plane: at {100 * frac:.1f}% of the points "

@@ -187,6 +187,17 @@ def test_a_z_folded_sheet_is_rejected() -> None:
         parameterize(np.column_stack([x, y, z]))
 
 
+def test_a_steep_height_field_taller_than_wide_is_projected_along_its_height() -> None:
+    """Renka's F7 on the unit square spans z in [-3, 3]: its PCA plane is vertical and the
+    cloud folds over it, but it is a height field over the horizontal plane."""
+    xy = np.random.default_rng(6).random((3000, 2))
+    z = 2 * np.cos(10 * xy[:, 0]) * np.sin(10 * xy[:, 1]) + np.sin(10 * xy[:, 0] * xy[:, 1])
+    par = parameterize_points(np.column_stack([xy, z]))
+    assert abs(par.axes[2] @ [0, 0, 1]) > 0.999
+    tri = Delaunay(xy).simplices
+    assert np.all(signed_areas(par.uv, tri) * signed_areas(xy, tri) > 0)
+
+
 @pytest.mark.parametrize("noise", [0.0, 0.01, 0.03])
 def test_gentle_caps_and_noisy_planes_are_accepted(noise: float) -> None:
     rng = np.random.default_rng(5)
