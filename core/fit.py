@@ -9,10 +9,11 @@ Minimizes, over the control points ``C`` (n_basis, 3),
 through the sparse normal equations
 ``(A^T W A + alpha G1 + beta G2) C = A^T W P`` with ``G1 = Du^T Q Du + Dv^T Q Dv`` and
 ``G2 = Duu^T Q Duu + 2 Duv^T Q Duv + Dvv^T Q Dvv`` (``Q`` the quadrature weights ``a_q``). ``A^T W A``
-and ``A^T W P`` are accumulated over chunks of points, so memory does not grow with the number of
-points. ``alpha`` and ``beta`` are given relative to ``trace(A^T W A) / trace(G)``, so one
-``smoothness`` works at any scale and knot density. One sparse LU factorization serves the three
-coordinates.
+and ``A^T W P`` are accumulated over chunks of points; the sparse chunks of ``A`` are kept (up to
+:data:`KEEP_BYTES`, more than the 2e6 points ``fit_surface`` fits) for iterative refinement and
+the errors, so the basis is evaluated once per fit. ``alpha`` and ``beta`` are given relative to
+``trace(A^T W A) / trace(G)``, so one ``smoothness`` works at any scale and knot density. One
+sparse LU factorization serves the three coordinates.
 
 Quadrature: three points per triangle of ``Gamma_0`` (the rule exact for quadratics, weights
 ``area / 3``). ``Gamma_0`` covers the convex hull of all knots, including the border rings, so every
@@ -36,6 +37,9 @@ __all__ = ["FitResult", "fit_control_points", "fairing_quadrature", "PARTITION_T
 
 PARTITION_TOL = 1e-9
 CHUNK = 200_000
+# the evaluated basis chunks are kept up to this size (CSR bytes) instead of evaluated again
+# for the errors: at 1e6 points that second evaluation took as long as the first (10 s)
+KEEP_BYTES = 768 * 2**20
 # beta = smoothness, alpha = FIRST_ORDER_SHARE * smoothness (both relative to the data term)
 FIRST_ORDER_SHARE = 0.1
 
@@ -125,7 +129,7 @@ def fit_control_points(
 
     AtA = sp.csr_matrix((n, n))
     AtP = np.zeros((n, 3))
-    chunks = []
+    chunks, keep, kept_bytes = [], True, 0
     worst, n_bad = 0.0, 0
     t_eval = 0.0
     for s in range(0, N, CHUNK):
@@ -139,8 +143,11 @@ def fit_control_points(
         WA = sp.diags(weights[s : s + CHUNK]) @ A
         AtA = AtA + A.T @ WA
         AtP += WA.T @ points[s : s + CHUNK]
-        if N <= 2 * CHUNK:
+        if keep and kept_bytes + A.data.nbytes + A.indices.nbytes + A.indptr.nbytes <= KEEP_BYTES:
             chunks.append(A)
+            kept_bytes += A.data.nbytes + A.indices.nbytes + A.indptr.nbytes
+        else:
+            keep = False
     if n_bad:
         raise BorderError(
             f"the spline basis does not sum to one at {n_bad} of {N} data parameters (worst "
@@ -169,7 +176,7 @@ def fit_control_points(
     t2 = time.perf_counter()
     if smoothness > 0:
         C, solver = _solve((AtA + smoothness * G).tocsc(), AtP, ridge=True)
-        if chunks:
+        if keep:
             C = _refine(C, solver, chunks, weights, points, lambda c: smoothness * (G @ c))
     else:
         # no fairing: pure least squares for the functions that see data, then the functions
@@ -178,7 +185,7 @@ def fit_control_points(
         d, u = np.flatnonzero(has_data), np.flatnonzero(~has_data)
         C = np.zeros((n, 3))
         C[d], solver = _solve(AtA[d][:, d].tocsc(), AtP[d], ridge=True)
-        if chunks:
+        if keep:
             C[d] = _refine(C[d], solver, [A[:, d] for A in chunks], weights, points, None)
         if len(u):
             C[u], _ = _solve(G[u][:, u].tocsc(), -(G[u][:, d] @ C[d]), ridge=True)
@@ -187,7 +194,7 @@ def fit_control_points(
     t3 = time.perf_counter()
     errors = np.empty(N)
     for i, s in enumerate(range(0, N, CHUNK)):
-        A = chunks[i] if chunks else space.evaluate(uv[s : s + CHUNK])
+        A = chunks[i] if i < len(chunks) else space.evaluate(uv[s : s + CHUNK])
         errors[s : s + CHUNK] = np.linalg.norm(A @ C - points[s : s + CHUNK], axis=1)
     t_err = time.perf_counter() - t3
     timings = {
