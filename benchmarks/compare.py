@@ -74,9 +74,7 @@ def dataset_list(quick: bool, cfg: dict) -> list[dict]:
                 ds.dem(cfg["dem_step"]), ds.mesh("patch-01")]
     out = []
     for name in ("F1-franke", "F2-cliff", "F6-sphere", "F7-trig", "F10-cospeak", "crease"):
-        # grid samples for the smooth reference and the crease (the DEM is a grid too)
-        samplings = ("scattered", "grid") if name in ("F1-franke", "crease") else ("scattered",)
-        for sampling in samplings:
+        for sampling in ("scattered", "grid"):
             out.append(ds.height_field(name, n, sampling))
     out.append(ds.dem(cfg["dem_step"]))
     for name in ("nefertiti", "three_peaks", "patch-01"):

@@ -210,41 +210,64 @@ class TCBSurface:
         normal equations per point, vectorized, only steps that improve are taken), kept in the
         domain's box; the better result is returned.
         """
+        return self._closest(points, iterations)[0]
+
+    def _closest(self, points, iterations: int = 4) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`closest_parameters` and the distances ``|S(x) - p|`` there, (m, 2), (m,)."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         uv_t, _ = self.tessellation_uv(96)
-        verts = self(uv_t)
-        _, nearest = cKDTree(verts).query(p)
-        x = self._newton_closest(p, uv_t[nearest].copy(), uv_t, iterations)
-        if self._param.kind == "plane" and self._param.origin is not None:
-            # a cloud's own projection is another good start; keep the better result
-            y = self._newton_closest(p, np.clip(self._param.project(p), uv_t.min(0), uv_t.max(0)),
-                                     uv_t, iterations)
-            better = np.linalg.norm(self(y) - p, axis=1) < np.linalg.norm(self(x) - p, axis=1)
-            x[better] = y[better]
-        return x
-
-    def _newton_closest(self, p, x, uv_t, iterations):
         lo, hi = uv_t.min(axis=0), uv_t.max(axis=0)
+        _, nearest = cKDTree(self(uv_t)).query(p)
+        x = uv_t[nearest].copy()
+        x, d = self._newton_closest(p, x, self._surface_and_gradient(x), lo, hi, iterations)
+        if self._param.kind == "plane" and self._param.origin is not None:
+            # a cloud's own projection is another start; keep the better result (starting from
+            # the better start only was 1.6x faster on the DEM but 2% of the distances came out
+            # larger, by up to 2% of the largest)
+            y = np.clip(self._param.project(p), lo, hi)
+            y, e = self._newton_closest(p, y, self._surface_and_gradient(y), lo, hi, iterations)
+            b = e < d
+            x[b], d[b] = y[b], e[b]
+        return x, d
+
+    def _surface_and_gradient(self, uv):
+        return [M @ self._c for M in self._space.evaluate_many(uv, [(0, 0), (1, 0), (0, 1)])]
+
+    def _newton_closest(self, p, x, start, lo, hi, iterations):
+        """Gauss-Newton from ``x`` (with the surface and its gradient there, ``start``) inside
+        the box ``[lo, hi]``; returns the parameters and their distances. Each step evaluates the
+        surface and its first derivatives once, at the trial points only; points whose step was
+        rejected or below 1e-8 of the box drop out (one basis pass per step, shrinking)."""
+        tiny = 1e-8 * float(np.max(hi - lo))
+        S, Su, Sv = start
+        dist = np.linalg.norm(S - p, axis=1)
+        active = np.arange(len(p))
         for _ in range(iterations):
-            S, Su, Sv = (M @ self._c for M in self._space.evaluate_many(x, [(0, 0), (1, 0), (0, 1)]))
-            r = S - p
-            su, sv = Su, Sv
+            if len(active) == 0:
+                break
+            r, su, sv = S[active] - p[active], Su[active], Sv[active]
             a, b, c = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
             g1, g2 = (su * r).sum(1), (sv * r).sum(1)
             det = a * c - b * b
             ok = det > 1e-300
-            step = np.zeros_like(x)
+            step = np.zeros((len(active), 2))
             step[ok, 0] = (c[ok] * g1[ok] - b[ok] * g2[ok]) / det[ok]
             step[ok, 1] = (a[ok] * g2[ok] - b[ok] * g1[ok]) / det[ok]
-            cand = np.clip(x - step, lo, hi)
-            better = np.linalg.norm(self(cand) - p, axis=1) <= np.linalg.norm(r, axis=1)
-            x[better] = cand[better]
-        return x
+            cand = np.clip(x[active] - step, lo, hi)
+            moved = np.abs(cand - x[active]).max(axis=1) > tiny
+            active, cand = active[moved], cand[moved]
+            Sc, Suc, Svc = self._surface_and_gradient(cand)
+            dc = np.linalg.norm(Sc - p[active], axis=1)
+            better = dc <= dist[active]
+            idx = active[better]
+            x[idx], dist[idx] = cand[better], dc[better]
+            S[idx], Su[idx], Sv[idx] = Sc[better], Suc[better], Svc[better]
+            active = idx
+        return x, dist
 
     def distances(self, points) -> np.ndarray:
         """Distance (m,) of ``points`` (m, 3) to the surface (closest point, see above)."""
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        return np.linalg.norm(self(self.closest_parameters(p)) - p, axis=1)
+        return self._closest(points)[1]
 
     # ---- refinement --------------------------------------------------------------------
     def refine(self, points, faces=None, callback=None, **changes) -> "TCBSurface":

@@ -305,3 +305,20 @@ def test_knot_insertion_at_knots_on_knot_lines_and_at_the_border_stays_c1_and_su
             L2 = np.maximum.reduce([((b - a) ** 2).sum(1), ((c - a) ** 2).sum(1), ((c - b) ** 2).sum(1)])
             worst = min(worst, float((det / L2).min()))
         assert worst > 1e-4  # no three (nearly) collinear knots in any configuration
+
+
+def test_distances_recover_known_offsets_along_the_normal():
+    """Points moved by t along the unit normal are at distance |t| with closest parameters
+    where they started (t small against the curvature radius), for a cloud and a mesh."""
+    xy = np.random.default_rng(3).random((4000, 2))
+    cloud = fit_surface(np.c_[xy, franke(*xy.T)], max_control_points=300)
+    points, faces = read_geometry(DATA / "nefertiti.off")
+    mesh = fit_surface(points, faces, max_control_points=300)
+    for surf in (cloud, mesh):
+        uv, _ = surf.tessellation_uv(40)
+        uv = uv[np.abs(uv).max(axis=1) < 0.6 * np.abs(uv).max()]  # away from the domain's edge
+        t = np.random.default_rng(4).uniform(-1, 1, len(uv)) * 1e-3 * surf.report["diagonal"]
+        p = surf(uv) + t[:, None] * surf.normals(uv)
+        np.testing.assert_allclose(surf.distances(p), np.abs(t), rtol=0,
+                                   atol=1e-6 * surf.report["diagonal"])
+        np.testing.assert_allclose(surf.closest_parameters(p), uv, rtol=0, atol=1e-5)
