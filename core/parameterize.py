@@ -333,16 +333,38 @@ def _local_planes(q: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.nda
 
 
 def _distance_to_hull(uv: np.ndarray, chunk: int = 20_000) -> np.ndarray:
-    """Distance (n,) of parameters to the boundary of their convex hull (chunked over points)."""
-    hull = uv[ConvexHull(uv).vertices]
-    a, b = hull, np.roll(hull, -1, axis=0)
-    ab = b - a
-    ab2 = np.maximum((ab * ab).sum(axis=1), 1e-300)
+    """Distance (n,) of parameters to the boundary of their convex hull, to within 1e-3 of the
+    extent (chunked over points).
+
+    Inside a convex polygon the distance to the boundary is the smallest distance to the lines
+    of its edges, ``min_e (x - a_e) . n_e`` with ``n_e`` the inward unit normals. The hull is
+    first thinned: runs of vertices within 1e-3 of the extent from the chord that replaces them
+    are dropped (an inscribed convex polygon, far closer than the 5% rim width this serves): a
+    dense round rim has thousands of hull vertices, and ``points x vertices`` work made refusing
+    a folded 1e5-point cap take 14 s (1.2 s now).
+    """
+    hull = uv[ConvexHull(uv).vertices]  # counter-clockwise
+    tol = 1e-3 * float(np.ptp(uv, axis=0).max())
+    keep, skipped = [0], []
+    for i in range(1, len(hull)):
+        # drop vertex i if it and the vertices dropped since the last kept one lie within tol
+        # of the chord from the last kept vertex to vertex i + 1
+        a, b = hull[keep[-1]], hull[(i + 1) % len(hull)]
+        ab = b - a
+        run = hull[skipped + [i]]
+        dist = np.abs(ab[0] * (run[:, 1] - a[1]) - ab[1] * (run[:, 0] - a[0]))
+        if (dist > tol * max(float(np.hypot(*ab)), 1e-300)).any():
+            keep.append(i)
+            skipped = []
+        else:
+            skipped.append(i)
+    a = hull[keep]
+    e = np.roll(a, -1, axis=0) - a
+    inward = np.c_[-e[:, 1], e[:, 0]] / np.maximum(np.linalg.norm(e, axis=1), 1e-300)[:, None]
+    offset = (a * inward).sum(axis=1)
     out = np.empty(len(uv))
     for s in range(0, len(uv), chunk):
-        x = uv[s : s + chunk, None, :]
-        t = np.clip(((x - a) * ab).sum(-1) / ab2, 0.0, 1.0)
-        out[s : s + chunk] = np.sqrt(((x - a - t[..., None] * ab) ** 2).sum(-1)).min(axis=1)
+        out[s : s + chunk] = np.abs((uv[s : s + chunk] @ inward.T - offset).min(axis=1))
     return out
 
 

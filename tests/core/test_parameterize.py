@@ -10,13 +10,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.spatial import Delaunay
+from scipy.spatial import ConvexHull, Delaunay
 
 from core.errors import InvalidInputError, ParameterizationError, TopologyError
 from core.meshio import read_geometry
 from core.parameterize import (
     Normalization,
     Parameterization,
+    _distance_to_hull,
     count_duplicates,
     normalize,
     parameterize,
@@ -185,6 +186,24 @@ def test_a_z_folded_sheet_is_rejected() -> None:
     z = np.where(s < 1, 0.0, np.where(turn < np.pi, r - r * np.cos(turn), 2 * r))
     with pytest.raises(ParameterizationError):
         parameterize(np.column_stack([x, y, z]))
+
+
+@pytest.mark.parametrize("shape", ["square", "disk", "thin"])
+def test_distance_to_the_hull_matches_the_distance_to_its_edges(shape: str) -> None:
+    """The rim test's distances (thinned hull, edge lines) against point-to-segment distances
+    to the exact hull, within 1e-3 of the extent."""
+    rng = np.random.default_rng(7)
+    if shape == "disk":
+        t, r = rng.random(20000) * 2 * np.pi, np.sqrt(rng.random(20000))
+        uv = np.column_stack([r * np.cos(t), r * np.sin(t)])
+    else:
+        uv = rng.random((20000, 2)) * ([1.0, 0.05] if shape == "thin" else [1.0, 1.0])
+    hull = uv[ConvexHull(uv).vertices]
+    a, ab = hull, np.roll(hull, -1, axis=0) - hull
+    t = np.clip(((uv[:, None] - a) * ab).sum(-1) / (ab * ab).sum(-1), 0, 1)
+    ref = np.sqrt(((uv[:, None] - a - t[..., None] * ab) ** 2).sum(-1)).min(axis=1)
+    got = _distance_to_hull(uv)
+    assert np.abs(got - ref).max() <= 1e-3 * np.ptp(uv, axis=0).max()
 
 
 def test_a_steep_height_field_taller_than_wide_is_projected_along_its_height() -> None:
