@@ -401,7 +401,12 @@ def link_triangulation_procedure(
         link_poly = [tuple(polys[gi]) for gi in chosen]
         many = getattr(triangulator, "triangulate_many", None)
         if many is not None:  # a triangulator that batches the links of a level
-            results = many(link_poly, knots, link_J, level)
+            results = list(many(link_poly, knots, link_J, level))
+            if len(results) != len(link_poly):
+                raise ValueError(
+                    f"the link triangulator returned {len(results)} triangulations for "
+                    f"{len(link_poly)} links"
+                )
         else:
             results = [triangulator(p, knots, J, level) for p, J in zip(link_poly, link_J)]
         for J, poly, tris in zip(link_J, link_poly, results):

@@ -71,20 +71,21 @@ def grouped_plane_costs(x: np.ndarray, p: np.ndarray, group: np.ndarray, n_group
                         quadratic: bool = False) -> np.ndarray:
     """Fit residual of every point group at once, (G,): ``Q - tr(R^T M^-1 R)`` from per-group
     moment sums (``bincount``) of the basis ``phi = (u, v, 1)`` (affine fit ``(u, v) -> p``),
-    or with ``quadratic`` also ``(u^2, u v, v^2)`` in units of the group's RMS radius (a
-    quadratic fit: the residual of what a quadratic spline cannot follow locally), in
-    coordinates centred on each group's mean. Groups with at most as many points as ``phi``
-    has terms cost 0. Points may appear in several groups (pass them repeated)."""
+    or with ``quadratic`` also ``(u^2, u v, v^2)`` (a quadratic fit: the residual of what a
+    quadratic spline cannot follow locally), in coordinates centred on each group's mean and
+    divided by its RMS radius (so the result does not depend on the units of ``x``). Groups
+    with at most 3 points cost 0; with ``quadratic``, groups of 4-6 points get the affine
+    residual. Points may appear in several groups (pass them repeated)."""
     cnt = np.bincount(group, minlength=n_groups).astype(np.float64)
     safe = np.maximum(cnt, 1.0)
     mx = np.stack([np.bincount(group, x[:, j], n_groups) for j in range(2)], 1) / safe[:, None]
     mp = np.stack([np.bincount(group, p[:, j], n_groups) for j in range(3)], 1) / safe[:, None]
     x = x - mx[group]
     p = p - mp[group]
-    cols = [x[:, 0], x[:, 1], np.ones(len(x))]
+    r = np.sqrt(np.bincount(group, (x * x).sum(axis=1), n_groups) / safe) + 1e-300
+    xs = x / r[group, None]
+    cols = [np.ones(len(x)), xs[:, 0], xs[:, 1]]
     if quadratic:
-        r = np.sqrt(np.bincount(group, (x * x).sum(axis=1), n_groups) / safe) + 1e-300
-        xs = x / r[group, None]
         cols += [xs[:, 0] ** 2, xs[:, 0] * xs[:, 1], xs[:, 1] ** 2]
     d = len(cols)
     M = np.empty((n_groups, d, d))
@@ -94,16 +95,21 @@ def grouped_plane_costs(x: np.ndarray, p: np.ndarray, group: np.ndarray, n_group
     R = np.stack([np.stack([np.bincount(group, cols[a] * p[:, j], n_groups) for j in range(3)], 1)
                   for a in range(d)], 1)  # (G, d, 3)
     Q = np.bincount(group, (p * p).sum(axis=1), n_groups)
-    ssr = Q - _spd_quadratic_form(M, R)
-    return np.where(cnt > d, np.maximum(ssr, 0.0), 0.0)
+    explained = np.cumsum(_spd_quadratic_terms(M, R), axis=1)  # by the first 1, 2, ... columns
+    ssr = np.where(cnt > 3, np.maximum(Q - explained[:, 2], 0.0), 0.0)
+    if quadratic:
+        ssr = np.where(cnt > 6, np.maximum(Q - explained[:, 5], 0.0), ssr)
+    return ssr
 
 
-def _spd_quadratic_form(M: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """``tr(R^T (M + eps I)^-1 R)`` for stacks of symmetric positive semidefinite ``M``
-    (G, d, d) and ``R`` (G, d, k), ``eps = 1e-12 trace(M)``: ``L D L^T`` factors vectorized over
-    the stack (a loop over the d columns), the form being ``sum_i |(L^-1 R)_i|^2 / d_i``. Not
-    ``np.linalg.solve``: a LAPACK call per small system, which under OpenBLAS threading on a
-    loaded machine took 0.6-4 s for 5e4 3x3 systems instead of 0.03 s."""
+def _spd_quadratic_terms(M: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Terms ``|(L^-1 R)_i|^2 / d_i`` (G, d) of ``tr(R^T (M + eps I)^-1 R)`` for stacks of
+    symmetric positive semidefinite ``M`` (G, d, d) and ``R`` (G, d, k), with
+    ``M + eps I = L D L^T`` and ``eps = 1e-12 trace(M)``; the sum of the first ``j`` terms is the
+    form of the leading ``j x j`` block (the fit with the first ``j`` columns). ``L D L^T`` is
+    vectorized over the stack (a loop over the d columns). Not ``np.linalg.solve``: a LAPACK
+    call per small system, which under OpenBLAS threading on a loaded machine took 0.6-4 s for
+    5e4 3x3 systems instead of 0.03 s."""
     G, d, _ = M.shape
     eps = 1e-12 * np.trace(M, axis1=1, axis2=2) + 1e-300
     L = np.zeros((G, d, d))
@@ -115,7 +121,7 @@ def _spd_quadratic_form(M: np.ndarray, R: np.ndarray) -> np.ndarray:
     Y = np.array(R, dtype=np.float64)
     for i in range(1, d):
         Y[:, i] -= (L[:, i, :i, None] * Y[:, :i]).sum(axis=1)
-    return (Y**2 / D[:, :, None]).sum(axis=(1, 2))
+    return (Y**2).sum(axis=2) / D
 
 
 def locate(knots: np.ndarray, triangles: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -134,14 +140,13 @@ def locate(knots: np.ndarray, triangles: np.ndarray, uv: np.ndarray) -> np.ndarr
     return owner
 
 
-
 class PlaneFitCost:
     """Sum of squared residuals of the affine fit ``(u, v) -> p`` over the points of a triangle.
 
     With ``phi = (u, v, 1)``, moment sums ``M = sum phi phi^T``, ``R = sum phi p^T`` and
     ``Q = sum |p|^2`` over the triangle's points, the residual is ``Q - tr(R^T M^-1 R)``
-    (normal equations; method.md section 2.4). Sums are taken in coordinates centred on the
-    region being triangulated, which avoids cancellation.
+    (normal equations; method.md section 2.4). Sums are taken per triangle, in coordinates
+    centred on its points' mean and divided by their RMS radius (:func:`grouped_plane_costs`).
     """
 
     def __init__(self, uv: np.ndarray, points: np.ndarray):
@@ -293,7 +298,17 @@ def _candidate_triangles(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
         o3, o4 = _orient(E0, E1, A), _orient(E0, E1, B)
         touches_end = (e0[None] == di[:, None]) | (e0[None] == dj[:, None])
         touches_end |= ((e0[None] + 1) % m == di[:, None]) | ((e0[None] + 1) % m == dj[:, None])
-        crosses = ((o1 * o2 <= 0) & (o3 * o4 <= 0) & ~touches_end).any(axis=2)
+        cross = (o1 * o2 <= 0) & (o3 * o4 <= 0)
+        # a diagonal on the line of an edge it does not touch crosses it only if they overlap
+        both = (o1 == 0) & (o2 == 0)
+        if both.any():
+            axis = np.abs(B - A)[..., 0] >= np.abs(B - A)[..., 1]  # project on the longer axis
+            pr = lambda q: np.where(axis, q[..., 0], q[..., 1])  # noqa: E731
+            a, b, e, f = pr(A), pr(B), pr(E0), pr(E1)
+            overlap = (np.maximum(np.minimum(a, b), np.minimum(e, f))
+                       <= np.minimum(np.maximum(a, b), np.maximum(e, f)))
+            cross = np.where(both, overlap, cross)
+        crosses = (cross & ~touches_end).any(axis=2)
         # locally inside at vertex i: between the edges (i-1 -> i) and (i -> i+1)
         Ai, Bj = P[:, di], P[:, dj]
         prev, nxt = P[:, (di - 1) % m], P[:, (di + 1) % m]
@@ -352,7 +367,7 @@ def _min_cost_triangulations(poly: np.ndarray, chord: np.ndarray, trip: np.ndarr
 def constrained_delaunay_many(poly: np.ndarray, knots: np.ndarray) -> list:
     """Constrained Delaunay triangulations of ``L`` simple CCW polygons with ``m`` vertices each
     (``poly`` (L, m) knot indices), in one array pass: the triangulation minimizing the integral
-    of the piecewise-linear interpolant of ``|x - x_0|^2`` (``x_0`` the polygon's centroid), i.e.
+    of the piecewise-linear interpolant of ``|x - x_0|^2`` (``x_0`` the mean of its vertices), i.e.
     ``sum_T area(T) (|a|^2 + |b|^2 + |c|^2) / 3``. Every Lawson flip to a locally Delaunay edge
     lowers that lifted volume, so its minimum is the constrained Delaunay triangulation (any
     one of them for co-circular knots). None where it fails (then use
@@ -380,9 +395,10 @@ class FeatureLinkTriangulator:
 
     The quadratic residual measures what a quadratic spline cannot follow locally. On 60 random
     knots with 6000 points (3 seeds each of a straight crease, a curved crease and Franke's
-    function; least squares, error on a 90x90 grid of the true function) it was 0-3% better than
-    the affine one on the creases and 7-17% better on Franke's function, where the affine choice
-    had been 2-7% worse than Delaunay links.
+    function; least squares, error on a 90x90 grid of the true function;
+    ``benchmarks/same_knots.py``) it was within 1% of the affine one on the straight crease,
+    0.2-2% better on the curved one and 7-17% better on Franke's function, where the affine
+    choice had been 2-7% worse than Delaunay links.
 
     :meth:`triangulate_many` does all the links of one level at once (the link procedure uses
     it): links with the same number of vertices share one array pass for their admissible
@@ -417,13 +433,13 @@ class FeatureLinkTriangulator:
                 elif self.movable is None or (
                     self.movable[list(poly)].all() and self.movable[list(J)].all()
                 ):
-                    by_size.setdefault(len(poly), []).append(li)
+                    by_size.setdefault((len(poly), len(J)), []).append(li)
                 # links that touch the border rings keep their Delaunay choice: reaching into
                 # the rings with long triangles would shrink the region where the basis sums
                 # to one
-            for m, members in by_size.items():
+            for (m, nj), members in by_size.items():
                 polys = np.array([polygons[li] for li in members], dtype=np.int64).reshape(-1, m)
-                J = np.array([Js[li] for li in members], dtype=np.int64).reshape(len(members), -1)
+                J = np.array([Js[li] for li in members], dtype=np.int64).reshape(-1, nj)
                 for li, tris in zip(members, self._optimal(polys, J, knots)):
                     out[li] = tris
         # the rest (the last level, which does not change a TCB basis, links at the border

@@ -48,17 +48,62 @@ def test_grouped_fit_residuals_match_a_least_squares_solve_per_group(quadratic):
     p = np.c_[x, np.sin(3 * x[:, 0]) + x[:, 1] ** 2] + 0.01 * rng.standard_normal((4000, 3))
     g = rng.integers(0, 40, 4000)
     g[g == 7] = 8  # an empty group costs 0
+    g[np.flatnonzero(g == 9)[3:]] = 10  # 3 points: 0
+    g[np.flatnonzero(g == 11)[5:]] = 12  # 5 points: the affine residual even when quadratic
     got = grouped_plane_costs(x, p, g, 40, quadratic=quadratic)
     for k in range(40):
         xx = x[g == k]
         A = np.c_[xx, np.ones(len(xx))]
-        if quadratic:
+        if quadratic and len(xx) > 6:
             A = np.c_[A, xx[:, 0] ** 2, xx[:, 0] * xx[:, 1], xx[:, 1] ** 2]
         ref = 0.0
-        if len(xx) > A.shape[1]:
+        if len(xx) > 3:
             c = np.linalg.lstsq(A, p[g == k], rcond=None)[0]
             ref = ((A @ c - p[g == k]) ** 2).sum()
         assert abs(got[k] - ref) <= 1e-8 * max(ref, 1.0)
+    assert got[7] == got[9] == 0 and got[11] > 0
+
+
+@pytest.mark.parametrize("apex", [(2.0, 3.0), (2.0, 1.6)])
+def test_a_diagonal_on_the_line_of_a_distant_edge_is_admissible(apex):
+    """A crown whose diagonal (1,1)-(3,1) lies on the line of the edge (6,1)-(5,1) it does not
+    touch: the diagonal is inside the polygon, so the batched CDT must find the same
+    triangulation as the per-polygon one (it used to treat the two as crossing)."""
+    knots = np.array([(0, 0), (7, 0), (7, 3), (6, 1), (5, 1), (4, 3), (3, 1), apex, (1, 1), (0, 3)],
+                     dtype=float)
+    poly = np.arange(10)[None]
+    got = constrained_delaunay_many(poly, knots)[0]
+    assert got is not None
+    assert tri_set(got) == tri_set(constrained_delaunay(tuple(range(10)), knots))
+
+
+@pytest.mark.parametrize("quadratic", [False, True])
+def test_fit_residuals_do_not_depend_on_the_units_of_the_parameters(quadratic):
+    """Scaling u, v by s changes no residual (the columns are scaled per group): small groups
+    of a smooth function, where a ridge on unscaled columns had biased the quadratic fit."""
+    rng = np.random.default_rng(1)
+    g = np.repeat(np.arange(200), 20)
+    x = rng.random((200, 2))[g] + 0.03 * rng.random((4000, 2))
+    p = np.c_[x, np.sin(3 * x[:, 0]) * np.cos(2 * x[:, 1])]
+    ref = grouped_plane_costs(x, p, g, 200, quadratic)
+    for s in (0.01, 100.0):
+        got = grouped_plane_costs(s * x, p, g, 200, quadratic)
+        np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-12 * ref.max())
+
+
+def test_link_procedure_refuses_a_batch_with_missing_links():
+    from core.configurations import link_triangulation_procedure
+
+    class Short:
+        def __call__(self, polygon, knots, J=(), level=0):
+            return constrained_delaunay(polygon, knots, J, level)
+
+        def triangulate_many(self, polygons, knots, Js, level=0):
+            return [self(p, knots, J, level) for p, J in zip(polygons, Js)][:-1]
+
+    knots = np.random.default_rng(3).random((30, 2))
+    with pytest.raises(ValueError, match="triangulations for"):
+        link_triangulation_procedure(knots, 2, link_triangulator=Short())
 
 
 def crease_data(n=6000, seed=0):
