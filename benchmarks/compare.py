@@ -67,15 +67,16 @@ def settings(quick: bool) -> dict:
                 same_iters=5, dem_step=4)
 
 
-def dataset_list(quick: bool, cfg: dict) -> list[dict]:
+def dataset_list(quick: bool, cfg: dict, seed: int = 0) -> list[dict]:
+    """The datasets; ``seed`` draws the scattered samples (grids, the DEM and meshes are fixed)."""
     n = cfg["n"]
     if quick:
-        return [ds.height_field("F1-franke", n), ds.height_field("crease", n),
+        return [ds.height_field("F1-franke", n, seed=seed), ds.height_field("crease", n, seed=seed),
                 ds.dem(cfg["dem_step"]), ds.mesh("patch-01")]
     out = []
     for name in ("F1-franke", "F2-cliff", "F6-sphere", "F7-trig", "F10-cospeak", "crease"):
         for sampling in ("scattered", "grid"):
-            out.append(ds.height_field(name, n, sampling))
+            out.append(ds.height_field(name, n, sampling, seed=seed))
     out.append(ds.dem(cfg["dem_step"]))
     for name in ("nefertiti", "three_peaks", "patch-01"):
         out.append(ds.mesh(name))
@@ -106,7 +107,8 @@ def stats(err: np.ndarray, diag: float, hold_err=None) -> dict:
 def run_tcb(d, P, H, diag, cfg, **kw):
     t = time.perf_counter()
     opts = dict(tolerance=0.0, max_control_points=cfg["budget"], initial_knots=cfg["initial"],
-                knots_per_iteration=cfg["per_iteration"], max_iterations=cfg["iterations"])
+                knots_per_iteration=cfg["per_iteration"], max_iterations=cfg["iterations"],
+                seed=cfg.get("seed", 0))
     opts.update(kw)
     s = fit_surface(P, d["faces"], **opts)
     sec = time.perf_counter() - t
@@ -206,7 +208,7 @@ def guarded(fn, *a, **kw):
 
 
 def compare_dataset(d: dict, cfg: dict) -> tuple[list, dict]:
-    P, H = split(d)
+    P, H = split(d, cfg.get("seed", 0))
     diag = float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
     rows = []
     tcb = guarded(run_tcb, d, P, H, diag, cfg)
@@ -238,6 +240,32 @@ def compare_dataset(d: dict, cfg: dict) -> tuple[list, dict]:
     return rows, same
 
 
+def aggregate(per_seed: list) -> tuple[list, dict]:
+    """Medians over seeds of every number of every row, and of the ratio to TCB's RMS with its
+    range (``ratio_lo``, ``ratio_hi``); a method that failed for any seed is a failed row."""
+    def med(rs, ref=None):
+        if any(r is None for r in rs):
+            return None
+        out = {k: float(np.median([r[k] for r in rs])) for k in rs[0]}
+        out["cp"], out["knots"] = int(round(out["cp"])), int(round(out["knots"]))
+        if ref is not None and all(x is not None for x in ref):
+            ratios = [r["rms"] / t["rms"] for r, t in zip(rs, ref)]
+            out["ratio"], out["ratio_lo"], out["ratio_hi"] = (
+                float(np.median(ratios)), float(min(ratios)), float(max(ratios)))
+        return out
+
+    first_rows, first_same = per_seed[0]
+    tcb = [rows[0][1] for rows, _ in per_seed]
+    rows = [(method, med([rows[i][1] for rows, _ in per_seed], tcb))
+            for i, (method, _) in enumerate(first_rows)]
+    same = {}
+    for label in first_same:
+        a = [s[label][0] for _, s in per_seed]
+        b = [s[label][1] for _, s in per_seed]
+        same[label] = (med(a), med(b, a))
+    return rows, same
+
+
 # ---------------------------------------------------------------------------------------------
 # tables
 # ---------------------------------------------------------------------------------------------
@@ -249,23 +277,25 @@ def fmt(v, spec=".2e"):
 
 def main_table(results) -> list[list[str]]:
     head = ["dataset", "method", "ctrl pts", "RMS/diag", "max/diag", "hold-out RMS/diag",
-            "seconds", "RMS ratio vs TCB"]
+            "seconds", "RMS ratio vs TCB (range over seeds)"]
     lines = [head]
     for name, rows, _ in results:
-        ref = rows[0][1]
         for method, r in rows:
             if r is None:
                 lines.append([name, method, "failed", "-", "-", "-", "-", "-"])
                 continue
-            ratio = r["rms"] / ref["rms"] if ref and ref["rms"] > 0 else np.nan
+            ratio = fmt(r.get("ratio"), ".2f")
+            if r.get("ratio_hi", 0) > r.get("ratio_lo", 0):
+                ratio += f" ({r['ratio_lo']:.2f}-{r['ratio_hi']:.2f})"
             lines.append([name, method, str(r["cp"]), fmt(r["rms"]), fmt(r["max"]),
-                          fmt(r["hold"]), fmt(r["sec"], ".1f"), fmt(ratio, ".2f")])
+                          fmt(r["hold"]), fmt(r["sec"], ".1f"), ratio])
     return lines
 
 
 def same_table(results) -> list[list[str]]:
     head = ["dataset", "comparison", "interior knots TCB / DCB", "ctrl pts TCB / DCB",
-            "RMS/diag TCB", "RMS/diag DCB", "TCB/DCB RMS", "hold-out TCB/DCB"]
+            "RMS/diag TCB", "RMS/diag DCB", "TCB/DCB RMS (range over seeds)",
+            "hold-out TCB/DCB (of the medians)"]
     lines = [head]
     for name, _, same in results:
         for label, (a, b) in same.items():
@@ -273,9 +303,12 @@ def same_table(results) -> list[list[str]]:
                 lines.append([name, label, "-", "-", "-", "-", "-", "-"])
                 continue
             hold = a["hold"] / b["hold"] if np.isfinite(a["hold"]) and b["hold"] > 0 else np.nan
+            ratio = fmt(1.0 / b["ratio"], ".2f")  # median over seeds of TCB/DCB
+            if b["ratio_hi"] > b["ratio_lo"]:
+                ratio += f" ({1.0 / b['ratio_hi']:.2f}-{1.0 / b['ratio_lo']:.2f})"
             lines.append([name, label.replace("_", " "), f"{a['knots']} / {b['knots']}",
                           f"{a['cp']} / {b['cp']}", fmt(a["rms"]), fmt(b["rms"]),
-                          fmt(a["rms"] / b["rms"], ".2f"), fmt(hold, ".2f")])
+                          ratio, fmt(hold, ".2f")])
     return lines
 
 
@@ -295,30 +328,42 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="small data, few datasets (< 2 min)")
     ap.add_argument("--out", type=Path, default=None, help="Markdown output file")
     ap.add_argument("--only", default=None, help="run only datasets whose name contains this")
+    ap.add_argument("--seeds", type=int, default=None,
+                    help="repeat with this many seeds (samples, hold-out split, TCB/DCB random "
+                         "choices) and report medians; default 3, 1 with --quick")
     args = ap.parse_args(argv)
     cfg = settings(args.quick)
+    if args.seeds is None:
+        args.seeds = 1 if args.quick else 3
     out = args.out or ROOT / "docs" / ("compare_quick.md" if args.quick else "compare.md")
     t0 = time.perf_counter()
-    results = []
-    for d in dataset_list(args.quick, cfg):
-        if args.only and args.only not in d["name"]:
-            continue
-        t = time.perf_counter()
-        print(f"[{time.perf_counter() - t0:6.1f}s] {d['name']} ({len(d['points'])} points)",
-              file=sys.stderr, flush=True)
-        rows, same = compare_dataset(d, cfg)
-        results.append((d["name"], rows, same))
-        print(f"         done in {time.perf_counter() - t:.1f}s", file=sys.stderr, flush=True)
+    runs: dict = {}
+    for seed in range(args.seeds):
+        cfg["seed"] = seed
+        for d in dataset_list(args.quick, cfg, seed):
+            if args.only and args.only not in d["name"]:
+                continue
+            t = time.perf_counter()
+            print(f"[{time.perf_counter() - t0:6.1f}s] {d['name']} ({len(d['points'])} points), "
+                  f"seed {seed}", file=sys.stderr, flush=True)
+            runs.setdefault(d["name"], []).append(compare_dataset(d, cfg))
+            print(f"         done in {time.perf_counter() - t:.1f}s", file=sys.stderr, flush=True)
+    del cfg["seed"]
+    results = [(name, *aggregate(per_seed)) for name, per_seed in runs.items()]
     t1, t2 = main_table(results), same_table(results)
     print(to_text(t1))
     print()
     print(to_text(t2))
     total = time.perf_counter() - t0
     cmd = "benchmarks/compare.py" + (" --quick" if args.quick else "")
+    if args.seeds != (1 if args.quick else 3):
+        cmd += f" --seeds {args.seeds}"
     md = [
         f"# TCB vs baselines ({'quick' if args.quick else 'full'} run)",
         "",
         f"Produced by `.venv/bin/python {cmd}` in {total:.0f} s. Settings: {cfg}. "
+        f"{args.seeds} seed(s) (scattered samples, hold-out split, TCB/DCB random choices; the "
+        "grids, the DEM and the meshes are fixed): every number is the median over the seeds. "
         "Quadratic TCB/DCB (degree 2, the default), bicubic tensor and FITPACK splines. Errors "
         "are divided by the bounding-box diagonal of the data; ratio = method RMS / TCB RMS "
         "(> 1: TCB is more accurate).",
