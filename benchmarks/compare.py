@@ -1,7 +1,13 @@
 """TCB against its baselines on the same points, in the same process (issue 5).
 
-    .venv/bin/python benchmarks/compare.py            # full run, writes docs/compare.md
+    .venv/bin/python benchmarks/compare.py            # full run, 3 seeds, writes docs/compare.md
     .venv/bin/python benchmarks/compare.py --quick    # < 2 minutes, writes docs/compare_quick.md
+
+Every dataset runs once per seed (``--seeds``; 3 for the full run, 1 with ``--quick``): the seed
+draws the scattered samples, the hold-out split and TCB's/DCB's random choices (initial knots,
+jitter). The tables give the median over the seeds of every number and the range of the ratio
+to TCB: the adaptive loop is path dependent, and one seed's ratios moved by up to 50% with
+small changes of the method.
 
 Methods (one row each per dataset):
 
