@@ -369,7 +369,8 @@ def _distance_to_hull(uv: np.ndarray, chunk: int = 20_000) -> np.ndarray:
 
 
 def _fold_sample(q: np.ndarray) -> np.ndarray:
-    """Indices of the (seeded) subset of at most 40 000 points used by the fold checks (folds are regions of at least 2% of the cloud, which a sample of this size resolves)."""
+    """Indices of the (seeded) subset of at most 40 000 points used by the fold checks (a fold
+    that matters covers at least 2% of the cloud, which a sample of this size resolves)."""
     if len(q) > _FOLD_MAX_SAMPLE:
         return np.sort(np.random.default_rng(0).choice(len(q), _FOLD_MAX_SAMPLE, replace=False))
     return np.arange(len(q))

@@ -162,10 +162,10 @@ LINE_CLEARANCE = 0.08
 
 
 def _clearance(x: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
-    """For points ``x`` (M, 2) and their neighbour knots ``nbrs`` (M, K, 2; rows may be padded
-    with NaN): min over pairs (a, b) of ``|det(a, b, x)| / |ab|^2`` (distance to the line ab in
-    units of |ab|), over the pairs whose segment is near ``x`` (midpoint not farther than
-    ``|ab|``); ``inf`` where there is none. Vectorized over points and pairs, (M,)."""
+    """For points ``x`` (M, 2) and their neighbour knots ``nbrs`` (M, K, 2): min over pairs
+    (a, b) of ``|det(a, b, x)| / |ab|^2`` (distance to the line ab in units of |ab|), over the
+    pairs whose segment is near ``x`` (midpoint not farther than ``|ab|``); ``inf`` where there
+    is none. Vectorized over points and pairs, (M,)."""
     K = nbrs.shape[1]
     if K < 2:
         return np.full(len(x), np.inf)
@@ -176,8 +176,7 @@ def _clearance(x: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
     xa = x[:, None, :] - a
     det = np.abs(ab[..., 0] * xa[..., 1] - ab[..., 1] * xa[..., 0])
     mid = 0.5 * (a + b)
-    with np.errstate(invalid="ignore"):
-        near = ((mid - x[:, None, :]) ** 2).sum(axis=-1) <= L2  # NaN padding: False
+    near = ((mid - x[:, None, :]) ** 2).sum(axis=-1) <= L2
     r = np.where(near, det / np.where(near, np.maximum(L2, 1e-300), 1.0), np.inf)
     return r.min(axis=1)
 

@@ -26,7 +26,7 @@ from itertools import combinations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .configurations import constrained_delaunay, delaunay_triangulation
+from .configurations import _segments_cross, constrained_delaunay, delaunay_triangulation
 from .simplex import SimplexBatch, orient2d
 from .spatial import BoxIndex
 
@@ -291,23 +291,15 @@ def _candidate_triangles(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     diag = np.flatnonzero(~adjacent)
     if len(diag):
         di, dj = ii[diag], jj[diag]
-        A, B = P[:, di, None], P[:, dj, None]  # (L, D, 1, 2)
         e0 = np.arange(m)
-        E0, E1 = P[:, None, e0], P[:, None, (e0 + 1) % m]  # (L, 1, m, 2)
-        o1, o2 = _orient(A, B, E0), _orient(A, B, E1)
-        o3, o4 = _orient(E0, E1, A), _orient(E0, E1, B)
+        # closed-segment intersection of each diagonal with each polygon edge, (L, D, m);
+        # edges that share an end with the diagonal do not count
+        shape = (L, len(diag), m, 2)
+        ends = [np.broadcast_to(q, shape).reshape(-1, 2) for q in
+                (P[:, di, None], P[:, dj, None], P[:, None, e0], P[:, None, (e0 + 1) % m])]
+        cross = _segments_cross(*ends).reshape(shape[:3])
         touches_end = (e0[None] == di[:, None]) | (e0[None] == dj[:, None])
         touches_end |= ((e0[None] + 1) % m == di[:, None]) | ((e0[None] + 1) % m == dj[:, None])
-        cross = (o1 * o2 <= 0) & (o3 * o4 <= 0)
-        # a diagonal on the line of an edge it does not touch crosses it only if they overlap
-        both = (o1 == 0) & (o2 == 0)
-        if both.any():
-            axis = np.abs(B - A)[..., 0] >= np.abs(B - A)[..., 1]  # project on the longer axis
-            pr = lambda q: np.where(axis, q[..., 0], q[..., 1])  # noqa: E731
-            a, b, e, f = pr(A), pr(B), pr(E0), pr(E1)
-            overlap = (np.maximum(np.minimum(a, b), np.minimum(e, f))
-                       <= np.minimum(np.maximum(a, b), np.maximum(e, f)))
-            cross = np.where(both, overlap, cross)
         crosses = (cross & ~touches_end).any(axis=2)
         # locally inside at vertex i: between the edges (i-1 -> i) and (i -> i+1)
         Ai, Bj = P[:, di], P[:, dj]
