@@ -16,6 +16,14 @@ def scattered():
     return np.random.default_rng(1).random((3000, 2))
 
 
+def parameters(scattered, grid: bool, side: int) -> np.ndarray:
+    """The scattered sample, or a ``side x side`` lattice of the unit square."""
+    if not grid:
+        return scattered
+    g = np.linspace(0, 1, side)
+    return np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+
+
 def test_averaged_knots():
     t = averaged_knots(np.array([0.0, 0.1, 0.2, 0.6, 0.7, 1.0]), 3)
     assert len(t) == 6 + 3 + 1
@@ -26,11 +34,7 @@ def test_averaged_knots():
 
 @pytest.mark.parametrize("grid", [False, True])
 def test_reproduces_bicubic_polynomial(scattered, grid):
-    if grid:
-        g = np.linspace(0, 1, 40)
-        uv = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
-    else:
-        uv = scattered
+    uv = parameters(scattered, grid, 40)
     P = np.c_[uv, bicubic(uv[:, 0], uv[:, 1])]
     surf = fit_tensor(uv, P, max_control_points=64, tolerance=0, max_iterations=3, smoothness=0)
     assert isinstance(surf, TensorSurface)
@@ -78,11 +82,7 @@ def test_tolerance_stops_early(scattered):
 @pytest.mark.parametrize("grid", [False, True])
 def test_knots_concentrate_at_crease(scattered, grid):
     """Dominant columns crowd at a crease along u = 0.37: knots follow them."""
-    if grid:
-        g = np.linspace(0, 1, 70)
-        uv = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
-    else:
-        uv = scattered
+    uv = parameters(scattered, grid, 70)
     P = np.c_[uv, 0.25 * np.abs(uv[:, 0] - 0.37) + 0.05 * uv[:, 1]]
     surf = fit_tensor(uv, P, max_control_points=150, tolerance=0)
     p = surf.degree

@@ -85,6 +85,13 @@ def test_write_mesh_rejects_unknown_extension_and_bad_arrays(tmp_path: Path) -> 
 # ---------------------------------------------------------------------------------------------
 
 
+def assert_reads_the_sample_mesh(path: Path, text: str) -> None:
+    path.write_text(text)
+    pts, faces = read_geometry(path)
+    np.testing.assert_array_equal(pts, VERTS)
+    np.testing.assert_array_equal(faces, TRIS)
+
+
 def test_off_with_counts_on_header_comments_polygons_and_colours(tmp_path: Path) -> None:
     text = (
         "OFF 5 2 0  # counts on the header line\n"
@@ -93,10 +100,7 @@ def test_off_with_counts_on_header_comments_polygons_and_colours(tmp_path: Path)
         + "\n4 0 1 2 3 255 0 0\n"  # quad with a colour
         "3 1 4 2\n"
     )
-    (tmp_path / "a.off").write_text(text)
-    pts, faces = read_geometry(tmp_path / "a.off")
-    np.testing.assert_array_equal(pts, VERTS)
-    np.testing.assert_array_equal(faces, TRIS)
+    assert_reads_the_sample_mesh(tmp_path / "a.off", text)
 
 
 def test_coff_and_point_only_off(tmp_path: Path) -> None:
@@ -140,10 +144,7 @@ def test_obj_with_slashes_quads_negative_indices_and_other_statements(tmp_path: 
         "f -4 -1 -3  # relative indices: 2 5 3\n"
         "l 1 2\n"
     )
-    (tmp_path / "a.obj").write_text(text)
-    pts, faces = read_geometry(tmp_path / "a.obj")
-    np.testing.assert_array_equal(pts, VERTS)
-    np.testing.assert_array_equal(faces, TRIS)
+    assert_reads_the_sample_mesh(tmp_path / "a.obj", text)
 
 
 def test_obj_without_faces_is_a_point_cloud(tmp_path: Path) -> None:
