@@ -264,20 +264,39 @@ def _segments_cross(p1, p2, q1, q2) -> np.ndarray:
     return proper | touch | on_seg(p1, p2, q2, d4)
 
 
+def _unique_rows(rows: np.ndarray, return_counts: bool = False):
+    """``np.unique(rows, axis=0, return_inverse=True[, return_counts])`` for nonnegative int
+    rows, through one int64 key per row when the values fit (5-10x faster than sorting rows)."""
+    rows = np.asarray(rows, dtype=np.int64)
+    m = rows.shape[1]
+    base = int(rows.max(initial=0)) + 1
+    if m == 0 or len(rows) == 0 or base ** m >= 2**62:
+        out = np.unique(rows, axis=0, return_inverse=True, return_counts=return_counts)
+        return (out[0], out[1].reshape(-1)) + tuple(out[2:])
+    key = np.zeros(len(rows), dtype=np.int64)
+    for c in range(m):
+        key = key * base + rows[:, c]
+    # lexicographic row order is the order of the keys
+    ukey, first, inv, *counts = np.unique(
+        key, return_index=True, return_inverse=True, return_counts=return_counts
+    )
+    return (rows[first], inv.reshape(-1)) + tuple(counts)
+
+
 def _close_links(J_rows: np.ndarray, heads: np.ndarray, tails: np.ndarray):
     """Group directed link edges by ``J``, cancel opposite pairs and chain each group.
 
     Returns the unique ``J`` rows and, per group, the CCW polygon as a list of knot indices or
-    None when the link does not close into one simple loop.
+    None when the link does not close into one simple loop. Vectorized over all groups: each
+    edge ``a -> b`` points to the edge of its group that leaves ``b``; walking those pointers
+    from each group's first edge must come back after exactly as many steps as the group has
+    edges (one simple loop through all of them).
     """
-    groups, inv = np.unique(J_rows, axis=0, return_inverse=True)
-    inv = inv.reshape(-1)
+    groups, inv = _unique_rows(J_rows)
     # cancel opposite pairs: canonical undirected key per group, +1 for lo->hi, -1 for hi->lo
     lo, hi = np.minimum(heads, tails), np.maximum(heads, tails)
     sign = np.where(heads < tails, 1, -1)
-    key = np.stack([inv, lo, hi], axis=1)
-    ukey, kinv, kcount = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    kinv = kinv.reshape(-1)
+    ukey, kinv, kcount = _unique_rows(np.stack([inv, lo, hi], axis=1), return_counts=True)
     net = np.zeros(len(ukey), dtype=np.int64)
     np.add.at(net, kinv, sign)
     bad_group = np.zeros(len(groups), dtype=bool)
@@ -287,28 +306,39 @@ def _close_links(J_rows: np.ndarray, heads: np.ndarray, tails: np.ndarray):
     g = ukey[keep, 0]
     a = np.where(net[keep] > 0, ukey[keep, 1], ukey[keep, 2])
     b = np.where(net[keep] > 0, ukey[keep, 2], ukey[keep, 1])
-    order = np.argsort(g, kind="stable")
-    g, a, b = g[order], a[order], b[order]
-    starts = np.searchsorted(g, np.arange(len(groups) + 1))
+    # edges sorted by (group, head); ukey rows are sorted by (group, lo, hi), so the first
+    # edge of each group is the one the loop used to start from
+    start_edge = np.r_[0, np.flatnonzero(np.diff(g)) + 1] if len(g) else np.zeros(0, np.int64)
+    order = np.lexsort((a, g))
+    gs, as_ = g[order], a[order]
+    size = np.bincount(g, minlength=len(groups))
+    # two edges leaving one vertex: pinched or several loops
+    dup_head = (gs[1:] == gs[:-1]) & (as_[1:] == as_[:-1])
+    bad_group[gs[1:][dup_head]] = True
+    # successor of each edge: the edge of the same group whose head is its tail
+    n_v = int(max(a.max(initial=0), b.max(initial=0))) + 1
+    skey = gs * n_v + as_
+    want = g * n_v + b
+    pos = np.minimum(np.searchsorted(skey, want), max(len(skey) - 1, 0))
+    found = skey[pos] == want if len(skey) else np.zeros(0, dtype=bool)
+    bad_group[g[~found]] = True
+    succ = np.where(found, order[pos], -1)
+    gid = g[start_edge]
+    ok = ~bad_group[gid] & (size[gid] >= 3)
+    gid, cur = gid[ok], start_edge[ok]
+    length = size[gid]
+    steps = int(length.max(initial=0))
+    walk = np.empty((len(gid), steps), dtype=np.int64)
+    closed_at = np.full(len(gid), -1)
+    for t in range(steps):
+        walk[:, t] = a[cur]
+        cur = succ[cur]
+        back = (cur == start_edge[ok]) & (closed_at < 0)
+        closed_at[back] = t + 1
+    simple = closed_at == length
     polys: list = [None] * len(groups)
-    for gi in range(len(groups)):
-        s, e = starts[gi], starts[gi + 1]
-        if bad_group[gi] or e - s < 3:
-            continue
-        nxt = dict(zip(a[s:e].tolist(), b[s:e].tolist()))
-        if len(nxt) != e - s:
-            continue  # two edges leave one vertex: pinched or several loops
-        v0 = int(a[s])
-        poly = [v0]
-        v = nxt[v0]
-        while v != v0 and len(poly) <= e - s:
-            poly.append(v)
-            v = nxt.get(v, -1)
-            if v == -1:
-                break
-        if v != v0 or len(poly) != e - s:
-            continue
-        polys[gi] = poly
+    for gi, row, m in zip(gid[simple].tolist(), walk[simple].tolist(), length[simple].tolist()):
+        polys[gi] = row[:m]
     return groups, polys
 
 

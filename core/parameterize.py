@@ -25,6 +25,7 @@ from scipy.sparse.linalg import splu
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .errors import InvalidInputError, ParameterizationError, TopologyError
+from .parallel import pmap, row_blocks
 from .simplex import orient2d
 
 __all__ = [
@@ -51,7 +52,7 @@ _FOLD_COHERENCE = 0.5  # fraction of suspect 3D neighbours for a point to be fla
 _FOLD_MAX_FRACTION = 0.02  # fraction of flagged points above which the cloud is rejected
 _FOLD_RIM = 0.05  # "at the rim": within this fraction of the extent from the convex hull
 _FOLD_RIM_SHARE = 0.6  # steep points count as a fold when this share of them is at the rim
-_FOLD_MAX_SAMPLE = 40_000  # larger clouds are checked on a seeded random subset of this size
+_FOLD_MAX_SAMPLE = 20_000  # larger clouds are checked on a seeded random subset of this size
 _THIN_NEIGHBOURHOOD = 0.25  # lambda_0 / lambda_1 above this: local normal unreliable
 _COLLINEAR_RTOL = 1e-9  # RMS distance from the best line, relative to the scale
 
@@ -90,8 +91,10 @@ def _check_finite(points: np.ndarray, *, what: str = "points") -> None:
 def count_duplicates(points: np.ndarray) -> int:
     """Number of rows of ``points`` that exactly repeat an earlier row.
 
-    ``n - len(np.unique(points, axis=0))``: exact (bitwise-equal value) duplicates only; near
-    duplicates are not counted.
+    Rows equal in every coordinate (``==``, so ``-0.0`` equals ``0.0``) after a lexicographic
+    sort are neighbours: the count is the number of rows equal to the row before them. Exact
+    duplicates only; near duplicates are not counted. (``np.unique(points, axis=0)`` gives the
+    same count 5x slower: 70 ms on 1e5 points.)
 
     Args:
         points: ``(n, d)`` array.
@@ -102,7 +105,10 @@ def count_duplicates(points: np.ndarray) -> int:
     arr = np.asarray(points)
     if arr.ndim != 2 or len(arr) == 0:
         return 0
-    return int(len(arr) - len(np.unique(arr, axis=0)))
+    if arr.shape[1] == 0:
+        return len(arr) - 1
+    s = arr[np.lexsort(arr.T[::-1])]
+    return int(np.count_nonzero((s[1:] == s[:-1]).all(axis=1)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -323,13 +329,18 @@ def _local_planes(q: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.nda
         neighbourhoods (each point's own index among them).
     """
     _, idx = cKDTree(q).query(q, k=k + 1, workers=-1)
-    nb = q[idx]
-    nb -= nb.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", nb, nb) / (k + 1)
-    w, v = np.linalg.eigh(cov)
-    w = np.maximum(w, 0.0)
+
+    def block(bounds):
+        s, e = bounds
+        nb = q[idx[s:e]]
+        nb -= nb.mean(axis=1, keepdims=True)
+        return np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb) / (k + 1))
+
+    parts = pmap(block, row_blocks(len(q)))  # blocks on parallel threads (core.parallel)
+    w = np.maximum(np.concatenate([p[0] for p in parts]), 0.0)
+    normals = np.concatenate([p[1][:, :, 0] for p in parts])
     reliable = w[:, 0] < _THIN_NEIGHBOURHOOD * w[:, 1]
-    return v[:, :, 0], np.sqrt(w[:, 0]), reliable, idx
+    return normals, np.sqrt(w[:, 0]), reliable, idx
 
 
 def _distance_to_hull(uv: np.ndarray, chunk: int = 20_000) -> np.ndarray:
@@ -369,7 +380,7 @@ def _distance_to_hull(uv: np.ndarray, chunk: int = 20_000) -> np.ndarray:
 
 
 def _fold_sample(q: np.ndarray) -> np.ndarray:
-    """Indices of the (seeded) subset of at most 40 000 points used by the fold checks (a fold
+    """Indices of the (seeded) subset of at most 20 000 points used by the fold checks (a fold
     that matters covers at least 2% of the cloud, which a sample of this size resolves)."""
     if len(q) > _FOLD_MAX_SAMPLE:
         return np.sort(np.random.default_rng(0).choice(len(q), _FOLD_MAX_SAMPLE, replace=False))
@@ -442,7 +453,7 @@ def _fold_fraction(
     Only points with a reliable local normal are suspects, and a point counts as flagged only
     when at least half of its 3D neighbourhood are suspects (folds are regions; noise makes
     isolated suspects), so noise and line-like neighbourhoods do not cause false alarms.
-    Clouds of more than 40 000 points are checked on a seeded (deterministic) random subset of
+    Clouds of more than 20 000 points are checked on a seeded (deterministic) random subset of
     that size; ``planes`` are the local planes of that subset when already computed.
     """
     sample = _fold_sample(q)

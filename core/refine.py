@@ -25,6 +25,7 @@ from .border import border_rings, default_ring_count
 from .configurations import link_triangulation_procedure
 from .errors import BorderError, InvalidInputError
 from .fit import FitResult, fit_control_points
+from .parallel import pmap, row_blocks
 from .simplex import orient2d
 from .spline_space import SplineSpace, build_space, validate_knots
 from .triangulation import FeatureLinkTriangulator, PlaneFitCost, feature_triangulation, locate
@@ -74,7 +75,7 @@ class RefineOptions:
             raise InvalidInputError(f"smoothness must be a nonnegative number, got {self.smoothness}")
 
 
-def feature_measure(uv: np.ndarray, points: np.ndarray, k: int = 12, max_points: int = 50_000,
+def feature_measure(uv: np.ndarray, points: np.ndarray, k: int = 12, max_points: int = 20_000,
                     seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Surface variation ``lambda_min / (lambda_1 + lambda_2 + lambda_3)`` of the covariance of
     each point's ``k`` nearest neighbours in parameter space (Pauly et al.), on a subsample.
@@ -86,11 +87,17 @@ def feature_measure(uv: np.ndarray, points: np.ndarray, k: int = 12, max_points:
     sample = np.sort(rng.choice(N, max_points, replace=False)) if N > max_points else np.arange(N)
     k = min(k, len(sample))
     tree = cKDTree(uv[sample])
-    _, nb = tree.query(uv[sample], k=k)
-    Q = points[sample][nb]  # (s, k, 3)
-    Q = Q - Q.mean(axis=1, keepdims=True)
-    cov = np.einsum("ski,skj->sij", Q, Q) / k
-    ev = np.maximum(np.linalg.eigvalsh(cov), 0.0)  # rounding can make a zero one negative
+    _, nb = tree.query(uv[sample], k=k, workers=-1)
+    P = points[sample]
+
+    def block(bounds):
+        s, e = bounds
+        Q = P[nb[s:e]]  # (b, k, 3)
+        Q = Q - Q.mean(axis=1, keepdims=True)
+        return np.linalg.eigvalsh(np.einsum("ski,skj->sij", Q, Q) / k)
+
+    # blocks on parallel threads (core.parallel); rounding can make a zero eigenvalue negative
+    ev = np.maximum(np.concatenate(pmap(block, row_blocks(len(sample)))), 0.0)
     total = ev.sum(axis=1)
     f = np.where(total > 0, ev[:, 0] / np.where(total > 0, total, 1.0), 0.0)
     return sample, np.clip(f, 0.0, 1.0 / 3.0)
@@ -116,7 +123,7 @@ def initial_knots(uv: np.ndarray, points: np.ndarray, count: int, seed: int = 0,
     count = int(min(count, len(X)))
     c = X[rng.choice(len(X), count, replace=False, p=w / w.sum())].copy()
     for _ in range(iterations):
-        _, label = cKDTree(c).query(X)
+        _, label = cKDTree(c).query(X, workers=-1)
         ws = np.bincount(label, weights=w, minlength=count)
         cu = np.bincount(label, weights=w * X[:, 0], minlength=count)
         cv = np.bincount(label, weights=w * X[:, 1], minlength=count)

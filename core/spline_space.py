@@ -25,6 +25,7 @@ from .configurations import (
     triangulate_polygon,
 )
 from .errors import InvalidKnotsError
+from .parallel import pmap, row_blocks
 from .simplex import SimplexBatch, orient2d
 from .spatial import BoxIndex
 
@@ -226,16 +227,28 @@ class SplineSpace:
             if der not in _DERIVATIVES:
                 raise ValueError(f"derivative must be one of {sorted(_DERIVATIVES)}, got {der}")
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        parts: list = [([], [], []) for _ in ders]
-        for pt, cfg in self._index.pairs(uv):
-            values = self._batch.evaluate_many(uv[pt], cfg, ders)
-            for (rows, cols, vals), v in zip(parts, values):
-                nz = v != 0
-                rows.append(pt[nz].astype(np.int32))
-                cols.append(self.config_basis[cfg[nz]].astype(np.int32))
-                vals.append(v[nz])
+
+        def block(bounds):
+            s, e = bounds
+            x = uv[s:e]
+            parts: list = [([], [], []) for _ in ders]
+            for pt, cfg in self._index.pairs(x):
+                values = self._batch.evaluate_many(x[pt], cfg, ders)
+                for (rows, cols, vals), v in zip(parts, values):
+                    nz = v != 0
+                    rows.append((pt[nz] + s).astype(np.int32))
+                    cols.append(self.config_basis[cfg[nz]].astype(np.int32))
+                    vals.append(v[nz])
+            return parts
+
+        # blocks of points on parallel threads (core.parallel), combined in order: the same
+        # entries in the same order as one serial pass
+        blocks = pmap(block, row_blocks(len(uv), min_rows=2048))
         out = []
-        for rows, cols, vals in parts:
+        for d in range(len(ders)):
+            rows = [r for b in blocks for r in b[d][0]]
+            cols = [c for b in blocks for c in b[d][1]]
+            vals = [v for b in blocks for v in b[d][2]]
             if rows:
                 r, c, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
             else:

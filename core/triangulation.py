@@ -27,6 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .configurations import _segments_cross, constrained_delaunay, delaunay_triangulation
+from .parallel import pmap
 from .simplex import SimplexBatch, orient2d
 from .spatial import BoxIndex
 
@@ -396,8 +397,12 @@ class FeatureLinkTriangulator:
     it): links with the same number of vertices share one array pass for their admissible
     diagonals, candidate triangles, collinearity tests and costs (one grouped moment sum over
     all (triangle, point) pairs), and the dynamic programme runs over the sub-polygon spans
-    with every link of the group in one array.
+    with every link of the group in one array. Groups are cut into batches of at most
+    ``OPTIMAL_BATCH`` links that run on parallel threads (:mod:`core.parallel`); each link's
+    choice does not depend on the batch it is in.
     """
+
+    OPTIMAL_BATCH = 400
 
     def __init__(self, cost: PlaneFitCost, degree: int, movable: np.ndarray | None = None,
                  quadratic: bool = True):
@@ -429,11 +434,23 @@ class FeatureLinkTriangulator:
                 # links that touch the border rings keep their Delaunay choice: reaching into
                 # the rings with long triangles would shrink the region where the basis sums
                 # to one
-            for (m, nj), members in by_size.items():
+            # batches of at most OPTIMAL_BATCH links of one shape, on parallel threads
+            batches = [
+                (m, nj, members[s : s + self.OPTIMAL_BATCH])
+                for (m, nj), members in by_size.items()
+                for s in range(0, len(members), self.OPTIMAL_BATCH)
+            ]
+
+            def solve(batch):
+                m, nj, members = batch
                 polys = np.array([polygons[li] for li in members], dtype=np.int64).reshape(-1, m)
                 J = np.array([Js[li] for li in members], dtype=np.int64).reshape(-1, nj)
-                for li, tris in zip(members, self._optimal(polys, J, knots)):
+                return self._optimal(polys, J, knots)
+
+            for (_, _, members), result in zip(batches, pmap(solve, batches)):
+                for li, tris in zip(members, result):
                     out[li] = tris
+                self.optimized += sum(t is not None for t in result)
         # the rest (the last level, which does not change a TCB basis, links at the border
         # rings, links without data): constrained Delaunay, batched by polygon size
         rest: dict = {}
@@ -517,6 +534,4 @@ class FeatureLinkTriangulator:
         area = np.abs(_orient(corners[:, 0], corners[:, 1], corners[:, 2]))
         tcost = np.full((L, C), np.inf)
         tcost[lt, ct] = ssr + (1e-9 * q[lt] + 1e-15) * edges2 / np.maximum(area, 1e-300)
-        out = _min_cost_triangulations(poly, chord, trip, tcost)
-        self.optimized += sum(t is not None for t in out)
-        return out
+        return _min_cost_triangulations(poly, chord, trip, tcost)

@@ -1,0 +1,157 @@
+"""Threaded chunks (core/parallel.py) change nothing but the time: the same bits with 1 or 2
+threads, batch-independent link choices, and the vectorized link chaining against a plain
+walk."""
+
+import numpy as np
+import pytest
+
+from core import build_space, fit_surface
+from core.configurations import _close_links, _unique_rows
+from core.parallel import pmap, row_blocks, thread_count
+from core.refine import make_space
+from core.triangulation import FeatureLinkTriangulator, PlaneFitCost
+from knotsets import knot_set
+
+
+def test_thread_count_follows_the_environment(monkeypatch):
+    monkeypatch.setenv("TCB_THREADS", "3")
+    assert thread_count() == 3
+    monkeypatch.setenv("TCB_THREADS", "0")
+    assert thread_count() == 1
+    monkeypatch.setenv("TCB_THREADS", "many")
+    with pytest.raises(ValueError, match="TCB_THREADS"):
+        thread_count()
+
+
+def test_pmap_keeps_order_runs_nested_calls_serially_and_raises(monkeypatch):
+    monkeypatch.setenv("TCB_THREADS", "2")
+    assert pmap(lambda i: i * i, range(10)) == [i * i for i in range(10)]
+    # an inner pmap inside a chunk runs serially instead of waiting for the busy pool
+    assert pmap(lambda i: sum(pmap(lambda j: j, range(i))), range(6)) == [0, 0, 1, 3, 6, 10]
+
+    def boom(i):
+        if i == 3:
+            raise KeyError("chunk 3")
+        return i
+
+    with pytest.raises(KeyError, match="chunk 3"):
+        pmap(boom, range(6))
+
+
+@pytest.mark.parametrize("n", [0, 1, 4095, 4096, 10_000, 100_001])
+def test_row_blocks_tile_the_range(monkeypatch, n):
+    monkeypatch.setenv("TCB_THREADS", "2")
+    blocks = row_blocks(n)
+    covered = np.concatenate([np.arange(s, e) for s, e in blocks]) if blocks else np.zeros(0)
+    assert np.array_equal(covered, np.arange(n))
+    assert len(blocks) <= 4 and all(e - s >= min(n, 4096) // 2 for s, e in blocks)
+
+
+def test_basis_matrix_is_bit_identical_with_one_and_two_threads(monkeypatch):
+    space = build_space(knot_set("random", 150, 2, seed=3), 2)
+    uv = np.random.default_rng(0).random((30_000, 2))
+    mats = {}
+    for threads in ("1", "2"):
+        monkeypatch.setenv("TCB_THREADS", threads)
+        mats[threads] = space.evaluate_many(uv, [(0, 0), (1, 0), (0, 2)])
+    for A, B in zip(mats["1"], mats["2"]):
+        assert A.nnz > 0
+        assert np.array_equal(A.indptr, B.indptr) and np.array_equal(A.indices, B.indices)
+        assert np.array_equal(A.data, B.data)
+
+
+def test_fit_is_the_same_with_one_and_two_threads(monkeypatch):
+    rng = np.random.default_rng(5)
+    xy = rng.random((25_000, 2))
+    pts = np.c_[xy, np.sin(3 * xy[:, 0]) * np.cos(2 * xy[:, 1]) + 0.2 * np.abs(xy[:, 1] - 0.5)]
+    surfs = {}
+    for threads in ("1", "2"):
+        monkeypatch.setenv("TCB_THREADS", threads)
+        surfs[threads] = fit_surface(pts, max_iterations=2, max_control_points=800)
+    assert np.array_equal(surfs["1"].control_points, surfs["2"].control_points)
+    assert np.array_equal(surfs["1"].errors, surfs["2"].errors)
+
+
+def test_link_choices_do_not_depend_on_the_batch(monkeypatch):
+    """Feature-sensitive configurations are the same whether the links of a level are solved
+    in one batch or in batches of 7 on two threads."""
+    rng = np.random.default_rng(2)
+    uv = rng.random((6000, 2))
+    P = np.c_[uv, 0.25 * np.abs(uv[:, 1] - 0.3 - 0.4 * uv[:, 0])]
+    K = knot_set("random", 60, 2, seed=2)
+    n_inner = 60
+    runs = []
+    for batch, threads in ((10_000, "1"), (7, "2")):
+        monkeypatch.setenv("TCB_THREADS", threads)
+        monkeypatch.setattr(FeatureLinkTriangulator, "OPTIMAL_BATCH", batch)
+        runs.append(make_space(K, 2, "tcb", PlaneFitCost(uv, P), n_inner).configurations)
+    a, b = runs
+    for level in range(3):
+        assert np.array_equal(a.triangles[level], b.triangles[level])
+        assert np.array_equal(a.interior[level], b.interior[level])
+
+
+def test_unique_rows_matches_numpy_unique():
+    rng = np.random.default_rng(0)
+    for cols, high in ((1, 5), (2, 40), (3, 1000), (3, 3_000_000)):  # the last one: row sort
+        rows = rng.integers(0, high, (500, cols))
+        got, inv, cnt = _unique_rows(rows, return_counts=True)
+        ref, rinv, rcnt = np.unique(rows, axis=0, return_inverse=True, return_counts=True)
+        assert np.array_equal(got, ref) and np.array_equal(inv, rinv.reshape(-1))
+        assert np.array_equal(cnt, rcnt)
+
+
+def _walk_links(J, heads, tails):
+    """Plain reference: per J, cancel opposite edges, then follow ``a -> b`` from the edge with
+    the smallest (min, max) endpoints; a polygon only when one simple loop uses every edge."""
+    out = {}
+    for key in sorted({tuple(r) for r in J.tolist()}):
+        net = {}
+        for r, a, b in zip(J.tolist(), heads.tolist(), tails.tolist()):
+            if tuple(r) == key:
+                e = (min(a, b), max(a, b))
+                net.setdefault(e, []).append(1 if a < b else -1)
+        if any(abs(sum(s)) > 1 or len(s) > 2 for s in net.values()):
+            out[key] = None
+            continue
+        edges = [(lo, hi) if sum(s) > 0 else (hi, lo) for (lo, hi), s in sorted(net.items()) if sum(s)]
+        nxt = {}
+        for a, b in edges:
+            nxt.setdefault(a, []).append(b)
+        if len(edges) < 3 or any(len(v) > 1 for v in nxt.values()):
+            out[key] = None
+            continue
+        poly, v = [edges[0][0]], edges[0][1]
+        while v != poly[0] and v in nxt and len(poly) <= len(edges):
+            poly.append(v)
+            v = nxt[v][0]
+        out[key] = poly if v == poly[0] and len(poly) == len(edges) else None
+    return out
+
+
+def test_link_chaining_matches_a_plain_walk():
+    rng = np.random.default_rng(4)
+    cases = []
+    for _ in range(300):  # random edge soups: pinched, open, doubled, several loops
+        E = int(rng.integers(3, 30))
+        h = rng.integers(0, 8, E)
+        t = (h + rng.integers(1, 8, E)) % 8
+        cases.append((rng.integers(0, 4, (E, 1)), h, t))
+    for i in range(99):  # simple loops, and the same loop cut open or doubled
+        m = int(rng.integers(3, 12))
+        v = rng.permutation(20)[:m]
+        h, t = v, np.roll(v, -1)
+        kind = i % 3
+        if kind == 1:
+            h, t = h[1:], t[1:]
+        elif kind == 2:
+            h, t = np.r_[h, h[:2]], np.r_[t, t[:2]]
+        cases.append((np.zeros((len(h), 1), dtype=np.int64), h, t))
+    closed = 0
+    for J, h, t in cases:
+        groups, polys = _close_links(J, h, t)
+        ref = _walk_links(J, h, t)
+        assert [tuple(g) for g in groups.tolist()] == list(ref)
+        assert polys == list(ref.values())
+        closed += sum(p is not None for p in polys)
+    assert closed >= 33  # the 33 simple loops were found, not only refused
