@@ -91,10 +91,11 @@ def _check_finite(points: np.ndarray, *, what: str = "points") -> None:
 def count_duplicates(points: np.ndarray) -> int:
     """Number of rows of ``points`` that exactly repeat an earlier row.
 
-    Rows equal in every coordinate (``==``, so ``-0.0`` equals ``0.0``) after a lexicographic
-    sort are neighbours: the count is the number of rows equal to the row before them. Exact
-    duplicates only; near duplicates are not counted. (``np.unique(points, axis=0)`` gives the
-    same count 5x slower: 70 ms on 1e5 points.)
+    Rows equal in every coordinate (``==``, so ``-0.0`` equals ``0.0``) are found by sorting a
+    64-bit hash of each row's bits: only rows whose hash repeats can be duplicates, and those
+    are sorted lexicographically and compared with their neighbours (the count is the number of
+    rows equal to the row before them). Exact duplicates only; near duplicates are not counted.
+    (``np.unique(points, axis=0)`` gives the same count 5-10x slower: 70 ms on 1e5 points.)
 
     Args:
         points: ``(n, d)`` array.
@@ -107,8 +108,18 @@ def count_duplicates(points: np.ndarray) -> int:
         return 0
     if arr.shape[1] == 0:
         return len(arr) - 1
-    s = arr[np.lexsort(arr.T[::-1])]
-    return int(np.count_nonzero((s[1:] == s[:-1]).all(axis=1)))
+    arr = np.ascontiguousarray(arr, dtype=np.float64) + 0.0  # -0.0 -> 0.0: same bits
+    bits = arr.view(np.uint64)
+    h = bits[:, 0].copy()
+    for c in range(1, arr.shape[1]):
+        h = (h * np.uint64(0x9E3779B97F4A7C15)) ^ bits[:, c]  # wraps modulo 2^64
+    hs = np.sort(h)
+    repeated = np.unique(hs[1:][hs[1:] == hs[:-1]])
+    if len(repeated) == 0:
+        return 0
+    sub = arr[np.isin(h, repeated)]
+    sub = sub[np.lexsort(sub.T[::-1])]
+    return int(np.count_nonzero((sub[1:] == sub[:-1]).all(axis=1)))
 
 
 @dataclass(frozen=True, eq=False)

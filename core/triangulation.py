@@ -481,49 +481,40 @@ class FeatureLinkTriangulator:
         if counts.sum() == 0:
             return out
         flat = np.concatenate([np.asarray(x, dtype=np.int64) for x in near])
-        # keep the points in the closed polygon (even-odd rule, or on an edge): a candidate
-        # triangle lies inside its link polygon, so only those can be in one
         link = np.repeat(np.arange(L), counts)
         x = self.cost.uv[flat]
-        inside = np.zeros(len(flat), dtype=bool)
-        on_edge = np.zeros(len(flat), dtype=bool)
-        for e in range(m):
-            a, b = P[link, e], P[link, (e + 1) % m]
-            o = _orient(a, b, x)
-            on_edge |= (o == 0) & (np.minimum(a, b) <= x).all(axis=1) & (x <= np.maximum(a, b)).all(axis=1)
-            # the edge crosses the horizontal ray to the right of x: o > 0 for an upward edge
-            upward = b[:, 1] > a[:, 1]
-            inside ^= ((a[:, 1] > x[:, 1]) != (b[:, 1] > x[:, 1])) & ((o > 0) == upward)
-        keep = inside | on_edge
-        flat, link = flat[keep], link[keep]
-        counts = np.bincount(link, minlength=L)
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
         chord, trip, valid = _candidate_triangles(P)
+        # the side of every point against the line through every vertex pair (i < j) of its
+        # link, once; the closed candidate triangle (i, k, j), i < k < j, CCW when admissible,
+        # holds the points left of i -> k and k -> j and right of i -> j
+        ii, jj = np.triu_indices(m, 1)
+        pair = np.full((m, m), -1)
+        pair[ii, jj] = np.arange(len(ii))
+        Pl = P[link]  # (n, m, 2)
+        side = _orient(Pl[:, ii], Pl[:, jj], x[:, None, :])  # (n, pairs)
+        member = side[:, pair[trip[:, 0], trip[:, 1]]] >= 0
+        member &= side[:, pair[trip[:, 1], trip[:, 2]]] >= 0
+        member &= side[:, pair[trip[:, 0], trip[:, 2]]] <= 0  # (n, C)
+        # the points of the closed link polygon: those in one of its admissible triangles
+        # (they cover it); only those can count for a triangle
+        keep = (member & valid[link]).any(axis=1)
+        flat, link, x, member = flat[keep], link[keep], x[keep], member[keep]
+        counts = np.bincount(link, minlength=L)
         C = len(trip)
-        tp = P[:, trip]  # (L, C, 3, 2)
         valid &= (counts > 3)[:, None]
         lt, ct = np.nonzero(valid)
-        withJ = np.concatenate([tp[lt, ct], knots[J[lt]]], axis=1)
+        withJ = np.concatenate([P[lt[:, None], trip[ct]], knots[J[lt]]], axis=1)
         valid[lt, ct] = _collinear_free(withJ)
         lt, ct = np.nonzero(valid)
         V = len(lt)
         ssr = np.zeros(V)
-        corners = tp[lt, ct]  # (V, 3, 2)
+        corners = P[lt[:, None], trip[ct]]  # (V, 3, 2)
         if V:
-            # (triangle, point) pairs over each triangle's link's points; closed triangles
-            reps = counts[lt]
-            tri_of = np.repeat(np.arange(V), reps)
-            first = np.concatenate([[0], np.cumsum(reps)[:-1]])
-            pt = flat[np.arange(reps.sum()) - np.repeat(first, reps) + np.repeat(starts[lt], reps)]
-            inside = np.empty(len(pt), dtype=bool)
-            x_all = self.cost.uv[pt]
-            for s in range(0, len(pt), 1 << 21):
-                t, x = tri_of[s : s + (1 << 21)], x_all[s : s + (1 << 21)]
-                a, b, c = corners[t, 0], corners[t, 1], corners[t, 2]
-                inside[s : s + len(t)] = (
-                    (_orient(a, b, x) >= 0) & (_orient(b, c, x) >= 0) & (_orient(c, a, x) >= 0)
-                )
-            ssr = grouped_plane_costs(x_all[inside], self.cost.points[pt[inside]], tri_of[inside], V,
+            vid = np.full((L, C), -1)
+            vid[lt, ct] = np.arange(V)
+            # (point, triangle) pairs; one grouped moment sum per triangle
+            pi, ci = np.nonzero(member & valid[link])
+            ssr = grouped_plane_costs(x[pi], self.cost.points[flat[pi]], vid[link[pi], ci], V,
                                       quadratic=self.quadratic)
         # tie-break towards well-shaped triangles, scaled by each link's data spread
         pts = self.cost.points[flat]
