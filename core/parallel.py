@@ -12,15 +12,20 @@ in order, and callers combine them in that order (the same floating-point operat
 run, so the same bits).
 
 The number of threads is ``TCB_THREADS`` from the environment if set (``1`` switches threading
-off), else the number of CPUs this process may use, at most 4. A chunk that itself calls
-:func:`pmap` runs its inner chunks serially (no nested pools, no deadlock).
+off; a value that is not a whole number is ignored with a warning), else the number of CPUs
+this process may use, at most 4. A chunk that itself calls :func:`pmap` runs its inner chunks
+serially (no nested waits, no deadlock). The workers are daemon threads, so quitting the
+interpreter (or Blender) in the middle of a fit does not wait for queued chunks, and a process
+forked after a pool was made builds its own.
 """
 
 from __future__ import annotations
 
 import os
+import queue
 import threading
-from concurrent.futures import ThreadPoolExecutor
+import warnings
+from concurrent.futures import Future
 from typing import Callable, Iterable, Sequence, TypeVar
 
 __all__ = ["thread_count", "pmap", "row_blocks"]
@@ -30,9 +35,8 @@ R = TypeVar("R")
 
 MAX_THREADS = 4
 
-_pool: ThreadPoolExecutor | None = None
-_pool_size = 0
-_pool_lock = threading.Lock()
+_pools: dict = {}  # thread count -> task queue served by that many daemon threads
+_pools_lock = threading.Lock()
 _inside = threading.local()
 
 
@@ -43,7 +47,8 @@ def thread_count() -> int:
         try:
             return max(1, int(env))
         except ValueError:
-            raise ValueError(f"TCB_THREADS must be a whole number, got {env!r}") from None
+            warnings.warn(f"TCB_THREADS must be a whole number, got {env!r}; ignoring it",
+                          RuntimeWarning, stacklevel=2)
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
@@ -51,37 +56,64 @@ def thread_count() -> int:
     return max(1, min(MAX_THREADS, cpus))
 
 
-def _executor(n: int) -> ThreadPoolExecutor:
-    global _pool, _pool_size
-    with _pool_lock:
-        if _pool is None or _pool_size != n:
-            if _pool is not None:
-                _pool.shutdown(wait=False)
-            _pool = ThreadPoolExecutor(n, thread_name_prefix="tcb")
-            _pool_size = n
-        return _pool
+def _serve(tasks: queue.SimpleQueue) -> None:
+    _inside.active = True  # a pmap inside a chunk runs serially
+    while True:
+        fn, item, fut = tasks.get()
+        if not fut.set_running_or_notify_cancel():
+            continue
+        try:
+            fut.set_result(fn(item))
+        except BaseException as exc:  # handed to the caller
+            fut.set_exception(exc)
 
 
-def _run_marked(fn: Callable[[T], R], item: T) -> R:
-    _inside.active = True
-    try:
-        return fn(item)
-    finally:
-        _inside.active = False
+def _queue(n: int) -> queue.SimpleQueue:
+    """The task queue of the pool of ``n`` daemon threads (made on first use; pools of other
+    sizes stay, idle, so a caller that still holds one is never cut off)."""
+    with _pools_lock:
+        tasks = _pools.get(n)
+        if tasks is None:
+            tasks = queue.SimpleQueue()
+            for i in range(n):
+                threading.Thread(target=_serve, args=(tasks,), name=f"tcb-{n}-{i}",
+                                 daemon=True).start()
+            _pools[n] = tasks
+        return tasks
+
+
+def _forget_pools() -> None:  # in a forked child the parent's threads do not exist
+    global _pools_lock
+    _pools.clear()
+    _pools_lock = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pools)
 
 
 def pmap(fn: Callable[[T], R], items: Iterable[T]) -> list[R]:
     """``[fn(x) for x in items]``, the items spread over :func:`thread_count` threads.
 
-    Serial when there is one item, one thread, or when called from inside a chunk. The first
-    exception raised by a chunk is re-raised here.
+    Serial when there is one item, one thread, or when called from inside a chunk. If chunks
+    raise, the exception of the first failing one in item order is re-raised here (once every
+    chunk has finished).
     """
     items = list(items)
     n = thread_count()
     if n <= 1 or len(items) <= 1 or getattr(_inside, "active", False):
         return [fn(x) for x in items]
-    pool = _executor(n)
-    return list(pool.map(lambda x: _run_marked(fn, x), items))
+    tasks = _queue(n)
+    futures = []
+    for x in items:
+        fut: Future = Future()
+        tasks.put((fn, x, fut))
+        futures.append(fut)
+    errors = [f.exception() for f in futures]  # waits for all
+    for err in errors:
+        if err is not None:
+            raise err
+    return [f.result() for f in futures]
 
 
 def row_blocks(n: int, min_rows: int = 4096, per_thread: int = 2) -> Sequence[tuple[int, int]]:

@@ -490,14 +490,19 @@ class FeatureLinkTriangulator:
         ii, jj = np.triu_indices(m, 1)
         pair = np.full((m, m), -1)
         pair[ii, jj] = np.arange(len(ii))
-        Pl = P[link]  # (n, m, 2)
-        side = _orient(Pl[:, ii], Pl[:, jj], x[:, None, :])  # (n, pairs)
-        member = side[:, pair[trip[:, 0], trip[:, 1]]] >= 0
-        member &= side[:, pair[trip[:, 1], trip[:, 2]]] >= 0
-        member &= side[:, pair[trip[:, 0], trip[:, 2]]] <= 0  # (n, C)
+        e01, e12, e02 = (pair[trip[:, a], trip[:, b]] for a, b in ((0, 1), (1, 2), (0, 2)))
+        member = np.empty((len(flat), len(trip)), dtype=bool)
+        step = max(1, (1 << 20) // len(ii))  # about 1e6 side tests per chunk (bounded memory)
+        for s in range(0, len(flat), step):
+            Pl = P[link[s : s + step]]  # (b, m, 2)
+            side = _orient(Pl[:, ii], Pl[:, jj], x[s : s + step, None, :])  # (b, pairs)
+            left, right = side >= 0, side <= 0
+            member[s : s + step] = left[:, e01] & left[:, e12] & right[:, e02]
         # the points of the closed link polygon: those in one of its admissible triangles
         # (they cover it); only those can count for a triangle
         keep = (member & valid[link]).any(axis=1)
+        if not keep.any():
+            return out
         flat, link, x, member = flat[keep], link[keep], x[keep], member[keep]
         counts = np.bincount(link, minlength=L)
         C = len(trip)

@@ -2,11 +2,16 @@
 threads, batch-independent link choices, and the vectorized link chaining against a plain
 walk."""
 
+import multiprocessing
+import os
+import threading
+import time
+
 import numpy as np
 import pytest
 
 from core import build_space, fit_surface
-from core.configurations import _close_links, _unique_rows
+from core.configurations import _close_links, _unique_rows, constrained_delaunay
 from core.parallel import pmap, row_blocks, thread_count
 from core.refine import make_space
 from core.triangulation import FeatureLinkTriangulator, PlaneFitCost
@@ -18,24 +23,70 @@ def test_thread_count_follows_the_environment(monkeypatch):
     assert thread_count() == 3
     monkeypatch.setenv("TCB_THREADS", "0")
     assert thread_count() == 1
+    monkeypatch.delenv("TCB_THREADS")
+    default = thread_count()
+    assert 1 <= default <= 4
     monkeypatch.setenv("TCB_THREADS", "many")
-    with pytest.raises(ValueError, match="TCB_THREADS"):
-        thread_count()
+    with pytest.warns(RuntimeWarning, match="TCB_THREADS"):
+        assert thread_count() == default
 
 
-def test_pmap_keeps_order_runs_nested_calls_serially_and_raises(monkeypatch):
-    monkeypatch.setenv("TCB_THREADS", "2")
+def _within(seconds, fn):
+    """Run ``fn`` on a helper thread; fail (instead of hanging the suite) if it takes longer."""
+    box = {}
+    t = threading.Thread(target=lambda: box.update(value=fn()), daemon=True)
+    t.start()
+    t.join(seconds)
+    assert not t.is_alive(), f"still running after {seconds} s (deadlock?)"
+    return box["value"]
+
+
+@pytest.mark.parametrize("threads", ["2", "3"])
+def test_pmap_keeps_order_runs_nested_calls_serially_and_raises(monkeypatch, threads):
+    monkeypatch.setenv("TCB_THREADS", threads)
     assert pmap(lambda i: i * i, range(10)) == [i * i for i in range(10)]
-    # an inner pmap inside a chunk runs serially instead of waiting for the busy pool
-    assert pmap(lambda i: sum(pmap(lambda j: j, range(i))), range(6)) == [0, 0, 1, 3, 6, 10]
+    # an inner pmap inside a chunk runs serially instead of waiting for the busy pool; also
+    # from a thread that is not the main one (the Blender add-on fits on a worker thread)
+    nested = _within(20, lambda: pmap(lambda i: sum(pmap(lambda j: j, range(i))), range(6)))
+    assert nested == [0, 0, 1, 3, 6, 10]
 
     def boom(i):
-        if i == 3:
-            raise KeyError("chunk 3")
+        if i in (3, 5):
+            raise KeyError(f"chunk {i}")
         return i
 
     with pytest.raises(KeyError, match="chunk 3"):
         pmap(boom, range(6))
+    assert pmap(lambda i: i + 1, range(4)) == [1, 2, 3, 4]  # the pool survives
+
+
+def test_changing_the_thread_count_does_not_cut_off_a_running_pmap(monkeypatch):
+    monkeypatch.setenv("TCB_THREADS", "2")
+    started = threading.Event()
+
+    def slow(i):
+        started.set()
+        time.sleep(0.05)
+        return i
+
+    other = threading.Thread(target=lambda: box.update(v=pmap(slow, range(8))))
+    box = {}
+    other.start()
+    started.wait(5)
+    monkeypatch.setenv("TCB_THREADS", "3")  # a new pool for 3; the first keeps serving
+    assert pmap(lambda i: -i, range(5)) == [0, -1, -2, -3, -4]
+    other.join(20)
+    assert box["v"] == list(range(8))
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork is POSIX-only")
+def test_a_forked_child_builds_its_own_pool(monkeypatch):
+    monkeypatch.setenv("TCB_THREADS", "2")
+    assert pmap(abs, [-1, -2]) == [1, 2]  # the parent's pool exists
+    ctx = multiprocessing.get_context("fork")
+    with ctx.Pool(1) as pool:
+        result = pool.apply_async(pmap, (abs, [-3, -4, -5]))
+        assert result.get(timeout=20) == [3, 4, 5]
 
 
 @pytest.mark.parametrize("n", [0, 1, 4095, 4096, 10_000, 100_001])
@@ -44,7 +95,7 @@ def test_row_blocks_tile_the_range(monkeypatch, n):
     blocks = row_blocks(n)
     covered = np.concatenate([np.arange(s, e) for s, e in blocks]) if blocks else np.zeros(0)
     assert np.array_equal(covered, np.arange(n))
-    assert len(blocks) <= 4 and all(e - s >= min(n, 4096) // 2 for s, e in blocks)
+    assert len(blocks) <= 4 and all(e - s >= min(n, 4096) for s, e in blocks)
 
 
 def test_basis_matrix_is_bit_identical_with_one_and_two_threads(monkeypatch):
@@ -155,3 +206,27 @@ def test_link_chaining_matches_a_plain_walk():
         assert polys == list(ref.values())
         closed += sum(p is not None for p in polys)
     assert closed >= 33  # the 33 simple loops were found, not only refused
+
+
+def test_a_link_batch_without_data_inside_falls_back_like_a_mixed_batch(monkeypatch):
+    """A non-convex pentagon whose only nearby point sits in its notch (inside the search
+    ball, outside the polygon) gets the constrained Delaunay triangulation, alone in its batch
+    or batched with a hexagon that has data."""
+    rng = np.random.default_rng(0)
+    ang = np.arange(6) * np.pi / 3
+    hexagon = np.c_[np.cos(ang), np.sin(ang)]
+    pentagon = np.array([[5, -1], [7, -1], [7, 1], [6, 0.2], [5, 1]], dtype=float)
+    knots = np.vstack([hexagon, pentagon, [[0.05, 0.02], [5.6, -0.3]]])
+    uv = np.vstack([rng.uniform(-0.6, 0.6, (60, 2)), [[6.0, 0.8]]])
+    P = np.c_[uv, np.abs(uv[:, 0] - 0.1) + uv[:, 1] ** 2]
+    polys = [tuple(range(6)), tuple(range(6, 11))]
+    Js = [(11,), (12,)]
+    results = []
+    for batch in (1, 2):
+        monkeypatch.setattr(FeatureLinkTriangulator, "OPTIMAL_BATCH", batch)
+        tri = FeatureLinkTriangulator(PlaneFitCost(uv, P), 2)
+        results.append(tri.triangulate_many(polys, knots, Js, level=1))
+    assert results[0] == results[1]
+    cdt = constrained_delaunay(polys[1], knots, Js[1], 1)
+    assert sorted(map(sorted, results[0][1])) == sorted(map(sorted, cdt))
+    assert len(results[0][0]) == 4

@@ -130,6 +130,18 @@ def test_duplicates_are_counted_and_allowed() -> None:
     assert q.shape == (27, 3)
 
 
+def test_duplicate_count_matches_sorting_the_rows() -> None:
+    """The row-hash count equals ``n - len(unique rows)`` (``-0.0`` equal to ``0.0``), also
+    when many rows share coordinates (lattices), and integer rows are compared exactly."""
+    rng = np.random.default_rng(8)
+    for _ in range(300):
+        a = rng.integers(-2, 3, (int(rng.integers(1, 60)), int(rng.integers(1, 4)))).astype(float)
+        a[rng.random(a.shape) < 0.2] = -0.0
+        assert count_duplicates(a) == len(a) - len(np.unique(a + 0.0, axis=0))
+    big = np.array([[2**53, 0], [2**53 + 1, 0], [2**53 + 1, 0]], dtype=np.int64)
+    assert count_duplicates(big) == 1
+
+
 # ---------------------------------------------------------------------------------------------
 # point clouds
 # ---------------------------------------------------------------------------------------------
@@ -176,11 +188,12 @@ def test_a_cloud_folding_over_its_plane_is_rejected(max_polar: float) -> None:
         parameterize(sphere_cap(3000, max_polar))
 
 
-def test_a_z_folded_sheet_is_rejected() -> None:
-    """A sheet folded back over itself (two layers overlap in projection)."""
+@pytest.mark.parametrize("r, n, back", [(0.05, 4000, 0.7), (0.005, 80_000, 0.12)])
+def test_a_z_folded_sheet_is_rejected(r: float, n: int, back: float) -> None:
+    """A sheet folded back over itself (two layers overlap in projection); the second case has
+    a thin fold (layer gap 0.01) and more points than the fold check samples (40 000)."""
     rng = np.random.default_rng(4)
-    r, n = 0.05, 4000
-    s, y = rng.uniform(0, 1.0 + np.pi * r + 0.7, n), rng.uniform(0, 1, n)
+    s, y = rng.uniform(0, 1.0 + np.pi * r + back, n), rng.uniform(0, 1, n)
     turn = (s - 1.0) / r
     x = np.where(s < 1, s, np.where(turn < np.pi, 1 + r * np.sin(turn), 1 - (s - 1 - np.pi * r)))
     z = np.where(s < 1, 0.0, np.where(turn < np.pi, r - r * np.cos(turn), 2 * r))
