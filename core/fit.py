@@ -215,10 +215,13 @@ def fit_control_points(
 
 def _refine(C, solver, chunks, weights, points, penalty_grad, steps: int = 10):
     """Iterative refinement with residuals from ``A`` itself (semi-normal equations, Bjorck):
-    ``C += K^-1 (A^T W (P - A C) - penalty'(C))``, until the correction stalls (at most
-    ``steps``). The normal equations square the condition number; this recovers the accuracy
-    of a QR solve (cubic TCB bases can be nearly dependent: condition 1e17 was measured).
+    ``C += K^-1 g`` with ``g = A^T W (P - A C) - penalty'(C)``, while the residual ``|g|``
+    (largest entry) falls (at most ``steps``; the ``C`` with the smallest residual is kept). The normal equations square the condition number; this recovers the accuracy of a
+    QR solve (cubic TCB bases can be nearly dependent: condition 1e17 was measured). A
+    well-conditioned quadratic fit reaches the rounding floor after one or two corrections and
+    then stops, instead of always making ten passes over ``A`` (0.07 s at 1e5 points).
     """
+    best_C, best_g = C, np.inf
     for _ in range(steps):
         g = np.zeros_like(C)
         s = 0
@@ -228,11 +231,16 @@ def _refine(C, solver, chunks, weights, points, penalty_grad, steps: int = 10):
             s = e
         if penalty_grad is not None:
             g -= penalty_grad(C)
+        g_norm = float(np.abs(g).max(initial=0.0))
+        if not g_norm < best_g:
+            break
+        best_C, best_g = C, g_norm
         delta = solver(g)
         C = C + delta
         if np.abs(delta).max() <= 1e-15 * max(np.abs(C).max(), 1e-300):
+            best_C = C
             break
-    return C
+    return best_C
 
 
 def _factor(K: sp.csc_matrix):
