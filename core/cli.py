@@ -60,10 +60,11 @@ def _check_output(path: str | None, what: str) -> None:
 def _progress(quiet: bool):
     def callback(r: dict) -> bool:
         if not quiet:
+            sampled = f", {r['sampled_points']} sampled points" if "sampled_points" in r else ""
             print(
                 f"  iteration {r['iteration']:3d}  knots {r['knots']:6d}  control points "
                 f"{r['control_points']:6d}  rms {r['rms_rel']:.2e}  max {r['max_rel']:.2e}  "
-                f"({r['seconds']:.1f} s)",
+                f"({r['seconds']:.1f} s{sampled})",
                 file=sys.stderr,
                 flush=True,
             )
@@ -102,6 +103,12 @@ def _fit(args) -> int:
         ("knots (interior)", f"{r['knots']} ({r['interior_knots']})"),
         ("control points", f"{r['control_points']}"),
         ("iterations", f"{r['iterations']} ({r['stop_reason']})"),
+    ]
+    if "refit" in r:
+        refit = r["refit"]
+        rows.append(("final fit", f"all {refit['points']} points ({refit['seconds']:.1f} s; "
+                                  "the iterations fitted a random subset)"))
+    rows += [
         ("RMS error", f"{r['rms']:.4g} ({r['rms_rel']:.2e} of the diagonal)"),
         ("max error", f"{r['max']:.4g} ({r['max_rel']:.2e} of the diagonal)"),
         ("surface", f"{args.output} ({len(verts)} vertices, {len(tris)} triangles)"),

@@ -329,6 +329,15 @@ class IterationState:
     n_interior: int
     space: SplineSpace
     fit: FitResult
+    refit: dict | None = None  # the final fit on all points after sampled iterations
+
+
+# Above this many points the iterations of the loop (criterion "rms") fit a seeded random subset
+# of this size; the chosen space is then fitted once to all points. The insertion needs the
+# error pattern, not every point, and the RMS of 2e5 random points estimates the full one to
+# well under 1%: a budget-limited run on 1e6 points took 96 s with every point in every
+# iteration (12 iterations of 6-8 s), within the goal of 60 s with the subset.
+ITERATION_POINTS = 200_000
 
 
 def adaptive_fit(
@@ -351,7 +360,10 @@ def adaptive_fit(
     tolerances are in the user's units). ``start_knots``/``ring_knots`` continue an earlier run.
     Only the first ``n_measured`` points (default: all) count for the tolerance, the reports
     and the choice of the best iteration: the rest (e.g. samples on a mesh's faces) are fitted
-    and guide the knot insertion.
+    and guide the knot insertion. With more than :data:`ITERATION_POINTS` points and the RMS
+    criterion, the iterations fit a seeded random subset of that size (their reports say
+    ``sampled_points``) and the best iteration's space is fitted to all points at the end
+    (``refit`` of the returned state: points, seconds, phases).
     Returns the best iteration, the per-iteration reports and why the loop stopped.
     """
     options.validate()
@@ -375,6 +387,15 @@ def adaptive_fit(
         ring_knots = border_rings(lo - pad, hi + pad, h, rings=default_ring_count(options.degree),
                                   seed=rng_seed)
     feature = options.feature_sensitive and options.mode == "tcb"
+    full = (uv, points, weights, n_measured)
+    sampled = options.criterion == "rms" and len(uv) > ITERATION_POINTS
+    if sampled:
+        pick = np.sort(np.random.default_rng(rng_seed + 1).choice(len(uv), ITERATION_POINTS,
+                                                                 replace=False))
+        if n_measured is not None:  # the measured points come first; so do their picks
+            n_measured = int(np.searchsorted(pick, n_measured))
+        uv, points = uv[pick], points[pick]
+        weights = None if weights is None else weights[pick]
 
     history: list[dict] = []
     best: IterationState | None = None
@@ -434,6 +455,8 @@ def adaptive_fit(
             "elapsed": time.perf_counter() - t_start,
             "phases": {"configurations": t_space, **fit.timings},
         }
+        if sampled:
+            report["sampled_points"] = len(uv)
         history.append(report)
         if callback is not None and callback(dict(report)):
             reason = "cancelled"
@@ -469,5 +492,11 @@ def adaptive_fit(
             f"even the coarsest surface needs {best.space.n_basis} control points, more than "
             f"the maximum of {options.max_control_points}; allow more control points"
         )
+    if sampled:
+        t0 = time.perf_counter()
+        fit = fit_control_points(best.space, full[0], full[1], full[2], options.smoothness)
+        refit = {"points": len(full[0]), "seconds": time.perf_counter() - t0,
+                 "phases": dict(fit.timings)}
+        best = IterationState(best.knots, best.n_interior, best.space, fit, refit)
     return best, history, reason
 

@@ -489,6 +489,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=()):
         "subsampled": bool(subsampled),
         "history": list(history) + hist,
     }
+    if best.refit is not None:  # iterations on a subset, the chosen space fitted to all points
+        report["refit"] = best.refit
     return TCBSurface(best.space, C, param, errors, report, best.n_interior, options)
 
 
@@ -533,7 +535,11 @@ def fit_surface(
     callback : callable, optional
         ``callback(report: dict) -> bool``: called after every iteration with keys
         ``iteration, knots, control_points, rms, max, rms_rel, max_rel, seconds``; return True to
-        cancel (the best surface so far is returned).
+        cancel (the best surface so far is returned). Above 200 000 points (criterion "rms")
+        the iterations fit a seeded random subset of 200 000 (their reports add
+        ``sampled_points`` and their errors are those of the subset) and the chosen knots are
+        fitted to all points at the end (``report["refit"]``); ``surf.errors`` and the final
+        ``rms``/``max`` are always those of all points.
     criterion : "rms" or "max"
     initial_knots, knots_per_iteration : int, optional
         Override the automatic sizes (about 1/12 of the budget to start; 15% more per iteration).

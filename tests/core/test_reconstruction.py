@@ -267,6 +267,61 @@ def test_huge_inputs_are_fitted_on_a_subset_with_a_warning(monkeypatch):
     assert surf.report["rms"] == pytest.approx(np.sqrt(np.mean(true**2)), rel=1e-9)
 
 
+def test_large_inputs_iterate_on_a_subset_and_fit_the_chosen_knots_to_all_points(monkeypatch):
+    """Above ITERATION_POINTS the iterations fit a random subset; the chosen space is then
+    fitted to every point: the result is exactly the least-squares fit of that space to all
+    points, and the reported errors are those of all points."""
+    import core.refine
+
+    monkeypatch.setattr(core.refine, "ITERATION_POINTS", 4000)
+    xy = np.random.default_rng(1).random((12000, 2))
+    points = np.c_[xy, 0.25 * np.abs(xy[:, 1] - 0.4 - 0.1 * np.sin(5 * xy[:, 0]))]
+    surf = fit_surface(points, tolerance=0.0, max_control_points=400, max_iterations=4)
+    hist = surf.report["history"]
+    assert len(hist) == 4 and all(h["sampled_points"] == 4000 for h in hist)
+    assert surf.report["refit"]["points"] == 12000
+    true = np.linalg.norm(surf(surf.parameterization.uv) - points, axis=1)
+    np.testing.assert_allclose(surf.errors, true, rtol=1e-9, atol=1e-12)
+    assert surf.report["rms"] == pytest.approx(np.sqrt(np.mean(true**2)), rel=1e-9)
+    best = min(hist, key=lambda h: h["rms"])  # the chosen iteration
+    assert surf.report["control_points"] == best["control_points"]
+    from core.parameterize import normalize
+
+    q, norm = normalize(points)  # the fit works in normalized coordinates
+    direct = fit_control_points(surf.space, surf.parameterization.uv, q, smoothness=1e-4)
+    np.testing.assert_allclose(surf.control_points, norm.undo(direct.control_points), rtol=0,
+                               atol=1e-12)
+    # the subset's RMS estimates the full one
+    assert surf.report["rms"] == pytest.approx(best["rms"], rel=0.15)
+    # the max criterion is never sampled (a subset cannot bound the largest error)
+    smax = fit_surface(points, tolerance=0.0, criterion="max", max_control_points=300,
+                       max_iterations=2)
+    assert "refit" not in smax.report
+    assert all("sampled_points" not in h for h in smax.report["history"])
+
+
+def test_large_meshes_iterate_on_a_subset_with_the_vertices_measured(monkeypatch):
+    """A mesh is fitted to its vertices plus samples on its faces; with the iterations on a
+    subset, the tolerance and reports still measure only the vertices."""
+    import core.refine
+
+    monkeypatch.setattr(core.refine, "ITERATION_POINTS", 3000)
+    n = 30
+    u, v = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n))
+    keep = (u**2 + v**2 <= 1).ravel()
+    uv = np.c_[u.ravel(), v.ravel()][keep]
+    from scipy.spatial import Delaunay
+
+    faces = Delaunay(uv).simplices
+    points = np.c_[uv, 0.3 * np.sin(2 * uv[:, 0]) * uv[:, 1]]
+    surf = fit_surface(points, faces, tolerance=0.0, max_control_points=300, max_iterations=3)
+    assert surf.report["refit"]["points"] > 3000  # vertices and face samples
+    assert all(h["sampled_points"] == 3000 for h in surf.report["history"])
+    used = surf.parameterization.used
+    assert surf.report["rms"] == pytest.approx(np.sqrt(np.mean(surf.errors[used] ** 2)), rel=1e-12)
+    assert surf.report["rms_rel"] < 1e-2
+
+
 def test_knot_insertion_at_knots_on_knot_lines_and_at_the_border_stays_c1_and_sums_to_one():
     """Errors concentrated exactly on knots, on knot lines and at the border of the data must
     not make collinear configurations or break the partition of unity (issue 6, item 5)."""
