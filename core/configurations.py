@@ -325,15 +325,16 @@ def _close_links(J_rows: np.ndarray, heads: np.ndarray, tails: np.ndarray):
     succ = np.where(found, order[pos], -1)
     gid = g[start_edge]
     ok = ~bad_group[gid] & (size[gid] >= 3)
-    gid, cur = gid[ok], start_edge[ok]
+    gid, start = gid[ok], start_edge[ok]
     length = size[gid]
     steps = int(length.max(initial=0))
     walk = np.empty((len(gid), steps), dtype=np.int64)
     closed_at = np.full(len(gid), -1)
+    cur = start
     for t in range(steps):
         walk[:, t] = a[cur]
         cur = succ[cur]
-        back = (cur == start_edge[ok]) & (closed_at < 0)
+        back = (cur == start) & (closed_at < 0)
         closed_at[back] = t + 1
     simple = closed_at == length
     polys: list = [None] * len(groups)

@@ -216,8 +216,9 @@ def fit_control_points(
 def _refine(C, solver, chunks, weights, points, penalty_grad, steps: int = 10):
     """Iterative refinement with residuals from ``A`` itself (semi-normal equations, Bjorck):
     ``C += K^-1 g`` with ``g = A^T W (P - A C) - penalty'(C)``, while the residual ``|g|``
-    (largest entry) falls (at most ``steps``; the ``C`` with the smallest residual is kept). The normal equations square the condition number; this recovers the accuracy of a
-    QR solve (cubic TCB bases can be nearly dependent: condition 1e17 was measured). A
+    (largest entry) falls (at most ``steps``; the ``C`` with the smallest residual is kept).
+    The normal equations square the condition number; this recovers the accuracy of a QR
+    solve (cubic TCB bases can be nearly dependent: condition 1e17 was measured). A
     well-conditioned quadratic fit reaches the rounding floor after one or two corrections and
     then stops, instead of always making ten passes over ``A`` (0.07 s at 1e5 points).
     """
