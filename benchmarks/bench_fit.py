@@ -47,10 +47,9 @@ def dataset(name: str, n: int) -> np.ndarray:
 
 
 def one(name: str, n: int, kind: str) -> dict:
-    from core import fit_surface
+    from core import fit_surface, refine
     from core.parameterize import parameterize
-
-    from core import refine
+    from timing import report_phases, time_calls
 
     pts = dataset(name, n)
     t0 = time.perf_counter()
@@ -58,21 +57,8 @@ def one(name: str, n: int, kind: str) -> dict:
     t_param = time.perf_counter() - t0
     # initial knot placement and knot insertion are not in the per-iteration report: time them
     extra = {"knots": 0.0, "insertion": 0.0}
-
-    def timed(attr: str, label: str) -> None:
-        fn = getattr(refine, attr)
-
-        def wrapped(*a, **kw):
-            t = time.perf_counter()
-            try:
-                return fn(*a, **kw)
-            finally:
-                extra[label] += time.perf_counter() - t
-
-        setattr(refine, attr, wrapped)
-
-    timed("initial_knots", "knots")
-    timed("insertion_points", "insertion")
+    time_calls(refine, "initial_knots", "knots", extra)
+    time_calls(refine, "insertion_points", "insertion", extra)
     t0 = time.perf_counter()
     if kind == "single":
         surf = fit_surface(pts, max_iterations=1, initial_knots=1500, max_control_points=5000)
@@ -81,8 +67,7 @@ def one(name: str, n: int, kind: str) -> dict:
         surf = fit_surface(pts, tolerance=0.0, max_control_points=5000, max_iterations=20)
     total = time.perf_counter() - t0
     phases: dict = dict(extra)
-    refit = surf.report.get("refit", {}).get("phases", {})  # iterations on a subset (> 2e5)
-    for ph in [h["phases"] for h in surf.report["history"]] + [refit]:
+    for ph in report_phases(surf.report):
         for k, v in ph.items():
             phases[k] = phases.get(k, 0.0) + v
     peer = None

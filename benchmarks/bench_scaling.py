@@ -47,24 +47,17 @@ def child(n: int, budget: int, iterations: int) -> dict:
     import core.surface as surface
     import datasets as ds
     from core import fit_surface
+    from timing import report_phases, time_calls
 
     P = ds.height_field("F1-franke", n, "scattered")["points"]
     mem: dict = {}
     sec: dict = {}
 
+    def peak(label):
+        mem[label] = max(mem.get(label, 0), tracemalloc.get_traced_memory()[1])
+
     def wrap(module, attr, label):
-        fn = getattr(module, attr)
-
-        def wrapped(*a, **kw):
-            tracemalloc.reset_peak()
-            t = time.perf_counter()
-            try:
-                return fn(*a, **kw)
-            finally:
-                sec[label] = sec.get(label, 0.0) + time.perf_counter() - t
-                mem[label] = max(mem.get(label, 0), tracemalloc.get_traced_memory()[1])
-
-        setattr(module, attr, wrapped)
+        time_calls(module, attr, label, sec, before=tracemalloc.reset_peak, after=peak)
 
     wrap(surface, "parameterize", "parameterize")
     wrap(refine, "initial_knots", "initial knots")
@@ -80,7 +73,7 @@ def child(n: int, budget: int, iterations: int) -> dict:
     tracemalloc.stop()
     r = s.report
     # above 2e5 points the iterations fit a subset and the chosen space is refitted to all
-    for ph in [h["phases"] for h in r["history"]] + [r.get("refit", {}).get("phases", {})]:
+    for ph in report_phases(r):
         for k in FIT_PHASES:
             sec["fit:" + k] = sec.get("fit:" + k, 0.0) + float(ph.get(k, 0.0))
     return {
