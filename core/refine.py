@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, cKDTree
 
 from .border import border_rings, default_ring_count
 from .configurations import link_triangulation_procedure
@@ -330,6 +330,7 @@ class IterationState:
     space: SplineSpace
     fit: FitResult
     refit: dict | None = None  # the final fit on all points after sampled iterations
+    n_control: int = 0  # the functions that meet the domain (what the budget counts)
 
 
 # Above this many points the iterations of the loop (criterion "rms") fit a seeded random subset
@@ -352,6 +353,7 @@ def adaptive_fit(
     history_offset: int = 0,
     unit: float = 1.0,
     n_measured: int | None = None,
+    domain: np.ndarray | None = None,
 ) -> tuple[IterationState, list[dict], str]:
     """Run the loop of method.md section 6 on parameters ``uv`` and (normalized) ``points``.
 
@@ -364,6 +366,10 @@ def adaptive_fit(
     criterion, the iterations fit a seeded random subset of that size (their reports say
     ``sampled_points``) and the best iteration's space is fitted to all points at the end
     (``refit`` of the returned state: points, seconds, phases).
+    The control-point budget counts the functions whose support meets ``domain`` (a convex CCW
+    polygon, default the convex hull of ``uv``): the others only carry the border rings'
+    partition of unity and vanish on the domain (:meth:`SplineSpace.meets`); reports give
+    both counts (``control_points`` and ``functions``).
     Returns the best iteration, the per-iteration reports and why the loop stopped.
     """
     options.validate()
@@ -386,6 +392,12 @@ def adaptive_fit(
         pad = 1e-6 * float(np.max(hi - lo))
         ring_knots = border_rings(lo - pad, hi + pad, h, rings=default_ring_count(options.degree),
                                   seed=rng_seed)
+    if domain is None:
+        domain = uv[ConvexHull(uv).vertices]
+
+    def size(space: SplineSpace) -> int:  # what the budget counts
+        return int(space.meets(domain).sum())
+
     feature = options.feature_sensitive and options.mode == "tcb"
     full = (uv, points, weights, n_measured)
     sampled = options.criterion == "rms" and len(uv) > ITERATION_POINTS
@@ -410,19 +422,22 @@ def adaptive_fit(
         for extra in range(3):
             knots = np.vstack([interior, ring_knots])
             space = make_space(knots, options.degree, options.mode, cost, len(interior))
+            n_ctrl = size(space)
             # the budget is strict: insert fewer knots until the space fits in it
-            while space.n_basis > options.max_control_points and len(pending):
+            while n_ctrl > options.max_control_points and len(pending):
                 pending = pending[: len(pending) // 2]
                 interior = np.vstack([interior[: n_before], pending])
                 knots = np.vstack([interior, ring_knots])
                 space = make_space(knots, options.degree, options.mode, cost, len(interior))
+                n_ctrl = size(space)
             # the first space too: fewer initial knots (a random subset: still well spread)
-            while (it == 0 and start_knots is None and space.n_basis > options.max_control_points
+            while (it == 0 and start_knots is None and n_ctrl > options.max_control_points
                    and len(interior) > 6):
                 interior = interior[: max(6, len(interior) // 2)]
                 knots = np.vstack([interior, ring_knots])
                 space = make_space(knots, options.degree, options.mode, cost, len(interior))
-            if space.n_basis > options.max_control_points and it > 0:
+                n_ctrl = size(space)
+            if n_ctrl > options.max_control_points and it > 0:
                 break
             t_space = time.perf_counter() - t0
             try:
@@ -433,10 +448,10 @@ def adaptive_fit(
                     raise
                 # safety net (method.md section 3 measured one more ring being needed at times)
                 ring_knots = _add_ring(ring_knots, seed=rng_seed + extra + 1)
-        if space.n_basis > options.max_control_points and it > 0:
+        if n_ctrl > options.max_control_points and it > 0:
             reason = "control-point budget reached"
             break
-        state = IterationState(knots, len(interior), space, fit)
+        state = IterationState(knots, len(interior), space, fit, n_control=n_ctrl)
         e = fit.errors[:n_measured]
         rms, emax = float(np.sqrt(np.mean(e**2))), float(e.max(initial=0.0))
         if best is None or rms < best_rms:
@@ -446,7 +461,8 @@ def adaptive_fit(
             "iteration": history_offset + it + 1,
             "knots": int(len(knots)),
             "interior_knots": int(len(interior)),
-            "control_points": int(space.n_basis),
+            "control_points": n_ctrl,
+            "functions": int(space.n_basis),
             "rms": rms * unit,
             "max": emax * unit,
             "rms_rel": rms / diagonal,
@@ -469,9 +485,10 @@ def adaptive_fit(
         if last_round:
             reason = "control-point budget reached"
             break
-        # how many knots the budget allows: control points grow about linearly with knots
-        per_knot = space.n_basis / len(knots)
-        room = int((options.max_control_points - space.n_basis) / max(per_knot, 1e-9))
+        # how many knots the budget allows: control points grow about linearly with the
+        # interior knots
+        per_knot = n_ctrl / max(len(interior), 1)
+        room = int((options.max_control_points - n_ctrl) / max(per_knot, 1e-9))
         want = options.knots_per_iteration or max(10, int(np.ceil(0.15 * len(interior))))
         count = min(want, room)
         if count < 1:
@@ -487,9 +504,9 @@ def adaptive_fit(
         n_before, pending = len(interior), new
         interior = np.vstack([interior, new])
     assert best is not None
-    if best.space.n_basis > options.max_control_points and len(history) == 1:
+    if best.n_control > options.max_control_points and len(history) == 1:
         raise InvalidInputError(
-            f"even the coarsest surface needs {best.space.n_basis} control points, more than "
+            f"even the coarsest surface needs {best.n_control} control points, more than "
             f"the maximum of {options.max_control_points}; allow more control points"
         )
     if sampled:
@@ -497,6 +514,6 @@ def adaptive_fit(
         fit = fit_control_points(best.space, full[0], full[1], full[2], options.smoothness)
         refit = {"points": len(full[0]), "seconds": time.perf_counter() - t0,
                  "phases": dict(fit.timings)}
-        best = IterationState(best.knots, best.n_interior, best.space, fit, refit)
+        best = IterationState(best.knots, best.n_interior, best.space, fit, refit, best.n_control)
     return best, history, reason
 

@@ -180,6 +180,43 @@ class SplineSpace:
         pos = np.minimum(pos, len(self._basis_keys) - 1)
         return np.where(self._basis_keys[pos] == keys, pos, -1)
 
+    def meets(self, polygon) -> np.ndarray:
+        """Mask (n_basis,) of the basis functions whose support meets the closed convex
+        ``polygon`` (b, 2) (counter-clockwise), e.g. the data's parameter domain.
+
+        The support of ``B_I`` is the union of ``conv(T u I)`` over its configurations; two
+        convex polygons are disjoint iff some edge direction of one of them separates them
+        (separating axis theorem): the polygon's edge normals and the normals of every knot
+        pair of a configuration (its hull edges among them) are tried. A support that only
+        touches the polygon, or comes within 1e-9 of its size, counts as meeting it. Functions
+        that do not meet the domain vanish on it: they carry the partition of unity of the
+        border rings (method.md section 3) but do not shape the surface. A polygon of more
+        than 128 vertices is replaced by the circumscribed 128-gon of its support lines
+        (a superset, so no function that meets it is missed).
+        """
+        poly = _outer_polygon(np.asarray(polygon, dtype=np.float64).reshape(-1, 2), 128)
+        V = self._batch.V  # (C, n, 2) knots of every configuration
+        C, n = V.shape[:2]
+        tol = 1e-9 * max(float(np.ptp(poly, axis=0).max()), 1e-300)
+        e = np.roll(poly, -1, axis=0) - poly
+        normal = np.c_[e[:, 1], -e[:, 0]]  # outward (CCW polygon)
+        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+        reach = (normal * poly).sum(axis=1)  # the polygon lies where normal . x <= reach
+        ii, jj = np.triu_indices(n, 1)
+        met = np.zeros(C, dtype=bool)
+        step = max(1, (1 << 21) // (len(ii) * len(poly) + n * len(poly)))
+        for s in range(0, C, step):
+            X = V[s : s + step]
+            outside = (np.einsum("cnk,hk->chn", X, normal).min(axis=2) > reach + tol).any(axis=1)
+            d = X[:, jj] - X[:, ii]
+            axis = np.stack([d[..., 1], -d[..., 0]], axis=-1)
+            axis /= np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-300)
+            pc = np.einsum("cnk,cpk->cpn", X, axis)  # (c, pairs, n)
+            pp = np.einsum("hk,cpk->cph", poly, axis)  # (c, pairs, b)
+            apart = (pc.max(axis=2) < pp.min(axis=2) - tol) | (pc.min(axis=2) > pp.max(axis=2) + tol)
+            met[s : s + step] = ~(outside | apart.any(axis=1))
+        return np.bincount(self.config_basis, weights=met, minlength=self.n_basis) > 0
+
     def _centroid_triangulation(self) -> np.ndarray:
         """Order-k centroid triangulation over the basis functions (method.md section 7).
 
@@ -318,3 +355,19 @@ def build_space(
         link_triangulator=link_triangulator or constrained_delaunay,
     )
     return SplineSpace(knots, degree, mode, configs)
+
+
+def _outer_polygon(poly: np.ndarray, max_vertices: int) -> np.ndarray:
+    """``poly`` (convex, CCW) itself if it has at most ``max_vertices`` vertices, otherwise the
+    circumscribed polygon of its support lines in ``max_vertices`` equally spaced directions
+    (it contains ``poly``)."""
+    if len(poly) <= max_vertices:
+        return poly
+    t = 2 * np.pi * np.arange(max_vertices) / max_vertices
+    nrm = np.c_[np.cos(t), np.sin(t)]
+    h = (poly @ nrm.T).max(axis=0)
+    n2, h2 = np.roll(nrm, -1, axis=0), np.roll(h, -1)
+    det = nrm[:, 0] * n2[:, 1] - nrm[:, 1] * n2[:, 0]
+    x = (h * n2[:, 1] - h2 * nrm[:, 1]) / det
+    y = (nrm[:, 0] * h2 - n2[:, 0] * h) / det
+    return np.c_[x, y]

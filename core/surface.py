@@ -58,7 +58,13 @@ class TCBSurface:
     Attributes
     ----------
     space : SplineSpace (knots, configurations, degree, basis)
-    control_points : (n_basis, 3) float64, read-only, in the data's units
+    control_points : (n, 3) float64, read-only, in the data's units: one per basis function
+        whose support meets the data's parameter domain (``active``); the others only carry
+        the border rings' partition of unity (method.md section 3), vanish on the domain and
+        are not control points (their coefficients, in ``coefficients``, extend the surface
+        outside the domain)
+    active : (n,) int, the basis index (in ``space``) of each control point
+    coefficients : (n_basis, 3) float64, read-only, the coefficients of every basis function
     parameterization : Parameterization of the data it was fitted to
     errors : (N,) float64, ``|S(x_j) - p_j|`` of the last fit (NaN for unused mesh vertices)
     report : dict, statistics of the fit (knots, control points, rms, max, history, ...)
@@ -74,6 +80,7 @@ class TCBSurface:
         report: dict,
         n_interior: int,
         options: RefineOptions | None = None,
+        active: np.ndarray | None = None,
     ):
         control_points = np.asarray(control_points, dtype=np.float64)
         if control_points.shape != (space.n_basis, 3):
@@ -84,6 +91,10 @@ class TCBSurface:
             raise InvalidInputError("control points must be finite")
         self._space = space
         self._c = _readonly(control_points)
+        if active is None:
+            active = np.flatnonzero(space.meets(parameterization.domain_polygon))
+        self._active = _readonly(np.asarray(active, dtype=np.int64))
+        self._ctrl = _readonly(self._c[self._active])
         self._param = parameterization
         self._errors = _readonly(errors)
         self._report = report
@@ -93,7 +104,9 @@ class TCBSurface:
 
     # ---- read-only state ----------------------------------------------------------------
     space = property(lambda self: self._space)
-    control_points = property(lambda self: self._c)
+    control_points = property(lambda self: self._ctrl)
+    active = property(lambda self: self._active)
+    coefficients = property(lambda self: self._c)
     parameterization = property(lambda self: self._param)
     errors = property(lambda self: self._errors)
     report = property(lambda self: dict(self._report))
@@ -109,16 +122,19 @@ class TCBSurface:
 
     # ---- evaluation --------------------------------------------------------------------
     def evaluation_matrix(self, uv, derivative=(0, 0)) -> sp.csr_matrix:
-        """Sparse (m, n_basis) matrix ``M`` with ``surface(uv) = M @ control_points``."""
-        return self._space.evaluate(uv, derivative)
+        """Sparse (m, n) matrix ``M`` with ``surface(uv) = M @ control_points`` for ``uv`` in
+        the data's domain (outside it the border functions, which are not control points, add
+        to the surface)."""
+        A = self._space.evaluate(uv, derivative)
+        return A if len(self._active) == self._space.n_basis else A[:, self._active]
 
     def __call__(self, uv) -> np.ndarray:
         """Surface points (m, 3) at parameters ``uv`` (m, 2)."""
-        return self.evaluation_matrix(uv) @ self._c
+        return self._space.evaluate(uv) @ self._c
 
     def derivative(self, uv, derivative=(1, 0)) -> np.ndarray:
         """Partial derivative ``d^(du+dv) S / du^du dv^dv`` (m, 3); ``du + dv <= 2``."""
-        return self.evaluation_matrix(uv, derivative) @ self._c
+        return self._space.evaluate(uv, derivative) @ self._c
 
     def normals(self, uv) -> np.ndarray:
         """Unit normals ``S_u x S_v / |S_u x S_v|`` (m, 3)."""
@@ -186,19 +202,35 @@ class TCBSurface:
         return self(uv), faces.copy()
 
     def control_net(self) -> tuple[np.ndarray, np.ndarray]:
-        """Control points (n_basis, 3) and the control-net triangles (f, 3) (method.md 7).
+        """Control points (n, 3) and the control-net triangles (f, 3) over them (method.md 7:
+        the triangles of the centroid triangulation whose three vertices are control points).
 
         For DCB surfaces the net is ambiguous (several control points share a Greville point)
         and no faces are returned.
         """
-        return self._c.copy(), self._space.net_faces.copy()
+        where = np.full(self._space.n_basis, -1)
+        where[self._active] = np.arange(len(self._active))
+        faces = where[self._space.net_faces]
+        return self._ctrl.copy(), faces[(faces >= 0).all(axis=1)]
 
     # ---- editing -----------------------------------------------------------------------
     def with_control_points(self, control_points) -> "TCBSurface":
-        """A new surface with other control points (same space); this one is unchanged."""
+        """A new surface with other control points (n, 3) (same space; the coefficients of
+        the border functions stay); this one is unchanged. All ``space.n_basis`` coefficients
+        (as in ``coefficients``) are accepted too."""
+        c = np.asarray(control_points, dtype=np.float64)
+        if c.shape == (len(self._active), 3):
+            full = np.array(self._c)
+            full[self._active] = c
+        elif c.shape == self._c.shape:
+            full = c
+        else:
+            raise InvalidInputError(
+                f"control_points must have shape ({len(self._active)}, 3), got {c.shape}"
+            )
         return TCBSurface(
-            self._space, control_points, self._param, self._errors, self._report,
-            self._n_interior, self._options,
+            self._space, full, self._param, self._errors, self._report,
+            self._n_interior, self._options, active=self._active,
         )
 
     # ---- distances ---------------------------------------------------------------------
@@ -386,7 +418,7 @@ class TCBSurface:
         r = self._report
         return (
             f"TCBSurface(mode={self.mode!r}, degree={self.degree}, knots={len(self.knots)}, "
-            f"control_points={self._space.n_basis}, rms_rel={r.get('rms_rel', float('nan')):.3g})"
+            f"control_points={len(self._active)}, rms_rel={r.get('rms_rel', float('nan')):.3g})"
         )
 
 
@@ -453,10 +485,11 @@ def _run(points, param, options, callback, start=None, rings=None, history=()):
         sp_, su_ = mesh_samples(norm.apply(points), np.asarray(param.uv), param.faces, count,
                                 seed=options.seed)
         fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
+    domain = np.asarray(param.domain_polygon, dtype=np.float64)
     best, hist, reason = adaptive_fit(
         fit_uv, fit_q, options, diagonal=diag_norm, start_knots=start, ring_knots=rings,
         callback=callback, history_offset=len(history), unit=norm.scale,
-        n_measured=None if subsampled else len(uv),
+        n_measured=None if subsampled else len(uv), domain=domain,
     )
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)
@@ -476,7 +509,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=()):
         "points": int(used.sum()),
         "knots": int(len(best.knots)),
         "interior_knots": int(best.n_interior),
-        "control_points": int(best.space.n_basis),
+        "control_points": int(best.n_control),
+        "functions": int(best.space.n_basis),
         "iterations": len(history) + len(hist),
         # errors at the user's points (for meshes the fit also used samples on the faces)
         "rms": float(np.sqrt(np.mean(errors[used] ** 2))),
