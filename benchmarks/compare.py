@@ -14,6 +14,7 @@ Methods (one row each per dataset):
 * ``TCB``: ``core.fit_surface(mode="tcb")``, tolerance 0, a control-point budget, explicit
   ``initial_knots``, ``knots_per_iteration`` and ``max_iterations`` (the loop runs to the budget).
 * ``TCB-delaunay``: the same with ``feature_sensitive=False`` (Delaunay Gamma_0 and links).
+* ``TCB-cubic``: the same with ``degree=3`` (C^2; three border rings instead of two).
 * ``DCB``: ``fit_surface(mode="dcb")`` with the same budget, knots per iteration and iterations;
   it starts from ``budget / 30`` knots instead of TCB's ``budget / 12`` (fit_surface's own
   sizing: DCB has about 2.4 times as many functions per knot, with TCB's initial knots it would
@@ -224,6 +225,8 @@ def compare_dataset(d: dict, cfg: dict) -> tuple[list, dict]:
     rows.append(("TCB", r_tcb))
     rows.append(("TCB-delaunay", (guarded(run_tcb, d, P, H, diag, cfg, feature_sensitive=False)
                                   or (None, None))[1]))
+    rows.append(("TCB-cubic", (guarded(run_tcb, d, P, H, diag, cfg, degree=3)
+                               or (None, None))[1]))
     # same budget, knots per iteration and iterations; DCB starts with budget/30 knots
     # (fit_surface's own sizing): with TCB's budget/12 it would start above the budget
     dcb = guarded(run_tcb, d, P, H, diag, cfg, mode="dcb", initial_knots=cfg["initial_dcb"])

@@ -202,11 +202,16 @@ class SplineSpace:
         normal = np.c_[e[:, 1], -e[:, 0]]  # outward (CCW polygon)
         normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
         reach = (normal * poly).sum(axis=1)  # the polygon lies where normal . x <= reach
+        # a configuration with a knot inside the polygon meets it (its support holds its
+        # knots); only the others need the separating-axis test
+        knot_in = (self.knots @ normal.T <= reach + tol).all(axis=1)
+        sets = np.concatenate([self.config_triangles, self.config_interior], axis=1)
+        met = knot_in[sets].any(axis=1)
+        rest = np.flatnonzero(~met)
         ii, jj = np.triu_indices(n, 1)
-        met = np.zeros(C, dtype=bool)
         step = max(1, (1 << 21) // (len(ii) * len(poly) + n * len(poly)))
-        for s in range(0, C, step):
-            X = V[s : s + step]
+        for s in range(0, len(rest), step):
+            X = V[rest[s : s + step]]
             outside = (np.einsum("cnk,hk->chn", X, normal).min(axis=2) > reach + tol).any(axis=1)
             d = X[:, jj] - X[:, ii]
             axis = np.stack([d[..., 1], -d[..., 0]], axis=-1)
@@ -214,7 +219,7 @@ class SplineSpace:
             pc = np.einsum("cnk,cpk->cpn", X, axis)  # (c, pairs, n)
             pp = np.einsum("hk,cpk->cph", poly, axis)  # (c, pairs, b)
             apart = (pc.max(axis=2) < pp.min(axis=2) - tol) | (pc.min(axis=2) > pp.max(axis=2) + tol)
-            met[s : s + step] = ~(outside | apart.any(axis=1))
+            met[rest[s : s + step]] = ~(outside | apart.any(axis=1))
         return np.bincount(self.config_basis, weights=met, minlength=self.n_basis) > 0
 
     def _centroid_triangulation(self) -> np.ndarray:
