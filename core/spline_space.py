@@ -15,6 +15,7 @@ from typing import Sequence
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import ConvexHull
 
 from .border import check_partition_of_unity
 from .configurations import (
@@ -194,14 +195,14 @@ class SplineSpace:
         than 128 vertices is replaced by the circumscribed 128-gon of its support lines
         (a superset, so no function that meets it is missed).
         """
-        poly = _outer_polygon(np.asarray(polygon, dtype=np.float64).reshape(-1, 2), 128)
+        hull = ConvexHull(_outer_polygon(np.asarray(polygon, dtype=np.float64).reshape(-1, 2), 128))
+        poly = hull.points[hull.vertices]
         V = self._batch.V  # (C, n, 2) knots of every configuration
         C, n = V.shape[:2]
         tol = 1e-9 * max(float(np.ptp(poly, axis=0).max()), 1e-300)
-        e = np.roll(poly, -1, axis=0) - poly
-        normal = np.c_[e[:, 1], -e[:, 0]]  # outward (CCW polygon)
-        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-        reach = (normal * poly).sum(axis=1)  # the polygon lies where normal . x <= reach
+        # the polygon lies where normal . x <= reach: unit outward normals of its hull's edges
+        # (qhull drops repeated and collinear vertices, whose edges have no direction)
+        normal, reach = hull.equations[:, :2], -hull.equations[:, 2]
         # a configuration with a knot inside the polygon meets it (its support holds its
         # knots); only the others need the separating-axis test
         knot_in = (self.knots @ normal.T <= reach + tol).all(axis=1)
@@ -365,7 +366,7 @@ def build_space(
 def _outer_polygon(poly: np.ndarray, max_vertices: int) -> np.ndarray:
     """``poly`` (convex, CCW) itself if it has at most ``max_vertices`` vertices, otherwise the
     circumscribed polygon of its support lines in ``max_vertices`` equally spaced directions
-    (it contains ``poly``)."""
+    (it contains ``poly``; consecutive directions with the same support point repeat it)."""
     if len(poly) <= max_vertices:
         return poly
     t = 2 * np.pi * np.arange(max_vertices) / max_vertices

@@ -18,11 +18,26 @@ def _polygon(n: int) -> np.ndarray:
     return 0.5 + 0.6 * np.c_[np.cos(t), np.sin(t)]
 
 
-@pytest.mark.parametrize("degree, n_vertices", [(2, 6), (3, 6), (2, 200)])
-def test_meets_finds_every_function_that_is_nonzero_in_the_polygon(degree, n_vertices):
+def _rhombus(per_side: int) -> np.ndarray:
+    """A tilted rhombus with ``per_side`` vertices on each slightly bulging side: the convex
+    hull of a projected grid (a cliff sampled on a lattice gave 196 such vertices, and the
+    circumscribed 128-gon then repeats each corner many times)."""
+    corners = np.array([[1.0, -0.1], [0.1, 1.0], [-1.0, 0.1], [-0.1, -1.0]]) * 0.7 + 0.5
+    out = []
+    for a, b in zip(corners, np.roll(corners, -1, axis=0)):
+        t = np.linspace(0.0, 1.0, per_side, endpoint=False)
+        edge = a + t[:, None] * (b - a)
+        bulge = 1e-3 * np.sin(np.pi * t)[:, None] * np.array([(b - a)[1], -(b - a)[0]])
+        out.append(edge + bulge)
+    return np.vstack(out)
+
+
+@pytest.mark.parametrize("degree, shape", [(2, "hexagon"), (3, "hexagon"), (2, "200-gon"),
+                                           (2, "rhombus")])
+def test_meets_finds_every_function_that_is_nonzero_in_the_polygon(degree, shape):
     rng = np.random.default_rng(degree)
     space = build_space(rng.random((150, 2)) * 3 - 1, degree)
-    poly = _polygon(n_vertices)
+    poly = {"hexagon": _polygon(6), "200-gon": _polygon(200), "rhombus": _rhombus(50)}[shape]
     met = space.meets(poly)
     sample = rng.random((300_000, 2)) * 1.4 - 0.2
     inside = sample[_points_in_polygon(sample, poly, 1e-12)]
