@@ -8,7 +8,7 @@
 * ``fig_error_maps.png``: the errors of TCB, DCB and the Park tensor fit at equal control
   points, side by side (points coloured by error, one shared log scale).
 * ``fig_error_vs_cp.png``: RMS/diag against control points along each method's refinement
-  (``report['history']``) on the crease, the DEM and Franke's F1.
+  (``report['history']``) on the crease, the DEM and Franke's F1 (quadratic and cubic TCB).
 """
 
 from __future__ import annotations
@@ -139,8 +139,9 @@ def fig_error_vs_cp(data):
             "TCB Delaunay": fit_surface(P, mode="tcb", feature_sensitive=False,
                                         initial_knots=25, **common),
             "DCB": fit_surface(P, mode="dcb", initial_knots=10, **common),
+            "TCB cubic": fit_surface(P, mode="tcb", degree=3, initial_knots=25, **common),
         }
-        for (name, s), st in zip(runs.items(), ("o-", "s--", "^-")):
+        for (name, s), st in zip(runs.items(), ("o-", "s--", "^-", "v:")):
             h = s.report["history"]
             ax.plot([x["control_points"] for x in h], [x["rms_rel"] for x in h], st, ms=3,
                     label=name)
