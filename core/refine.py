@@ -413,6 +413,7 @@ def adaptive_fit(
     best: IterationState | None = None
     best_rms = np.inf
     n_before, pending = len(interior), np.zeros((0, 2))
+    prev = None  # (interior knots, control points) of the last iteration
     last_round = False
     reason = "iteration limit"
     t_start = time.perf_counter()
@@ -424,12 +425,16 @@ def adaptive_fit(
             space = make_space(knots, options.degree, options.mode, cost, len(interior))
             n_ctrl = size(space)
             # the budget is strict: insert fewer knots until the space fits in it
+            shrunk_away = False
             while n_ctrl > options.max_control_points and len(pending):
                 pending = pending[: len(pending) // 2]
                 interior = np.vstack([interior[: n_before], pending])
                 knots = np.vstack([interior, ring_knots])
                 space = make_space(knots, options.degree, options.mode, cost, len(interior))
                 n_ctrl = size(space)
+                shrunk_away = len(pending) == 0  # not even one new knot fits
+            if shrunk_away:
+                break
             # the first space too: fewer initial knots (a random subset: still well spread)
             while (it == 0 and start_knots is None and n_ctrl > options.max_control_points
                    and len(interior) > 6):
@@ -448,7 +453,7 @@ def adaptive_fit(
                     raise
                 # safety net (method.md section 3 measured one more ring being needed at times)
                 ring_knots = _add_ring(ring_knots, seed=rng_seed + extra + 1)
-        if n_ctrl > options.max_control_points and it > 0:
+        if (n_ctrl > options.max_control_points and it > 0) or shrunk_away:
             reason = "control-point budget reached"
             break
         state = IterationState(knots, len(interior), space, fit, n_control=n_ctrl)
@@ -486,11 +491,20 @@ def adaptive_fit(
             reason = "control-point budget reached"
             break
         # how many knots the budget allows: control points grow about linearly with the
-        # interior knots
-        per_knot = n_ctrl / max(len(interior), 1)
+        # interior knots, by what the last insertion added per knot (the border functions
+        # that meet the domain are a large constant share: n_ctrl / knots would overstate a
+        # new knot's cost and stop the loop short of the budget); an optimistic guess is safe,
+        # the space is shrunk to the budget above
+        marginal = prev is not None and len(interior) > prev[0] and n_ctrl > prev[1]
+        per_knot = ((n_ctrl - prev[1]) / (len(interior) - prev[0]) if marginal
+                    else n_ctrl / max(len(interior), 1))
+        prev = (len(interior), n_ctrl)
         room = int((options.max_control_points - n_ctrl) / max(per_knot, 1e-9))
         want = options.knots_per_iteration or max(10, int(np.ceil(0.15 * len(interior))))
-        count = min(want, room)
+        if marginal:
+            count = min(want, room)
+        else:  # no measured cost per knot yet: try them all if there is any room at all
+            count = want if n_ctrl < options.max_control_points else 0
         if count < 1:
             reason = "control-point budget reached"
             break

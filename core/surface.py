@@ -383,8 +383,13 @@ class TCBSurface:
                 **{name: arrays.get(f"param_{name}") for name in _PARAM_FIELDS},
             )
             options = RefineOptions(**json.loads(str(arrays["options"])))
-            return cls(space, arrays["control_points"], param, arrays["errors"],
-                       json.loads(str(arrays["report"])), int(arrays["n_interior"]), options)
+            report = json.loads(str(arrays["report"]))
+            surf = cls(space, arrays["control_points"], param, arrays["errors"], report,
+                       int(arrays["n_interior"]), options)
+            if "functions" not in report:  # saved when every basis function counted
+                report["functions"] = int(space.n_basis)
+                report["control_points"] = len(surf.active)
+            return surf
         except FileFormatError:
             raise
         except Exception as exc:

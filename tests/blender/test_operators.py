@@ -330,6 +330,31 @@ def test_refine_retessellate_deviation_and_reopen(clean_scene, addon, tmp_path):
     assert core_of(addon).TCBSurface.load(out).control_points.shape[1] == 3
 
 
+def test_a_net_with_a_vertex_per_basis_function_is_rewritten_keeping_its_edits(clean_scene, addon):
+    """Nets written before control points left out the border rings' functions have one vertex
+    per basis function; re-tessellating keeps an edit made on such a net and rewrites the net
+    with the control points only."""
+    bpy = clean_scene
+    verts, faces = grid(20, f=lambda x, y: 0.2 * np.sin(2 * x) * y)
+    obj = add_mesh(bpy, "Old", verts, faces)
+    assert fit(bpy, obj, tolerance=2e-2, max_control_points=200) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    surf = spline_of(addon, surface)
+    old = np.array(surf.coefficients)
+    assert len(old) > len(surf.control_points)
+    old[surf.active[len(surf.active) // 2], 2] += 0.1  # an edit made on the old net
+    mesh = bpy.data.meshes.new("old net")
+    mesh.from_pydata(old.tolist(), [], [])
+    net.data = mesh
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.retessellate(resolution=16) == {"FINISHED"}
+    edited = surf.with_control_points(old)
+    assert len(net.data.vertices) == len(surf.control_points)
+    assert np.allclose(positions(net), edited.control_points, atol=1e-5)
+    assert np.allclose(positions(surface), edited.tessellate(16)[0], atol=1e-5)
+
+
 # --- errors: a specific message, nothing changed ------------------------------------------------
 
 

@@ -4,11 +4,14 @@ The border rings (method.md section 3) carry functions that vanish on the domain
 control points: the budget does not count them and the control net does not show them.
 """
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from core import fit_surface
+from core import TCBSurface, fit_surface
 from core.errors import InvalidInputError
+from core.meshio import read_geometry
 from core.parameterize import _points_in_polygon
 from core.spline_space import _outer_polygon, build_space
 
@@ -32,11 +35,13 @@ def _rhombus(per_side: int) -> np.ndarray:
     return np.vstack(out)
 
 
-@pytest.mark.parametrize("degree, shape", [(2, "hexagon"), (3, "hexagon"), (2, "200-gon"),
-                                           (2, "rhombus")])
-def test_meets_finds_every_function_that_is_nonzero_in_the_polygon(degree, shape):
+@pytest.mark.parametrize("degree, mode, shape", [
+    (2, "tcb", "hexagon"), (3, "tcb", "hexagon"), (1, "tcb", "hexagon"), (2, "dcb", "hexagon"),
+    (2, "tcb", "200-gon"), (2, "tcb", "rhombus"),
+])
+def test_meets_finds_every_function_that_is_nonzero_in_the_polygon(degree, mode, shape):
     rng = np.random.default_rng(degree)
-    space = build_space(rng.random((150, 2)) * 3 - 1, degree)
+    space = build_space(rng.random((150, 2)) * 3 - 1, degree, mode=mode)
     poly = {"hexagon": _polygon(6), "200-gon": _polygon(200), "rhombus": _rhombus(50)}[shape]
     met = space.meets(poly)
     sample = rng.random((300_000, 2)) * 1.4 - 0.2
@@ -94,7 +99,63 @@ def test_editing_the_control_points(ridge):
     # partition of unity on the domain: moving every control point moves the whole surface
     np.testing.assert_allclose(lifted(uv) - surf(uv), np.tile([0.0, 0.0, 1.0], (len(uv), 1)),
                                rtol=0, atol=1e-9)
-    same = surf.with_control_points(surf.coefficients)  # all coefficients are accepted too
-    np.testing.assert_array_equal(same.control_points, surf.control_points)
+    # the border functions keep their coefficients (they extend the surface off the domain)
+    border = np.setdiff1d(np.arange(surf.space.n_basis), surf.active)
+    np.testing.assert_array_equal(lifted.coefficients[border], surf.coefficients[border])
+    moved = surf.coefficients + 0.5  # all coefficients are accepted too
+    np.testing.assert_array_equal(surf.with_control_points(moved).coefficients, moved)
     with pytest.raises(InvalidInputError, match="shape"):
         surf.with_control_points(np.zeros((len(surf.control_points) + 1, 3)))
+
+
+@pytest.mark.parametrize("mode, degree, budget", [("tcb", 3, 150), ("dcb", 3, 300), ("dcb", 2, 150)])
+def test_the_loop_fills_the_budget(mode, degree, budget):
+    """The border functions that meet the domain are a large constant share of the control
+    points: the knots a budget still allows are estimated from what an insertion added, not
+    from the average per knot (which stopped DCB and cubic fits at 74-89% of the budget)."""
+    xy = np.random.default_rng(5).random((3000, 2))
+    points = np.c_[xy, 0.3 * np.abs(xy[:, 0] - 0.45 - 0.1 * xy[:, 1]) + 0.1 * xy[:, 1] ** 2]
+    surf = fit_surface(points, mode=mode, degree=degree, tolerance=0.0,
+                       max_control_points=budget, max_iterations=30)
+    counts = [h["control_points"] for h in surf.report["history"]]
+    assert max(counts) <= budget and max(counts) >= 0.95 * budget
+    assert surf.report["stop_reason"] == "control-point budget reached"
+
+
+def test_the_counts_agree_after_refine_in_dcb_mode_for_meshes_and_files(tmp_path):
+    v, f = read_geometry(Path(__file__).resolve().parents[2] / "data" / "nefertiti.off")
+    xy = np.random.default_rng(2).random((2000, 2))
+    cloud = np.c_[xy, np.sin(2 * xy[:, 0]) * xy[:, 1]]
+    first = fit_surface(cloud, tolerance=0.0, max_control_points=150, max_iterations=2)
+    surfaces = [
+        first,
+        first.refine(cloud, max_control_points=300, max_iterations=2),
+        fit_surface(cloud, mode="dcb", tolerance=0.0, max_control_points=250, max_iterations=3),
+        fit_surface(v, f, tolerance=0.0, max_control_points=250, max_iterations=3),
+    ]
+    for surf in surfaces:
+        assert surf.report["control_points"] == len(surf.control_points) < surf.space.n_basis
+        path = tmp_path / "s.npz"
+        surf.save(path)
+        back = TCBSurface.load(path)
+        np.testing.assert_array_equal(back.active, surf.active)
+        np.testing.assert_array_equal(back.control_points, surf.control_points)
+
+
+def test_a_file_saved_when_every_function_counted_reports_the_control_points(ridge):
+    """Files written before control points left out the border functions carry a report whose
+    ``control_points`` counted every function; loading says what the surface has now."""
+    import io
+    import json
+
+    with np.load(io.BytesIO(ridge.to_bytes())) as z:
+        arrays = {k: z[k] for k in z.files}
+    report = json.loads(str(arrays["report"]))
+    del report["functions"]
+    report["control_points"] = ridge.space.n_basis
+    arrays["report"] = np.array(json.dumps(report))
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    old = TCBSurface.from_bytes(buf.getvalue())
+    assert old.report["control_points"] == len(old.control_points) == len(ridge.control_points)
+    assert old.report["functions"] == ridge.space.n_basis
