@@ -330,7 +330,11 @@ class IterationState:
     space: SplineSpace
     fit: FitResult
     refit: dict | None = None  # the final fit on all points after sampled iterations
-    n_control: int = 0  # the functions that meet the domain (what the budget counts)
+    active: np.ndarray | None = None  # the functions that meet the domain (the control points)
+
+    @property
+    def n_control(self) -> int:  # what the budget counts
+        return len(self.active) if self.active is not None else self.space.n_basis
 
 
 # Above this many points the iterations of the loop (criterion "rms") fit a seeded random subset
@@ -395,8 +399,8 @@ def adaptive_fit(
     if domain is None:
         domain = uv[ConvexHull(uv).vertices]
 
-    def size(space: SplineSpace) -> int:  # what the budget counts
-        return int(space.meets(domain).sum())
+    def control(space: SplineSpace) -> np.ndarray:  # the control points: what the budget counts
+        return np.flatnonzero(space.meets(domain))
 
     feature = options.feature_sensitive and options.mode == "tcb"
     full = (uv, points, weights, n_measured)
@@ -423,7 +427,8 @@ def adaptive_fit(
         for extra in range(3):
             knots = np.vstack([interior, ring_knots])
             space = make_space(knots, options.degree, options.mode, cost, len(interior))
-            n_ctrl = size(space)
+            active = control(space)
+            n_ctrl = len(active)
             # the budget is strict: insert fewer knots until the space fits in it
             shrunk_away = False
             while n_ctrl > options.max_control_points and len(pending):
@@ -431,7 +436,8 @@ def adaptive_fit(
                 interior = np.vstack([interior[: n_before], pending])
                 knots = np.vstack([interior, ring_knots])
                 space = make_space(knots, options.degree, options.mode, cost, len(interior))
-                n_ctrl = size(space)
+                active = control(space)
+                n_ctrl = len(active)
                 shrunk_away = len(pending) == 0  # not even one new knot fits
             if shrunk_away:
                 break
@@ -441,7 +447,8 @@ def adaptive_fit(
                 interior = interior[: max(6, len(interior) // 2)]
                 knots = np.vstack([interior, ring_knots])
                 space = make_space(knots, options.degree, options.mode, cost, len(interior))
-                n_ctrl = size(space)
+                active = control(space)
+                n_ctrl = len(active)
             if n_ctrl > options.max_control_points and it > 0:
                 break
             t_space = time.perf_counter() - t0
@@ -456,7 +463,7 @@ def adaptive_fit(
         if (n_ctrl > options.max_control_points and it > 0) or shrunk_away:
             reason = "control-point budget reached"
             break
-        state = IterationState(knots, len(interior), space, fit, n_control=n_ctrl)
+        state = IterationState(knots, len(interior), space, fit, active=active)
         e = fit.errors[:n_measured]
         rms, emax = float(np.sqrt(np.mean(e**2))), float(e.max(initial=0.0))
         if best is None or rms < best_rms:
@@ -528,6 +535,6 @@ def adaptive_fit(
         fit = fit_control_points(best.space, full[0], full[1], full[2], options.smoothness)
         refit = {"points": len(full[0]), "seconds": time.perf_counter() - t0,
                  "phases": dict(fit.timings)}
-        best = IterationState(best.knots, best.n_interior, best.space, fit, refit, best.n_control)
+        best = IterationState(best.knots, best.n_interior, best.space, fit, refit, best.active)
     return best, history, reason
 

@@ -198,7 +198,7 @@ class SplineSpace:
         hull = ConvexHull(_outer_polygon(np.asarray(polygon, dtype=np.float64).reshape(-1, 2), 128))
         poly = hull.points[hull.vertices]
         V = self._batch.V  # (C, n, 2) knots of every configuration
-        C, n = V.shape[:2]
+        n = V.shape[1]
         tol = 1e-9 * max(float(np.ptp(poly, axis=0).max()), 1e-300)
         # the polygon lies where normal . x <= reach: unit outward normals of its hull's edges
         # (qhull drops repeated and collinear vertices, whose edges have no direction)

@@ -530,7 +530,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=()):
     }
     if best.refit is not None:  # iterations on a subset, the chosen space fitted to all points
         report["refit"] = best.refit
-    return TCBSurface(best.space, C, param, errors, report, best.n_interior, options)
+    return TCBSurface(best.space, C, param, errors, report, best.n_interior, options,
+                      active=best.active)
 
 
 def fit_surface(
