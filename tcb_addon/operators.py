@@ -108,17 +108,16 @@ def stored_surface(surface_obj, use_net: bool = True):
     net = surface_obj.tcb.net
     if use_net and net is not None and net.type == "MESH":
         ctrl = bridge.read_world_positions(net)
-        full = surf.coefficients
-        if len(ctrl) == len(full) != len(surf.control_points):
-            # a net saved before control points left out the border rings' functions (one
-            # vertex per basis function): keep its edits, then rewrite it in today's form
-            if not np.allclose(ctrl, full, rtol=0, atol=1e-6 * (1 + np.abs(full).max())):
-                surf = surf.with_control_points(ctrl)
-            write_net_mesh(net, surf)
-        elif len(ctrl) == len(surf.control_points) and not np.allclose(
-            ctrl, surf.control_points, rtol=0, atol=1e-6 * (1 + np.abs(surf.control_points).max())
+        # a net saved before control points left out the border rings' functions has a
+        # vertex per basis function: its edits are kept and it is rewritten in today's form
+        old_net = len(ctrl) == len(surf.coefficients) != len(surf.control_points)
+        ref = surf.coefficients if old_net else surf.control_points
+        if len(ctrl) == len(ref) and not np.allclose(
+            ctrl, ref, rtol=0, atol=1e-6 * (1 + np.abs(ref).max())
         ):
             surf = surf.with_control_points(ctrl)
+        if old_net:
+            write_net_mesh(net, surf)
     return surf
 
 
