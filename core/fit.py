@@ -33,7 +33,8 @@ import scipy.sparse.linalg as spla
 from .errors import BorderError, InvalidInputError, SingularSystemError
 from .simplex import orient2d
 
-__all__ = ["FitResult", "fit_control_points", "fairing_quadrature", "PARTITION_TOL"]
+__all__ = ["FitResult", "fit_control_points", "fairing_quadrature", "check_smoothness",
+           "PARTITION_TOL", "AUTO_SMOOTHNESS"]
 
 PARTITION_TOL = 1e-9
 CHUNK = 200_000
@@ -42,6 +43,12 @@ CHUNK = 200_000
 KEEP_BYTES = 768 * 2**20
 # beta = smoothness, alpha = FIRST_ORDER_SHARE * smoothness (both relative to the data term)
 FIRST_ORDER_SHARE = 0.1
+# smoothness="auto": the candidates (largest first), the number of cross-validation folds, the
+# fewest points that make a choice (below it: DEFAULT_SMOOTHNESS)
+AUTO_SMOOTHNESS = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
+FOLDS = 5
+MIN_AUTO_POINTS = 100
+DEFAULT_SMOOTHNESS = 1e-4
 
 
 @dataclass
@@ -53,6 +60,9 @@ class FitResult:
     rms: float
     max: float
     timings: dict = field(default_factory=dict)
+    smoothness: float = DEFAULT_SMOOTHNESS  # the value used (the chosen one for "auto")
+    # smoothness="auto": the cross-validated RMS of each candidate ({} when a value was given)
+    validation: dict = field(default_factory=dict)
 
 
 def fairing_quadrature(space) -> tuple[np.ndarray, np.ndarray]:
@@ -89,7 +99,7 @@ def fit_control_points(
     uv: np.ndarray,
     points: np.ndarray,
     weights: np.ndarray | None = None,
-    smoothness: float = 1e-4,
+    smoothness: float | str = DEFAULT_SMOOTHNESS,
     check_partition: bool = True,
 ) -> FitResult:
     """Fit the control points of ``space`` to ``points`` (N, 3) at parameters ``uv`` (N, 2).
@@ -101,10 +111,12 @@ def fit_control_points(
     points : (N, 3) float64
     weights : (N,) float64, optional
         Nonnegative per-point weights ``w_j`` (default 1).
-    smoothness : float
+    smoothness : float or "auto"
         ``beta`` relative to the data term; ``alpha = 0.1 * smoothness`` likewise. 0 means
         pure least squares for the functions that see data; the others then minimize the
         fairing energy with those held (exact reproduction of what the space reproduces).
+        ``"auto"``: chosen among :data:`AUTO_SMOOTHNESS` by 5-fold cross-validation
+        (:func:`_choose_smoothness`); ``FitResult.smoothness`` says which.
     check_partition : bool
         Assert ``|sum_I B_I(x_j) - 1| < 1e-9`` at every parameter (method.md section 3).
 
@@ -124,8 +136,7 @@ def fit_control_points(
     weights = np.asarray(weights, dtype=np.float64)
     if weights.shape != (N,) or not np.all(np.isfinite(weights)) or (weights < 0).any():
         raise InvalidInputError("weights must be N finite nonnegative numbers, one per point")
-    if not (np.isfinite(smoothness) and smoothness >= 0):
-        raise InvalidInputError(f"smoothness must be a nonnegative number, got {smoothness}")
+    smoothness = check_smoothness(smoothness)
 
     AtA = sp.csr_matrix((n, n))
     AtP = np.zeros((n, 3))
@@ -173,6 +184,13 @@ def fit_control_points(
         )
     t_fair = time.perf_counter() - t1
 
+    validation: dict = {}
+    t_select = 0.0
+    if smoothness == "auto":
+        ts = time.perf_counter()
+        smoothness, validation = _choose_smoothness(space, uv, points, weights, AtA, AtP, G,
+                                                    chunks if keep else None)
+        t_select = time.perf_counter() - ts
     t2 = time.perf_counter()
     if smoothness > 0:
         C, solver = _solve((AtA + smoothness * G).tocsc(), AtP, ridge=True)
@@ -204,13 +222,100 @@ def fit_control_points(
         "solve": t_solve,
         "errors": t_err,
     }
+    if validation:
+        timings["smoothness"] = t_select
     return FitResult(
         control_points=C,
         errors=errors,
         rms=float(np.sqrt(np.mean(errors**2))) if N else 0.0,
         max=float(errors.max(initial=0.0)),
         timings=timings,
+        smoothness=float(smoothness),
+        validation=validation,
     )
+
+
+def check_smoothness(value):
+    """A smoothness as given by a user: a nonnegative number, or ``"auto"``."""
+    if isinstance(value, str):
+        if value.strip().lower() == "auto":
+            return "auto"
+        raise InvalidInputError(f"smoothness must be a nonnegative number or 'auto', got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InvalidInputError(
+            f"smoothness must be a nonnegative number or 'auto', got {value!r}") from None
+    if not (np.isfinite(v) and v >= 0):
+        raise InvalidInputError(f"smoothness must be a nonnegative number or 'auto', got {value}")
+    return v
+
+
+def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks):
+    """Cross-validated choice of the fairing weight (method.md section 5).
+
+    The points are dealt into :data:`FOLDS` folds (seeded: same input, same choice). For fold
+    ``f`` the normal equations of the other points are those of all points minus the fold's
+    rows, ``K_f = A^T W A - A_f^T W_f A_f + s G_f`` and ``A^T W P - A_f^T W_f P_f`` (``G_f``
+    scaled by the data term of the points kept: a fit with the fold's weights set to 0); every
+    candidate ``s`` of :data:`AUTO_SMOOTHNESS` is solved on them (one sparse factorization
+    each; the basis is not evaluated again) and predicts the fold's points. Each point is
+    predicted once, so the score of ``s`` is the weighted mean of ``|A_f C_s - P_f|^2`` over
+    all points. The choice follows the one-standard-error rule (Hastie, Tibshirani, Friedman,
+    section 7.10): the largest ``s`` whose score is within one standard error of the best.
+    Smaller ``s`` fits the data more closely but lets the functions that see few points
+    overshoot between them; the rule keeps the smoother fit unless the data clearly ask for
+    less smoothing (the minimum score alone was measured to pick overshooting fits). Candidates
+    whose system is singular are skipped. With fewer than :data:`MIN_AUTO_POINTS` points of
+    positive weight there is nothing to cross-validate: :data:`DEFAULT_SMOOTHNESS`.
+
+    Returns the chosen value and ``{candidate: cross-validated RMS}``.
+    """
+    N = len(uv)
+    if int((weights > 0).sum()) < MIN_AUTO_POINTS:
+        return DEFAULT_SMOOTHNESS, {}
+    fold = np.random.default_rng(12345).integers(0, FOLDS, N)
+    starts = np.cumsum([0] + [A.shape[0] for A in chunks or []])
+
+    def fold_rows(f):  # one fold's rows of A at a time (memory: a fifth of A)
+        rows = np.flatnonzero(fold == f)
+        if chunks is None:  # the basis was too large to keep: evaluate it again
+            return rows, space.evaluate(uv[rows])
+        parts = [A[fold[starts[i] : starts[i + 1]] == f] for i, A in enumerate(chunks)]
+        return rows, sp.vstack(parts).tocsr()
+
+    sq = {s: np.zeros(N) for s in AUTO_SMOOTHNESS}
+    failed: set = set()
+    data_trace = AtA.diagonal().sum()
+    for f in range(FOLDS):
+        rows, Af = fold_rows(f)
+        wf, Pf = weights[rows], points[rows]
+        WAf = sp.diags(wf) @ Af
+        K_fit = AtA - Af.T @ WAf
+        rhs = AtP - WAf.T @ Pf
+        # G is scaled by the data term (module docstring): here by that of the points kept, so
+        # each candidate fit is exactly fit_control_points with the fold's weights set to 0
+        G_fit = (K_fit.diagonal().sum() / data_trace) * G
+        for s in AUTO_SMOOTHNESS:
+            if s in failed:
+                continue
+            try:
+                C, _ = _solve((K_fit + s * G_fit).tocsc(), rhs, ridge=True)
+            except SingularSystemError:
+                failed.add(s)
+                continue
+            sq[s][rows] = wf * np.sum((Af @ C - Pf) ** 2, axis=1)
+    wsum = float(weights.sum())
+    mean = {s: float(v.sum() / wsum) for s, v in sq.items() if s not in failed}
+    if not mean:
+        return DEFAULT_SMOOTHNESS, {}
+    best = min(mean, key=mean.get)
+    w = weights / wsum
+    # standard error of the weighted mean of the per-point squared errors
+    se = float(np.sqrt(np.sum(w * w * (sq[best] / np.where(weights > 0, weights, 1.0)
+                                        - mean[best]) ** 2)))
+    chosen = max(s for s, m in mean.items() if m <= mean[best] + se)
+    return chosen, {s: float(np.sqrt(m)) for s, m in mean.items()}
 
 
 def _refine(C, solver, chunks, weights, points, penalty_grad, steps: int = 10):

@@ -516,6 +516,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=()):
         "interior_knots": int(best.n_interior),
         "control_points": int(best.n_control),
         "functions": int(best.space.n_basis),
+        "smoothness": float(best.fit.smoothness),  # the value used (chosen, for "auto")
         "iterations": len(history) + len(hist),
         # errors at the user's points (for meshes the fit also used samples on the faces)
         "rms": float(np.sqrt(np.mean(errors[used] ** 2))),
@@ -530,6 +531,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=()):
     }
     if best.refit is not None:  # iterations on a subset, the chosen space fitted to all points
         report["refit"] = best.refit
+    if best.selection is not None:  # smoothness="auto"
+        report["smoothness_selection"] = best.selection
     return TCBSurface(best.space, C, param, errors, report, best.n_interior, options,
                       active=best.active)
 
@@ -543,7 +546,7 @@ def fit_surface(
     relative: bool = True,
     max_control_points: int = 2000,
     max_iterations: int = 20,
-    smoothness: float = 1e-4,
+    smoothness: float | str = 1e-4,
     callback=None,
     *,
     criterion: str = "rms",
@@ -570,8 +573,13 @@ def fit_surface(
         Budget of control points; knot insertion stops before exceeding it.
     max_iterations : int
         Fits at most this many times.
-    smoothness : float
-        Fairing weight relative to the data term (method.md section 5).
+    smoothness : float or "auto"
+        Fairing weight relative to the data term (method.md section 5). ``"auto"``: the
+        iterations use 1e-4 and the surface returned is refitted with the weight chosen by
+        5-fold cross-validation among 1e-2 ... 1e-7 (one-standard-error rule; the value used is
+        ``report["smoothness"]``, the scores ``report["smoothness_selection"]``). It pays on
+        dense samples of smooth shapes (1.1-2x lower error at 50 points per control point);
+        on meshes it picks a smoother surface than the default.
     callback : callable, optional
         ``callback(report: dict) -> bool``: called after every iteration with keys
         ``iteration, knots, control_points, rms, max, rms_rel, max_rel, seconds``; return True to

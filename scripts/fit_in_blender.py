@@ -76,6 +76,19 @@ def script_args(argv: list[str]) -> list[str]:
     return argv[1:]
 
 
+def smoothness_arg(text: str):
+    """``--smoothness``: a nonnegative number or ``auto``."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not (value >= 0 and value != float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a nonnegative number or 'auto', got {text!r}")
+    return value
+
+
 def parse_args(args: list[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(
         prog="fit_in_blender.py",
@@ -104,8 +117,9 @@ def parse_args(args: list[str]) -> argparse.Namespace:
                     help="spline degree (default 2)")
     ap.add_argument("--mode", choices=("tcb", "dcb"), default="tcb",
                     help="spline space: tcb or dcb (default %(default)s)")
-    ap.add_argument("--smoothness", type=float, default=1e-4,
-                    help="weight of the smoothing term (default %(default)g)")
+    ap.add_argument("--smoothness", type=smoothness_arg, default=1e-4,
+                    help="weight of the smoothing term, or 'auto' (chosen by cross-validation; "
+                    "default 1e-4)")
     ap.add_argument("--resolution", type=int, default=64,
                     help="subdivisions of the output surface mesh per side (default %(default)s)")
     ap.add_argument("--no-live-net", dest="live_net", action="store_false",
@@ -319,7 +333,9 @@ def fit(bpy, objs, ns):
     props = dict(
         tolerance=ns.tolerance, relative=ns.relative, criterion=ns.criterion.upper(),
         max_control_points=ns.max_control_points, max_iterations=ns.max_iterations,
-        degree=str(ns.degree), mode=ns.mode.upper(), smoothness=ns.smoothness,
+        degree=str(ns.degree), mode=ns.mode.upper(),
+        smoothness=1e-4 if ns.smoothness == "auto" else ns.smoothness,
+        auto_smoothness=ns.smoothness == "auto",
         resolution=ns.resolution, show_net=True, live_net=ns.live_net,
     )  # fmt: skip
     override = dict(selected_objects=list(objs), active_object=objs[0], object=objs[0])
@@ -554,7 +570,7 @@ def fit_stats(surface) -> dict:
     st = surface.tcb
     keys = ("degree", "mode", "tolerance", "relative", "criterion", "max_control_points",
             "knots", "control_points", "iterations", "rms", "max", "rms_rel", "max_rel",
-            "seconds")  # fmt: skip
+            "seconds", "smoothness", "auto_smoothness")  # fmt: skip
     return {k: getattr(st, k) for k in keys}
 
 
@@ -573,6 +589,7 @@ def report_table(surface, stats: dict, n_points: int, n_faces: int, timings: dic
         ("knots", f"{st.knots}"),
         ("control points", f"{st.control_points}"),
         ("iterations", f"{st.iterations}"),
+        ("smoothness", f"{st.smoothness:.0e}" + (" (auto)" if st.auto_smoothness else "")),
         ("RMS error", f"{st.rms:.6g}  ({100 * st.rms_rel:.3g} % of the diagonal)"),
         ("max error", f"{st.max:.6g}  ({100 * st.max_rel:.3g} % of the diagonal)"),
         ("surface mesh", f"{ev_verts} vertices, {ev_faces} faces"),

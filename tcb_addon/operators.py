@@ -145,6 +145,8 @@ def store_stats(tcb, surf, settings: dict) -> None:
     for key, value in settings.items():
         if hasattr(tcb, key):
             setattr(tcb, key, str(value) if key in {"degree", "mode", "criterion"} else value)
+    if "smoothness" in rep:  # the value used: the chosen one with Auto Smoothness
+        tcb.smoothness = float(rep["smoothness"])
 
 
 def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = None):
@@ -333,7 +335,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         return dict(
             degree=int(self.degree), mode=self.mode.lower(), tolerance=self.tolerance,
             relative=self.relative, max_control_points=self.max_control_points,
-            max_iterations=self.max_iterations, smoothness=self.smoothness,
+            max_iterations=self.max_iterations,
+            smoothness="auto" if self.auto_smoothness else self.smoothness,
             criterion=self.criterion.lower(),
         )  # fmt: skip
 

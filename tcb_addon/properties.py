@@ -74,8 +74,18 @@ class FitSettings:
     )
     smoothness: FloatProperty(
         name="Smoothness",
-        description="Weight of the smoothing term of the least-squares fit (0 = none)",
+        description="Weight of the smoothing term of the least-squares fit (0 = none); used "
+        "when Auto Smoothness is off",
         default=1e-4, min=0.0, soft_max=1.0, precision=6, step=0.001,
+    )  # fmt: skip
+    auto_smoothness: BoolProperty(
+        name="Auto Smoothness",
+        description=(
+            "Choose the smoothing weight by cross-validation: the one that best predicts points "
+            "left out of the fit (slower; more accurate on dense scans of smooth shapes, "
+            "smoother on meshes)"
+        ),
+        default=False,
     )  # fmt: skip
     resolution: IntProperty(
         name="Resolution",
@@ -86,7 +96,7 @@ class FitSettings:
 
 FIT_KEYS = (
     "tolerance", "relative", "criterion", "max_control_points", "max_iterations", "degree", "mode",
-    "smoothness", "resolution",
+    "smoothness", "auto_smoothness", "resolution",
 )  # fmt: skip
 
 
@@ -136,7 +146,8 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     max_iterations: IntProperty()
     degree: StringProperty()
     mode: StringProperty()
-    smoothness: FloatProperty(precision=6)
+    smoothness: FloatProperty(precision=6)  # the value used (the chosen one with auto)
+    auto_smoothness: BoolProperty()
     resolution: IntProperty()
     # deviation map (distance of the surface vertices to the data)
     has_deviation: BoolProperty()
@@ -170,5 +181,11 @@ def draw_fit_settings(layout, owner, short_labels: bool = False) -> None:
                 "smoothness", "resolution", "show_net", "live_net"):  # fmt: skip
         if short_labels and key == "max_control_points":
             col.prop(owner, key, text="Max Control Pts")
+        elif key == "smoothness":
+            row = col.row(align=True)
+            sub = row.row(align=True)
+            sub.active = not owner.auto_smoothness
+            sub.prop(owner, key)
+            row.prop(owner, "auto_smoothness", text="", icon="AUTO")
         else:
             col.prop(owner, key)

@@ -91,7 +91,7 @@ def test_operators_and_panels_registered(installed):
     fit = bpy.ops.tcb.fit_surface.get_rna_type()
     assert {"REGISTER", "UNDO"} <= set(bpy.types.TCB_OT_fit_surface.bl_options)
     for key in ("tolerance", "relative", "max_control_points", "max_iterations", "degree", "mode",
-                "smoothness", "resolution"):  # fmt: skip
+                "smoothness", "auto_smoothness", "resolution"):  # fmt: skip
         assert key in fit.properties.keys(), key
     for panel in ("TCB_PT_fit", "TCB_PT_result"):
         cls = getattr(bpy.types, panel)

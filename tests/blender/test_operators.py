@@ -162,6 +162,25 @@ def test_fit_point_cloud_object(clean_scene, addon):
     assert snapshot(cloud) == before
 
 
+def test_fit_with_auto_smoothness_stores_the_chosen_value(clean_scene, addon):
+    bpy = clean_scene
+    verts, _ = grid(20)
+    rng = np.random.default_rng(2)
+    pts = verts + rng.normal(scale=2e-3, size=verts.shape)
+    cloud = add_point_cloud(bpy, "Noisy", pts)
+    assert fit(bpy, cloud, tolerance=0.0, max_iterations=3, auto_smoothness=True) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    surf = spline_of(addon, surface)
+    chosen = surf.report["smoothness"]
+    assert chosen in core_of(addon).fit.AUTO_SMOOTHNESS
+    assert surf.report["smoothness_selection"]["chosen"] == chosen
+    assert surface.tcb.auto_smoothness and surface.tcb.smoothness == pytest.approx(chosen)
+    # Refine keeps choosing
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.refine(max_iterations=1) == {"FINISHED"}
+    assert "smoothness_selection" in spline_of(addon, surface).report
+
+
 def test_fit_mesh_object_nefertiti(clean_scene, addon):
     bpy = clean_scene
     import importlib

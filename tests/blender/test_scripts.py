@@ -73,9 +73,19 @@ def test_fit_point_cloud_xyz_without_render(tmp_path):
     np.savetxt(src, pts)
     blend, ply = tmp_path / "saddle.blend", tmp_path / "saddle.ply"
     proc = run_script(src, "-o", blend, "--tolerance", "1e-2", "--max-control-points", "80",
-                      "--resolution", "8", "--export", ply, "--no-deviation")  # fmt: skip
+                      "--resolution", "8", "--export", ply, "--no-deviation",
+                      "--smoothness", "auto")  # fmt: skip
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert blend.is_file() and ply.is_file() and ply.read_bytes().startswith(b"ply")
+    row = [ln for ln in proc.stdout.splitlines() if ln.startswith("smoothness")]
+    assert len(row) == 1 and row[0].endswith("(auto)"), proc.stdout
+
+
+def test_bad_smoothness_is_refused(tmp_path):
+    proc = run_script(ROOT / "data" / "nefertiti.off", "-o", tmp_path / "x.blend",
+                      "--smoothness", "lots", timeout=60)
+    assert proc.returncode == 2 and "nonnegative number or 'auto'" in proc.stderr
+    assert not (tmp_path / "x.blend").exists()
 
 
 def _error_line(proc) -> str:

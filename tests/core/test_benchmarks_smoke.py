@@ -28,3 +28,17 @@ def test_compare_quick(tmp_path):
         labels = {r.split("|")[2].strip() for r in got}
         assert {"equal cp", "same knots 1", "same knots 4"} <= labels, labels
     assert "RMS ratio vs TCB" in md and "TCB/DCB RMS" in md
+
+
+def test_smoothness_quick(tmp_path):
+    """``benchmarks/smoothness.py --quick`` runs and writes its table (default vs auto)."""
+    out = tmp_path / "smoothness.md"
+    res = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "smoothness.py"), "--quick", "--out", str(out)],
+        capture_output=True, text=True, timeout=300, cwd=ROOT,
+    )
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = [line for line in out.read_text().splitlines() if line.startswith("| ")]
+    assert [r.split("|")[1].strip() for r in rows[1:]] == ["F6-sphere 3000", "crease 3000"]
+    # every row has both fits' errors and a chosen value
+    assert all(len(r.split("|")) == 14 and "nan" not in r for r in rows)

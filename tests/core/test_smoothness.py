@@ -1,0 +1,169 @@
+"""``smoothness="auto"``: the fairing weight chosen by 5-fold cross-validation (core.fit).
+
+The fairing term (method.md section 5) holds the functions that see little data, but on a
+dense sample of a smooth shape it also biases the fit; on noisy data it is what keeps the
+surface from following the noise. The cross-validated choice has to tell the two apart.
+"""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core import TCBSurface, fit_surface
+from core import fit as fit_module
+from core.errors import InvalidInputError
+from core.fit import AUTO_SMOOTHNESS, FOLDS, check_smoothness, fit_control_points
+from core.spline_space import build_space
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from knotsets import knot_set  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def wave(x, y):
+    return np.sin(3 * x) * np.cos(2 * y)
+
+
+@pytest.fixture(scope="module")
+def space():
+    return build_space(knot_set("random", 80, 2, 3), 2)
+
+
+def _data(n, noise, seed=0):
+    rng = np.random.default_rng(seed)
+    uv = rng.random((n, 2))
+    return uv, np.c_[uv, wave(*uv.T) + noise * rng.standard_normal(n)]
+
+
+def _grid_error(space, C):
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 50), np.linspace(0, 1, 50)), -1).reshape(-1, 2)
+    return float(np.sqrt(np.mean((space.evaluate(g) @ C[:, 2] - wave(*g.T)) ** 2)))
+
+
+@pytest.mark.parametrize("value, expected", [("auto", "auto"), (" AUTO ", "auto"), (0, 0.0),
+                                             (1e-4, 1e-4), ("1e-3", None), (-1.0, None),
+                                             (float("nan"), None), (float("inf"), None),
+                                             ("smooth", None), (None, None)])
+def test_check_smoothness(value, expected):
+    if expected is None:
+        with pytest.raises(InvalidInputError, match="nonnegative number or 'auto'"):
+            check_smoothness(value)
+    else:
+        assert check_smoothness(value) == expected
+
+
+def test_cross_validation_scores_are_the_fits_without_each_fold(space):
+    """Each candidate's score is the RMS, over all points, of the fit made with that point's
+    fold left out (weight 0), exactly as fit_control_points would make it."""
+    uv, P = _data(1500, 0.02)
+    res = fit_control_points(space, uv, P, smoothness="auto")
+    fold = np.random.default_rng(12345).integers(0, FOLDS, len(uv))
+    for s in (1e-2, 1e-4, 1e-7):
+        sq = np.zeros(len(uv))
+        for f in range(FOLDS):
+            w = np.where(fold == f, 0.0, 1.0)
+            sq[fold == f] = fit_control_points(space, uv, P, w, smoothness=s).errors[fold == f] ** 2
+        assert res.validation[s] == pytest.approx(np.sqrt(sq.mean()), rel=1e-6)
+    assert set(res.validation) == set(AUTO_SMOOTHNESS)
+
+
+def test_noise_gets_more_smoothing_and_the_choice_beats_the_extremes(space):
+    clean = fit_control_points(space, *_data(3000, 0.0), smoothness="auto")
+    uv, P = _data(3000, 0.05)
+    noisy = fit_control_points(space, uv, P, smoothness="auto")
+    assert noisy.smoothness in AUTO_SMOOTHNESS and clean.smoothness in AUTO_SMOOTHNESS
+    assert noisy.smoothness >= 100 * clean.smoothness
+    # against the true surface the noisy data's choice is better than following the noise
+    least = fit_control_points(space, uv, P, smoothness=min(AUTO_SMOOTHNESS))
+    assert _grid_error(space, noisy.control_points) < 0.75 * _grid_error(space, least.control_points)
+    # the scores say why: the least smoothing predicts left-out points worse
+    assert noisy.validation[noisy.smoothness] < noisy.validation[min(AUTO_SMOOTHNESS)]
+    # and the surface returned is the fit of all points with the chosen value
+    again = fit_control_points(space, uv, P, smoothness=noisy.smoothness)
+    np.testing.assert_allclose(noisy.control_points, again.control_points, rtol=0, atol=1e-12)
+    assert noisy.timings["smoothness"] > 0 and "smoothness" not in again.timings
+
+
+def test_choice_is_deterministic_and_independent_of_keeping_the_basis(space, monkeypatch):
+    uv, P = _data(2000, 0.01)
+    a = fit_control_points(space, uv, P, smoothness="auto")
+    b = fit_control_points(space, uv, P, smoothness="auto")
+    assert a.smoothness == b.smoothness and a.validation == b.validation
+    # a basis too large to keep is evaluated again fold by fold: same scores
+    monkeypatch.setattr(fit_module, "KEEP_BYTES", 0)
+    c = fit_control_points(space, uv, P, smoothness="auto")
+    assert c.smoothness == a.smoothness
+    for s, v in a.validation.items():
+        assert c.validation[s] == pytest.approx(v, rel=1e-9)
+
+
+def test_too_few_points_fall_back_to_the_default(space):
+    uv, P = _data(60, 0.0)
+    res = fit_control_points(space, uv, P, smoothness="auto")
+    assert res.smoothness == fit_module.DEFAULT_SMOOTHNESS and res.validation == {}
+    # zero-weight points do not count
+    uv, P = _data(400, 0.0)
+    w = np.zeros(400)
+    w[:50] = 1.0
+    assert fit_control_points(space, uv, P, w, smoothness="auto").validation == {}
+
+
+def _noisy_cloud(n=4000, noise=0.02, seed=1):
+    rng = np.random.default_rng(seed)
+    xy = rng.random((n, 2))
+    return np.c_[xy, wave(*xy.T) + noise * rng.standard_normal(n)]
+
+
+def test_fit_surface_auto_reports_its_choice_and_round_trips(tmp_path):
+    P = _noisy_cloud()
+    surf = fit_surface(P, smoothness="auto", tolerance=0.0, max_control_points=150)
+    r = surf.report
+    assert r["smoothness"] in AUTO_SMOOTHNESS
+    sel = r["smoothness_selection"]
+    assert sel["chosen"] == r["smoothness"] and len(sel["cross_validated_rms"]) == len(AUTO_SMOOTHNESS)
+    # the iterations use the default; only the surface returned is refitted
+    assert all(h["smoothness"] == 1e-4 for h in r["history"])
+    e = surf.errors
+    assert r["rms"] == pytest.approx(np.sqrt(np.mean(e**2)), rel=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(surf(surf.parameterization.uv) - P, axis=1), e,
+                               rtol=0, atol=1e-9)
+    path = tmp_path / "a.npz"
+    surf.save(path)
+    back = TCBSurface.load(path)
+    assert back.report["smoothness"] == r["smoothness"]
+    # refine() keeps "auto"
+    more = back.refine(P, max_iterations=1, max_control_points=200)
+    assert "smoothness_selection" in more.report
+
+
+def test_auto_never_breaks_a_tolerance_the_loop_reached():
+    """A smoother choice has a larger training error: if the loop reached the tolerance with
+    the default, that fit is kept."""
+    P = _noisy_cloud(noise=0.05)
+    ref = fit_surface(P, tolerance=0.0, max_iterations=2, max_control_points=400)
+    tol = ref.report["rms_rel"] * (1 + 1e-9)
+    surf = fit_surface(P, smoothness="auto", tolerance=tol, max_iterations=6,
+                       max_control_points=400)
+    sel = surf.report["smoothness_selection"]
+    assert surf.report["stop_reason"] == "tolerance reached"
+    assert sel["chosen"] > 1e-4  # noisy data: the choice is smoother ...
+    assert "kept" in sel and surf.report["smoothness"] == 1e-4  # ... and would miss the tolerance
+    assert surf.report["rms_rel"] <= tol
+
+
+def test_cli_smoothness_auto(tmp_path):
+    src = tmp_path / "cloud.xyz"
+    np.savetxt(src, _noisy_cloud(1500))
+    out = tmp_path / "s.obj"
+    run = subprocess.run([sys.executable, "-m", "core", "fit", str(src), "-o", str(out),
+                          "--smoothness", "auto", "--max-control-points", "120", "--quiet"],
+                         cwd=ROOT, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert "(auto)" in run.stdout and out.stat().st_size > 0
+    bad = subprocess.run([sys.executable, "-m", "core", "fit", str(src), "-o", str(out),
+                          "--smoothness", "lots"], cwd=ROOT, capture_output=True, text=True)
+    assert bad.returncode != 0 and "nonnegative number or 'auto'" in bad.stderr
