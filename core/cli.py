@@ -41,8 +41,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--degree", type=int, choices=(2, 3), default=2)
     f.add_argument("--mode", choices=("tcb", "dcb"), default="tcb")
     f.add_argument("--smoothness", type=_smoothness, default=1e-4,
-                   help="fairing weight relative to the data term, or 'auto': chosen by the "
-                   "error on 10%% of the points held out of the fit (default 1e-4)")
+                   help="fairing weight relative to the data term, or 'auto': chosen by "
+                   "5-fold cross-validation for the final surface (default 1e-4)")
     f.add_argument("--resolution", type=int, default=64,
                    help="tessellation steps across the longer side of the domain (default 64)")
     f.add_argument("--net", help="write the control net (.obj or .ply) here")
@@ -60,6 +60,16 @@ def _smoothness(text: str):
     except (ValueError, InvalidInputError):
         raise argparse.ArgumentTypeError(
             f"expected a nonnegative number or 'auto', got {text!r}") from None
+
+
+def _smoothness_text(report: dict) -> str:
+    """The fairing weight used, and how it was chosen."""
+    text = f"{report['smoothness']:.3g}"
+    sel = report.get("smoothness_selection")
+    if sel is not None:
+        text += (f" (auto chose {sel['chosen']:.3g}, which misses the tolerance: default kept)"
+                 if "kept" in sel else " (auto)")
+    return text
 
 
 def _check_output(path: str | None, what: str) -> None:
@@ -116,7 +126,7 @@ def _fit(args) -> int:
         ("knots (interior)", f"{r['knots']} ({r['interior_knots']})"),
         ("control points", f"{r['control_points']}"),
         ("iterations", f"{r['iterations']} ({r['stop_reason']})"),
-        ("smoothness", f"{r['smoothness']:.0e}" + (" (auto)" if args.smoothness == "auto" else "")),
+        ("smoothness", _smoothness_text(r)),
     ]
     if "refit" in r:
         refit = r["refit"]

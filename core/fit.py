@@ -101,6 +101,7 @@ def fit_control_points(
     weights: np.ndarray | None = None,
     smoothness: float | str = DEFAULT_SMOOTHNESS,
     check_partition: bool = True,
+    scored: int | None = None,
 ) -> FitResult:
     """Fit the control points of ``space`` to ``points`` (N, 3) at parameters ``uv`` (N, 2).
 
@@ -119,6 +120,9 @@ def fit_control_points(
         (:func:`_choose_smoothness`); ``FitResult.smoothness`` says which.
     check_partition : bool
         Assert ``|sum_I B_I(x_j) - 1| < 1e-9`` at every parameter (method.md section 3).
+    scored : int, optional
+        ``smoothness="auto"``: only the first ``scored`` points score the candidates (a mesh's
+        vertices, not the points sampled on its faces; default: all).
 
     Raises
     ------
@@ -189,7 +193,7 @@ def fit_control_points(
     if smoothness == "auto":
         ts = time.perf_counter()
         smoothness, validation = _choose_smoothness(space, uv, points, weights, AtA, AtP, G,
-                                                    chunks if keep else None)
+                                                    chunks if keep else None, scored)
         t_select = time.perf_counter() - ts
     t2 = time.perf_counter()
     if smoothness > 0:
@@ -241,6 +245,8 @@ def check_smoothness(value):
         if value.strip().lower() == "auto":
             return "auto"
         raise InvalidInputError(f"smoothness must be a nonnegative number or 'auto', got {value!r}")
+    if isinstance(value, (bool, np.bool_)) or np.ndim(value) != 0:
+        raise InvalidInputError(f"smoothness must be a nonnegative number or 'auto', got {value!r}")
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -251,36 +257,36 @@ def check_smoothness(value):
     return v
 
 
-def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks):
+def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=None):
     """Cross-validated choice of the fairing weight (method.md section 5).
 
     The points are dealt into :data:`FOLDS` folds (seeded: same input, same choice). For fold
     ``f`` the normal equations of the other points are those of all points minus the fold's
     rows, ``K_f = A^T W A - A_f^T W_f A_f + s G_f`` and ``A^T W P - A_f^T W_f P_f`` (``G_f``
-    scaled by the data term of the points kept: a fit with the fold's weights set to 0); every
-    candidate ``s`` of :data:`AUTO_SMOOTHNESS` is solved on them (one sparse factorization
-    each; the basis is not evaluated again) and predicts the fold's points. Each point is
-    predicted once, so the score of ``s`` is the weighted mean of ``|A_f C_s - P_f|^2`` over
-    all points. The choice follows the one-standard-error rule (Hastie, Tibshirani, Friedman,
-    section 7.10): the largest ``s`` whose score is within one standard error of the best.
-    Smaller ``s`` fits the data more closely but lets the functions that see few points
-    overshoot between them; the rule keeps the smoother fit unless the data clearly ask for
-    less smoothing (the minimum score alone was measured to pick overshooting fits). Candidates
-    whose system is singular are skipped. With fewer than :data:`MIN_AUTO_POINTS` points of
-    positive weight there is nothing to cross-validate: :data:`DEFAULT_SMOOTHNESS`.
+    scaled by the data term of the points kept, as in a fit with the fold's weights set to 0,
+    without its final iterative refinement); every candidate ``s`` of :data:`AUTO_SMOOTHNESS`
+    is solved on them (one sparse factorization each; the basis is not evaluated again) and
+    predicts the fold's points. Each point is predicted once; the score of ``s`` is the
+    weighted mean of ``|A_f C_s - P_f|^2`` over the first ``scored`` points (default all: for a
+    mesh its vertices, while the points sampled on its faces are fitted and left out like the
+    others but not scored). The choice is :func:`_one_standard_error`. Candidates whose system
+    is singular are skipped. With fewer than :data:`MIN_AUTO_POINTS` scored points of positive
+    weight there is nothing to cross-validate: :data:`DEFAULT_SMOOTHNESS`.
 
     Returns the chosen value and ``{candidate: cross-validated RMS}``.
     """
     N = len(uv)
-    if int((weights > 0).sum()) < MIN_AUTO_POINTS:
+    m = N if scored is None else int(min(max(scored, 0), N))
+    if int((weights[:m] > 0).sum()) < MIN_AUTO_POINTS:
         return DEFAULT_SMOOTHNESS, {}
     fold = np.random.default_rng(12345).integers(0, FOLDS, N)
     starts = np.cumsum([0] + [A.shape[0] for A in chunks or []])
 
     def fold_rows(f):  # one fold's rows of A at a time (memory: a fifth of A)
         rows = np.flatnonzero(fold == f)
-        if chunks is None:  # the basis was too large to keep: evaluate it again
-            return rows, space.evaluate(uv[rows])
+        if chunks is None:  # the basis was too large to keep: evaluate it again, in chunks
+            return rows, sp.vstack([space.evaluate(uv[rows[i : i + CHUNK]])
+                                    for i in range(0, len(rows), CHUNK)]).tocsr()
         parts = [A[fold[starts[i] : starts[i + 1]] == f] for i, A in enumerate(chunks)]
         return rows, sp.vstack(parts).tocsr()
 
@@ -293,8 +299,7 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks):
         WAf = sp.diags(wf) @ Af
         K_fit = AtA - Af.T @ WAf
         rhs = AtP - WAf.T @ Pf
-        # G is scaled by the data term (module docstring): here by that of the points kept, so
-        # each candidate fit is exactly fit_control_points with the fold's weights set to 0
+        # G is scaled by the data term (module docstring): here by that of the points kept
         G_fit = (K_fit.diagonal().sum() / data_trace) * G
         for s in AUTO_SMOOTHNESS:
             if s in failed:
@@ -304,18 +309,30 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks):
             except SingularSystemError:
                 failed.add(s)
                 continue
-            sq[s][rows] = wf * np.sum((Af @ C - Pf) ** 2, axis=1)
-    wsum = float(weights.sum())
-    mean = {s: float(v.sum() / wsum) for s, v in sq.items() if s not in failed}
-    if not mean:
+            sq[s][rows] = np.sum((Af @ C - Pf) ** 2, axis=1)
+    errors = {s: v[:m] for s, v in sq.items() if s not in failed}
+    if not errors:
         return DEFAULT_SMOOTHNESS, {}
+    return _one_standard_error(errors, weights[:m])
+
+
+def _one_standard_error(sq: dict, weights: np.ndarray):
+    """The one-standard-error rule (Hastie, Tibshirani, Friedman, *The Elements of Statistical
+    Learning*, section 7.10) on cross-validated squared errors ``sq = {s: (n,) array}``.
+
+    Score ``m_s = sum w_j e_sj / sum w_j``; ``best`` minimizes it; its standard error is that of
+    a weighted mean, ``se = sqrt(sum (w_j / W)^2 (e_best,j - m_best)^2)``; the choice is the
+    largest ``s`` with ``m_s <= m_best + se``. Smaller ``s`` fits the data more closely but
+    lets the functions that see few points overshoot between them: the rule keeps the smoother
+    fit unless the data clearly ask for less smoothing (the minimum score alone picked
+    overshooting fits, docs/benchmarks.md). Returns ``(s, {s: sqrt(m_s)})``.
+    """
+    w = weights / weights.sum()
+    mean = {s: float(np.sum(w * e)) for s, e in sq.items()}
     best = min(mean, key=mean.get)
-    w = weights / wsum
-    # standard error of the weighted mean of the per-point squared errors
-    se = float(np.sqrt(np.sum(w * w * (sq[best] / np.where(weights > 0, weights, 1.0)
-                                        - mean[best]) ** 2)))
-    chosen = max(s for s, m in mean.items() if m <= mean[best] + se)
-    return chosen, {s: float(np.sqrt(m)) for s, m in mean.items()}
+    se = float(np.sqrt(np.sum(w * w * (sq[best] - mean[best]) ** 2)))
+    chosen = max(s for s, v in mean.items() if v <= mean[best] + se)
+    return chosen, {s: float(np.sqrt(v)) for s, v in mean.items()}
 
 
 def _refine(C, solver, chunks, weights, points, penalty_grad, steps: int = 10):

@@ -58,6 +58,10 @@ class RefineOptions:
     feature_sensitive: bool = True
     seed: int = 0
 
+    def __post_init__(self):
+        if isinstance(self.smoothness, str):  # " AUTO " -> "auto" (what files store)
+            object.__setattr__(self, "smoothness", check_smoothness(self.smoothness))
+
     def validate(self) -> None:
         if self.degree not in (2, 3):
             raise InvalidInputError(f"degree must be 2 or 3, got {self.degree}")
@@ -536,25 +540,29 @@ def adaptive_fit(
             f"even the coarsest surface needs {best.n_control} control points, more than "
             f"the maximum of {options.max_control_points}; allow more control points"
         )
+    # a cancelled run is not refitted with a choice (30 factorizations the user asked to skip)
+    auto = auto and reason != "cancelled"
     if sampled or auto:
         t0 = time.perf_counter()
         fu, fp, fw, fm = full if sampled else (uv, points, weights, n_measured)
-        fit = fit_control_points(best.space, fu, fp, fw, "auto" if auto else loop_smoothness)
-        seconds = time.perf_counter() - t0
-        refit = ({"points": len(fu), "seconds": seconds, "phases": dict(fit.timings)}
-                 if sampled else best.refit)
+        fit = fit_control_points(best.space, fu, fp, fw, "auto" if auto else loop_smoothness,
+                                 scored=fm)
         selection = None
         if auto:
-            selection = {"chosen": fit.smoothness, "seconds": seconds,
+            selection = {"chosen": fit.smoothness, "seconds": time.perf_counter() - t0,
                          "cross_validated_rms": {f"{k:g}": v * unit for k, v in
                                                  fit.validation.items()}}
             e = fit.errors[:fm]
             value = (np.sqrt(np.mean(e**2)) if options.criterion == "rms"
                      else e.max(initial=0.0))
-            if reason == "tolerance reached" and value > tol and not sampled:
-                # the smoother choice would break the tolerance the loop reached: keep that fit
-                fit = best.fit
+            if reason == "tolerance reached" and value > tol and fit.smoothness != loop_smoothness:
+                # the smoother choice would break the tolerance the loop reached: keep the
+                # default (the loop's fit, or after sampled iterations its refit on all points)
+                fit = (fit_control_points(best.space, fu, fp, fw, loop_smoothness) if sampled
+                       else best.fit)
                 selection["kept"] = f"{loop_smoothness:g} (the choice misses the tolerance)"
+        refit = ({"points": len(fu), "seconds": time.perf_counter() - t0,
+                  "phases": dict(fit.timings)} if sampled else best.refit)
         best = IterationState(best.knots, best.n_interior, best.space, fit, refit, best.active,
                               selection)
     return best, history, reason

@@ -589,7 +589,7 @@ def report_table(surface, stats: dict, n_points: int, n_faces: int, timings: dic
         ("knots", f"{st.knots}"),
         ("control points", f"{st.control_points}"),
         ("iterations", f"{st.iterations}"),
-        ("smoothness", f"{st.smoothness:.0e}" + (" (auto)" if st.auto_smoothness else "")),
+        ("smoothness", f"{st.smoothness:.3g}" + (" (auto)" if st.auto_smoothness else "")),
         ("RMS error", f"{st.rms:.6g}  ({100 * st.rms_rel:.3g} % of the diagonal)"),
         ("max error", f"{st.max:.6g}  ({100 * st.max_rel:.3g} % of the diagonal)"),
         ("surface mesh", f"{ev_verts} vertices, {ev_faces} faces"),

@@ -45,9 +45,10 @@ def _grid_error(space, C):
 
 
 @pytest.mark.parametrize("value, expected", [("auto", "auto"), (" AUTO ", "auto"), (0, 0.0),
-                                             (1e-4, 1e-4), ("1e-3", None), (-1.0, None),
-                                             (float("nan"), None), (float("inf"), None),
-                                             ("smooth", None), (None, None)])
+                                             (1e-4, 1e-4), (np.float64(1e-3), 1e-3),
+                                             ("1e-3", None), (-1.0, None), (float("nan"), None),
+                                             (float("inf"), None), ("smooth", None), (None, None),
+                                             (True, None), (np.array([1e-3]), None)])
 def test_check_smoothness(value, expected):
     if expected is None:
         with pytest.raises(InvalidInputError, match="nonnegative number or 'auto'"):
@@ -56,19 +57,47 @@ def test_check_smoothness(value, expected):
         assert check_smoothness(value) == expected
 
 
-def test_cross_validation_scores_are_the_fits_without_each_fold(space):
-    """Each candidate's score is the RMS, over all points, of the fit made with that point's
-    fold left out (weight 0), exactly as fit_control_points would make it."""
+@pytest.mark.parametrize("scored", [None, 900])
+def test_cross_validation_scores_are_the_fits_without_each_fold(space, scored):
+    """Each candidate's score is the weighted RMS, over the scored points, of the fit made with
+    that point's fold left out (weight 0), as fit_control_points makes it (up to its final
+    iterative refinement). Weights are uneven and some are 0."""
     uv, P = _data(1500, 0.02)
-    res = fit_control_points(space, uv, P, smoothness="auto")
+    rng = np.random.default_rng(7)
+    weights = rng.uniform(0.2, 3.0, len(uv)) * (rng.random(len(uv)) > 0.1)
+    res = fit_control_points(space, uv, P, weights, smoothness="auto", scored=scored)
     fold = np.random.default_rng(12345).integers(0, FOLDS, len(uv))
+    m = len(uv) if scored is None else scored
     for s in (1e-2, 1e-4, 1e-7):
         sq = np.zeros(len(uv))
         for f in range(FOLDS):
-            w = np.where(fold == f, 0.0, 1.0)
+            w = np.where(fold == f, 0.0, weights)
             sq[fold == f] = fit_control_points(space, uv, P, w, smoothness=s).errors[fold == f] ** 2
-        assert res.validation[s] == pytest.approx(np.sqrt(sq.mean()), rel=1e-6)
+        expect = np.sqrt(np.sum(weights[:m] * sq[:m]) / np.sum(weights[:m]))
+        assert res.validation[s] == pytest.approx(expect, rel=1e-6)
     assert set(res.validation) == set(AUTO_SMOOTHNESS)
+
+
+def test_one_standard_error_rule_prefers_the_smoother_fit_within_the_noise():
+    """A hand-made score table: 1e-6 has the lowest mean, 1e-4 is within one standard error of
+    it and 1e-2 is not: the rule picks 1e-4 where the minimum would pick 1e-6."""
+    rng = np.random.default_rng(0)
+    base = rng.exponential(1.0, 400)
+    sq = {1e-2: base + 0.5, 1e-4: base + 0.02, 1e-6: base.copy()}
+    w = np.ones(400)
+    se = base.std() / np.sqrt(400)  # about 0.05
+    assert 0.02 < se < 0.5
+    chosen, scores = fit_module._one_standard_error(sq, w)
+    assert chosen == 1e-4 and min(scores, key=scores.get) == 1e-6
+    assert scores[1e-6] == pytest.approx(np.sqrt(base.mean()))
+    # a clear gain is taken, and weights count: zero weight removes a point from the mean
+    sq = {1e-2: base + 0.5, 1e-6: base.copy()}
+    assert fit_module._one_standard_error(sq, w)[0] == 1e-6
+    w0 = w.copy()
+    w0[:200] = 0.0
+    sq = {1e-2: np.r_[np.zeros(200), base[200:]], 1e-6: np.r_[np.full(200, 100.0), base[200:] + 1]}
+    chosen, scores = fit_module._one_standard_error(sq, w0)
+    assert chosen == 1e-2 and scores[1e-6] == pytest.approx(np.sqrt(base[200:].mean() + 1))
 
 
 def test_noise_gets_more_smoothing_and_the_choice_beats_the_extremes(space):
@@ -153,6 +182,74 @@ def test_auto_never_breaks_a_tolerance_the_loop_reached():
     assert sel["chosen"] > 1e-4  # noisy data: the choice is smoother ...
     assert "kept" in sel and surf.report["smoothness"] == 1e-4  # ... and would miss the tolerance
     assert surf.report["rms_rel"] <= tol
+
+
+def test_sampled_iterations_choose_on_all_points_and_keep_a_reached_tolerance(monkeypatch):
+    """Above ITERATION_POINTS the iterations fit a subset and the final fit uses every point:
+    the choice is made there, and the reached tolerance is kept there too."""
+    import core.refine as refine
+
+    monkeypatch.setattr(refine, "ITERATION_POINTS", 2000)
+    P = _noisy_cloud(n=4000, noise=0.05)
+    ref = fit_surface(P, tolerance=0.0, max_iterations=2, max_control_points=400)
+    assert ref.report["history"][-1]["sampled_points"] == 2000
+    tol = ref.report["history"][-1]["rms_rel"] * (1 + 1e-9)
+    surf = fit_surface(P, smoothness="auto", tolerance=tol, max_iterations=6,
+                       max_control_points=400)
+    r = surf.report
+    assert r["stop_reason"] == "tolerance reached" and r["refit"]["points"] == 4000
+    sel = r["smoothness_selection"]
+    assert sel["chosen"] > 1e-4 and "kept" in sel and r["smoothness"] == 1e-4
+    # the kept fit is the default's refit on all points: the same as the plain run
+    np.testing.assert_allclose(surf.errors, ref.errors, rtol=0, atol=1e-12)
+    free = fit_surface(P, smoothness="auto", tolerance=0.0, max_iterations=2,
+                       max_control_points=400)
+    assert free.report["smoothness"] == free.report["smoothness_selection"]["chosen"]
+    assert "kept" not in free.report["smoothness_selection"]
+
+
+def test_a_cancelled_run_is_not_refitted():
+    P = _noisy_cloud(n=2000)
+    surf = fit_surface(P, smoothness="auto", tolerance=0.0, max_control_points=300,
+                       callback=lambda report: report["iteration"] >= 2)
+    assert surf.report["stop_reason"] == "cancelled"
+    assert "smoothness_selection" not in surf.report and surf.report["smoothness"] == 1e-4
+
+
+def test_a_mesh_is_scored_at_its_vertices(monkeypatch):
+    """Meshes are fitted to their vertices plus points sampled on the faces; the choice is
+    scored at the vertices only (what the tolerance and the report measure)."""
+    import core.refine as refine
+    from core.meshio import read_geometry
+
+    seen = []
+    real = refine.fit_control_points
+
+    def spy(*args, **kwargs):
+        seen.append((args[4] if len(args) > 4 else kwargs.get("smoothness"), kwargs.get("scored"),
+                     len(args[1])))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(refine, "fit_control_points", spy)
+    verts, faces = read_geometry(ROOT / "data" / "nefertiti.off")
+    surf = fit_surface(verts, faces, smoothness="auto", tolerance=0.0, max_iterations=2,
+                       max_control_points=150)
+    final = [s for s in seen if s[0] == "auto"]
+    assert len(final) == 1 and final[0][1] == len(verts) < final[0][2]
+    assert surf.report["smoothness_selection"]["chosen"] == surf.report["smoothness"]
+
+
+def test_format_version_says_when_a_file_needs_auto(tmp_path):
+    import zipfile
+
+    P = _noisy_cloud(n=1500)
+    for smoothness, version in ((1e-4, 1), ("auto", 2)):
+        surf = fit_surface(P, smoothness=smoothness, max_iterations=1, max_control_points=200)
+        path = tmp_path / f"{version}.npz"
+        surf.save(path)
+        with zipfile.ZipFile(path) as z, z.open("format_version.npy") as fh:
+            assert int(np.lib.format.read_array(fh)) == version
+        assert TCBSurface.load(path).report["smoothness"] == surf.report["smoothness"]
 
 
 def test_cli_smoothness_auto(tmp_path):
