@@ -260,7 +260,8 @@ def check_smoothness(value):
 def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=None):
     """Cross-validated choice of the fairing weight (method.md section 5).
 
-    The points are dealt into :data:`FOLDS` folds (seeded: same input, same choice). For fold
+    The points are dealt into :data:`FOLDS` folds by :func:`_folds` (same input, same choice;
+    points with the same parameters share a fold). For fold
     ``f`` the normal equations of the other points are those of all points minus the fold's
     rows, ``K_f = A^T W A - A_f^T W_f A_f + s G_f`` and ``A^T W P - A_f^T W_f P_f`` (``G_f``
     scaled by the data term of the points kept, as in a fit with the fold's weights set to 0,
@@ -279,7 +280,7 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
     m = N if scored is None else int(min(max(scored, 0), N))
     if int((weights[:m] > 0).sum()) < MIN_AUTO_POINTS:
         return DEFAULT_SMOOTHNESS, {}
-    fold = np.random.default_rng(12345).integers(0, FOLDS, N)
+    fold = _folds(uv)
     starts = np.cumsum([0] + [A.shape[0] for A in chunks or []])
 
     def fold_rows(f):  # one fold's rows of A at a time (memory: a fifth of A)
@@ -314,6 +315,22 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
     if not errors:
         return DEFAULT_SMOOTHNESS, {}
     return _one_standard_error(errors, weights[:m])
+
+
+def _folds(uv: np.ndarray) -> np.ndarray:
+    """The cross-validation fold (N,) of each parameter: a hash of its bits (splitmix64
+    finalizer) modulo :data:`FOLDS`. Points with equal parameters (duplicated points, or two
+    scans of one spot) fall in the same fold: left out one at a time, each would be predicted
+    by its twin, and the choice would favour too little smoothing."""
+    bits = np.ascontiguousarray(uv, dtype=np.float64).view(np.uint64).reshape(len(uv), -1)
+    h = np.full(len(uv), 0x9E3779B97F4A7C15, dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        for col in bits.T:
+            h = (h ^ col) * np.uint64(0xBF58476D1CE4E5B9)
+            h ^= h >> np.uint64(31)
+            h = h * np.uint64(0x94D049BB133111EB)
+            h ^= h >> np.uint64(29)
+    return (h % np.uint64(FOLDS)).astype(np.int64)
 
 
 def _one_standard_error(sq: dict, weights: np.ndarray):

@@ -66,7 +66,7 @@ def test_cross_validation_scores_are_the_fits_without_each_fold(space, scored):
     rng = np.random.default_rng(7)
     weights = rng.uniform(0.2, 3.0, len(uv)) * (rng.random(len(uv)) > 0.1)
     res = fit_control_points(space, uv, P, weights, smoothness="auto", scored=scored)
-    fold = np.random.default_rng(12345).integers(0, FOLDS, len(uv))
+    fold = fit_module._folds(uv)
     m = len(uv) if scored is None else scored
     for s in (1e-2, 1e-4, 1e-7):
         sq = np.zeros(len(uv))
@@ -76,6 +76,30 @@ def test_cross_validation_scores_are_the_fits_without_each_fold(space, scored):
         expect = np.sqrt(np.sum(weights[:m] * sq[:m]) / np.sum(weights[:m]))
         assert res.validation[s] == pytest.approx(expect, rel=1e-6)
     assert set(res.validation) == set(AUTO_SMOOTHNESS)
+
+
+def test_folds_are_balanced_and_keep_duplicates_together():
+    rng = np.random.default_rng(3)
+    uv = rng.random((50_000, 2))
+    fold = fit_module._folds(uv)
+    counts = np.bincount(fold, minlength=FOLDS)
+    assert len(counts) == FOLDS and np.all(np.abs(counts / len(uv) - 1 / FOLDS) < 0.01)
+    twice = np.vstack([uv[:1000], uv[:1000]])
+    f2 = fit_module._folds(twice)
+    assert np.array_equal(f2[:1000], f2[1000:]) and np.array_equal(f2[:1000], fold[:1000])
+
+
+def test_duplicated_points_do_not_fool_the_cross_validation(space):
+    """Each point twice: with the twins in different folds each point would be predicted by a
+    fit that saw its twin (random folds gave a 3x lower CV error here). With twins in one fold,
+    doubling every point is doubling every weight, which the relative fairing cancels: the
+    scores are those of the data given once."""
+    uv, P = _data(300, 0.05)
+    once = fit_control_points(space, uv, P, smoothness="auto")
+    twice = fit_control_points(space, np.vstack([uv, uv]), np.vstack([P, P]), smoothness="auto")
+    assert twice.smoothness == once.smoothness
+    for s, v in once.validation.items():
+        assert twice.validation[s] == pytest.approx(v, rel=1e-6)
 
 
 def test_one_standard_error_rule_prefers_the_smoother_fit_within_the_noise():
