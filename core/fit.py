@@ -63,6 +63,9 @@ class FitResult:
     smoothness: float = DEFAULT_SMOOTHNESS  # the value used (the chosen one for "auto")
     # smoothness="auto": the cross-validated RMS of each candidate ({} when a value was given)
     validation: dict = field(default_factory=dict)
+    # the evaluated basis, CSR chunks of CHUNK rows (None if it was too large to keep): a later
+    # fit of the same space at the same parameters can take it (``basis=``)
+    basis: list | None = field(default=None, repr=False)
 
 
 def fairing_quadrature(space) -> tuple[np.ndarray, np.ndarray]:
@@ -102,6 +105,7 @@ def fit_control_points(
     smoothness: float | str = DEFAULT_SMOOTHNESS,
     check_partition: bool = True,
     scored: int | None = None,
+    basis: list | None = None,
 ) -> FitResult:
     """Fit the control points of ``space`` to ``points`` (N, 3) at parameters ``uv`` (N, 2).
 
@@ -123,6 +127,8 @@ def fit_control_points(
     scored : int, optional
         ``smoothness="auto"``: only the first ``scored`` points score the candidates (a mesh's
         vertices, not the points sampled on its faces; default: all).
+    basis : list of CSR, optional
+        ``FitResult.basis`` of an earlier fit of this space at these ``uv``: not evaluated again.
 
     Raises
     ------
@@ -147,9 +153,13 @@ def fit_control_points(
     chunks, keep, kept_bytes = [], True, 0
     worst, n_bad = 0.0, 0
     t_eval = 0.0
-    for s in range(0, N, CHUNK):
+    if basis is not None and (len(basis) != -(-N // CHUNK)
+                              or sum(A.shape[0] for A in basis) != N
+                              or any(A.shape[1] != n for A in basis)):
+        raise ValueError("basis= does not match these parameters and this space")
+    for i, s in enumerate(range(0, N, CHUNK)):
         te = time.perf_counter()
-        A = space.evaluate(uv[s : s + CHUNK])
+        A = basis[i] if basis is not None else space.evaluate(uv[s : s + CHUNK])
         t_eval += time.perf_counter() - te
         if check_partition:
             dev = np.abs(np.asarray(A.sum(axis=1)).ravel() - 1.0)
@@ -236,6 +246,7 @@ def fit_control_points(
         timings=timings,
         smoothness=float(smoothness),
         validation=validation,
+        basis=chunks if keep else None,
     )
 
 
@@ -294,6 +305,8 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
     sq = {s: np.zeros(N) for s in AUTO_SMOOTHNESS}
     failed: set = set()
     data_trace = AtA.diagonal().sum()
+    # every system below has (nearly) the pattern of AtA + G: one ordering serves them all
+    order = _fill_order((AtA + G).tocsc())
     for f in range(FOLDS):
         rows, Af = fold_rows(f)
         wf, Pf = weights[rows], points[rows]
@@ -306,7 +319,7 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
             if s in failed:
                 continue
             try:
-                C, _ = _solve((K_fit + s * G_fit).tocsc(), rhs, ridge=True)
+                C, _ = _solve((K_fit + s * G_fit).tocsc(), rhs, ridge=True, order=order)
             except SingularSystemError:
                 failed.add(s)
                 continue
@@ -383,13 +396,33 @@ def _refine(C, solver, chunks, weights, points, penalty_grad, steps: int = 10):
     return best_C
 
 
-def _factor(K: sp.csc_matrix):
+class _OrderedLU:
+    """The LU factors of ``K[order][:, order]`` answering for ``K``."""
+
+    def __init__(self, lu, order):
+        self.lu, self.order, self.U = lu, order, lu.U
+
+    def solve(self, rhs):
+        x = np.empty_like(rhs, dtype=np.float64)
+        x[self.order] = self.lu.solve(np.ascontiguousarray(rhs[self.order]))
+        return x
+
+
+def _factor(K: sp.csc_matrix, order: np.ndarray | None = None):
     """Symmetric sparse LU (no pivoting: the pivots of an SPD matrix are positive and bounded
-    below by its smallest eigenvalue) and the smallest pivot ratio; None if it broke down."""
+    below by its smallest eigenvalue) and the smallest pivot ratio; None if it broke down.
+
+    ``order``: a fill-reducing symmetric ordering to use instead of computing one
+    (:func:`_fill_order`); many systems of one sparsity pattern (the candidates and folds of
+    ``smoothness="auto"``) then factor 1.5x faster."""
     try:
-        lu = spla.splu(
-            K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
-        )
+        if order is None:
+            lu = spla.splu(K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                           options={"SymmetricMode": True})
+        else:
+            lu = _OrderedLU(spla.splu(K[order][:, order].tocsc(), permc_spec="NATURAL",
+                                      diag_pivot_thresh=0.0, options={"SymmetricMode": True}),
+                            order)
     except RuntimeError:  # "Factor is exactly singular"
         return None, 0.0
     d = lu.U.diagonal()
@@ -397,7 +430,18 @@ def _factor(K: sp.csc_matrix):
     return lu, ratio
 
 
-def _solve(K: sp.csc_matrix, rhs: np.ndarray, ridge: bool = True):
+def _fill_order(K: sp.csc_matrix) -> np.ndarray | None:
+    """The minimum-degree ordering SuperLU chooses for ``K`` (as row/column indices), or None."""
+    try:
+        lu = spla.splu(K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                       options={"SymmetricMode": True})
+    except RuntimeError:
+        return None
+    return np.argsort(lu.perm_c)
+
+
+def _solve(K: sp.csc_matrix, rhs: np.ndarray, ridge: bool = True,
+           order: np.ndarray | None = None):
     """Solve the SPD normal equations; never a silent blow-up (method.md section 5).
 
     (Functions that neither data nor fairing determine are refused before, by the caller.)
@@ -416,12 +460,13 @@ def _solve(K: sp.csc_matrix, rhs: np.ndarray, ridge: bool = True):
       refused.
     """
     n = K.shape[0]
-    lu, ratio = _factor(K)
+    lu, ratio = _factor(K, order)
     ridged = False
     if not ratio > 1e-13 and ridge:
         mean_diag = K.diagonal().sum() / n
         for eps in (1e-15, 1e-14, 1e-13, 1e-12):
-            lu, ratio = _factor((K + sp.identity(n, format="csc") * (eps * mean_diag)).tocsc())
+            lu, ratio = _factor((K + sp.identity(n, format="csc") * (eps * mean_diag)).tocsc(),
+                                order)
             if lu is not None and ratio > 1e-3 * eps:
                 ridged = True
                 break

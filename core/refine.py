@@ -546,7 +546,7 @@ def adaptive_fit(
         t0 = time.perf_counter()
         fu, fp, fw, fm = full if sampled else (uv, points, weights, n_measured)
         fit = fit_control_points(best.space, fu, fp, fw, "auto" if auto else loop_smoothness,
-                                 scored=fm)
+                                 scored=fm, basis=None if sampled else best.fit.basis)
         selection = None
         if auto:
             selection = {"chosen": fit.smoothness, "seconds": time.perf_counter() - t0,

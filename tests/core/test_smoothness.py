@@ -154,6 +154,19 @@ def test_choice_is_deterministic_and_independent_of_keeping_the_basis(space, mon
         assert c.validation[s] == pytest.approx(v, rel=1e-9)
 
 
+def test_a_kept_basis_is_reused_bit_for_bit(space):
+    """The loop's auto refit takes the basis its best iteration evaluated (basis=)."""
+    uv, P = _data(2000, 0.01)
+    first = fit_control_points(space, uv, P)
+    assert len(first.basis) == 1 and first.basis[0].shape == (2000, space.n_basis)
+    again = fit_control_points(space, uv, P, smoothness="auto", basis=first.basis)
+    fresh = fit_control_points(space, uv, P, smoothness="auto")
+    assert np.array_equal(again.control_points, fresh.control_points)
+    assert again.validation == fresh.validation
+    with pytest.raises(ValueError, match="does not match"):
+        fit_control_points(space, uv[:1000], P[:1000], basis=first.basis)
+
+
 def test_too_few_points_fall_back_to_the_default(space):
     uv, P = _data(60, 0.0)
     res = fit_control_points(space, uv, P, smoothness="auto")
