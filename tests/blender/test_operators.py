@@ -144,12 +144,16 @@ def check_result(bpy, addon, source_name, points, tol_rel):
 # --- fitting --------------------------------------------------------------------------------------
 
 
+def noisy_grid_cloud(bpy, name: str, noise: float, seed: int):
+    """A point-cloud object: the 20 x 20 test grid plus Gaussian noise; and its points."""
+    verts, _ = grid(20)
+    pts = verts + np.random.default_rng(seed).normal(scale=noise, size=verts.shape)
+    return add_point_cloud(bpy, name, pts), pts
+
+
 def test_fit_point_cloud_object(clean_scene, addon):
     bpy = clean_scene
-    verts, _ = grid(20)
-    rng = np.random.default_rng(1)
-    pts = verts + rng.normal(scale=1e-4, size=verts.shape)
-    cloud = add_point_cloud(bpy, "Scan", pts)
+    cloud, pts = noisy_grid_cloud(bpy, "Scan", 1e-4, 1)
     cloud.location = (1.0, 2.0, 0.5)
     bpy.context.view_layer.update()
     before = snapshot(cloud)
@@ -164,10 +168,7 @@ def test_fit_point_cloud_object(clean_scene, addon):
 
 def test_fit_with_auto_smoothness_stores_the_chosen_value(clean_scene, addon):
     bpy = clean_scene
-    verts, _ = grid(20)
-    rng = np.random.default_rng(2)
-    pts = verts + rng.normal(scale=2e-3, size=verts.shape)
-    cloud = add_point_cloud(bpy, "Noisy", pts)
+    cloud, _ = noisy_grid_cloud(bpy, "Noisy", 2e-3, 2)
     assert fit(bpy, cloud, tolerance=0.0, max_iterations=3, auto_smoothness=True) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
     surf = spline_of(addon, surface)

@@ -9,14 +9,18 @@ ROOT = Path(__file__).resolve().parents[2]
 METHODS = ["TCB", "TCB-delaunay", "DCB", "Park-tensor", "FITPACK-LSQ", "FITPACK-smooth"]
 
 
-def test_compare_quick(tmp_path):
-    out = tmp_path / "compare.md"
+def run_quick(script: str, out: Path, timeout: int) -> str:
+    """Run ``benchmarks/<script> --quick --out <out>``; its markdown."""
     res = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "compare.py"), "--quick", "--out", str(out)],
-        capture_output=True, text=True, timeout=400, cwd=ROOT,
+        [sys.executable, str(ROOT / "benchmarks" / script), "--quick", "--out", str(out)],
+        capture_output=True, text=True, timeout=timeout, cwd=ROOT,
     )
     assert res.returncode == 0, res.stderr[-3000:]
-    md = out.read_text()
+    return out.read_text()
+
+
+def test_compare_quick(tmp_path):
+    md = run_quick("compare.py", tmp_path / "compare.md", 400)
     rows = [line for line in md.splitlines() if line.startswith("| ")]
     for dataset in ("F1-franke scattered", "crease scattered", "jacksboro DEM", "patch-01.off"):
         got = [r for r in rows if r.startswith(f"| {dataset}")]
@@ -32,13 +36,8 @@ def test_compare_quick(tmp_path):
 
 def test_smoothness_quick(tmp_path):
     """``benchmarks/smoothness.py --quick`` runs and writes its table (default vs auto)."""
-    out = tmp_path / "smoothness.md"
-    res = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "smoothness.py"), "--quick", "--out", str(out)],
-        capture_output=True, text=True, timeout=300, cwd=ROOT,
-    )
-    assert res.returncode == 0, res.stderr[-3000:]
-    rows = [line for line in out.read_text().splitlines() if line.startswith("| ")]
+    md = run_quick("smoothness.py", tmp_path / "smoothness.md", 300)
+    rows = [line for line in md.splitlines() if line.startswith("| ")]
     assert [r.split("|")[1].strip() for r in rows[1:]] == ["F6-sphere 3000", "crease 3000"]
     # every row has both fits' errors and a chosen value
     assert all(len(r.split("|")) == 14 and "nan" not in r for r in rows)
