@@ -65,7 +65,7 @@ class FitResult:
     validation: dict = field(default_factory=dict)
     # the evaluated basis, CSR chunks of CHUNK rows (None if it was too large to keep): a later
     # fit of the same space at the same parameters can take it (``basis=``)
-    basis: list | None = field(default=None, repr=False)
+    basis: list | None = field(default=None, repr=False, compare=False)
 
 
 def fairing_quadrature(space) -> tuple[np.ndarray, np.ndarray]:
@@ -153,9 +153,8 @@ def fit_control_points(
     chunks, keep, kept_bytes = [], True, 0
     worst, n_bad = 0.0, 0
     t_eval = 0.0
-    if basis is not None and (len(basis) != -(-N // CHUNK)
-                              or sum(A.shape[0] for A in basis) != N
-                              or any(A.shape[1] != n for A in basis)):
+    if basis is not None and (len(basis) != -(-N // CHUNK) or any(
+            A.shape != (min(CHUNK, N - i * CHUNK), n) for i, A in enumerate(basis))):
         raise ValueError("basis= does not match these parameters and this space")
     for i, s in enumerate(range(0, N, CHUNK)):
         te = time.perf_counter()
@@ -332,10 +331,13 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
 
 def _folds(uv: np.ndarray) -> np.ndarray:
     """The cross-validation fold (N,) of each parameter: a hash of its bits (splitmix64
-    finalizer) modulo :data:`FOLDS`. Points with equal parameters (duplicated points, or two
-    scans of one spot) fall in the same fold: left out one at a time, each would be predicted
-    by its twin, and the choice would favour too little smoothing."""
-    bits = np.ascontiguousarray(uv, dtype=np.float64).view(np.uint64).reshape(len(uv), -1)
+    finalizer) modulo :data:`FOLDS`. Points with bit-identical parameters (exact duplicates)
+    fall in the same fold: left out one at a time, each would be predicted by its twin, and
+    the choice would favour too little smoothing. Near duplicates are not grouped. The bits
+    come from the parameterization's floating-point arithmetic, so another machine may deal
+    the folds differently."""
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    bits = np.ascontiguousarray(uv + 0.0).view(np.uint64)  # + 0.0: -0.0 -> 0.0
     h = np.full(len(uv), 0x9E3779B97F4A7C15, dtype=np.uint64)
     with np.errstate(over="ignore"):
         for col in bits.T:

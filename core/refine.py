@@ -414,6 +414,9 @@ def adaptive_fit(
     loop_smoothness = DEFAULT_SMOOTHNESS if auto else float(options.smoothness)
     full = (uv, points, weights, n_measured)
     sampled = options.criterion == "rms" and len(uv) > ITERATION_POINTS
+    # the evaluated basis of the best iteration is kept for the auto refit at the same points
+    # (a basis is ~80 bytes per point: the others are dropped as soon as they are fitted)
+    keep_basis = auto and not sampled
     if sampled:
         pick = np.sort(np.random.default_rng(rng_seed + 1).choice(len(uv), ITERATION_POINTS,
                                                                  replace=False))
@@ -475,8 +478,13 @@ def adaptive_fit(
         state = IterationState(knots, len(interior), space, fit, active=active)
         e = fit.errors[:n_measured]
         rms, emax = float(np.sqrt(np.mean(e**2))), float(e.max(initial=0.0))
-        if best is None or rms < best_rms:
+        is_best = best is None or rms < best_rms
+        if is_best:
+            if best is not None:
+                best.fit.basis = None
             best, best_rms = state, rms
+        if not (keep_basis and is_best):  # only the auto refit of the best space reuses it
+            fit.basis = None
         value = rms if options.criterion == "rms" else emax
         report = {
             "iteration": history_offset + it + 1,
@@ -547,6 +555,7 @@ def adaptive_fit(
         fu, fp, fw, fm = full if sampled else (uv, points, weights, n_measured)
         fit = fit_control_points(best.space, fu, fp, fw, "auto" if auto else loop_smoothness,
                                  scored=fm, basis=None if sampled else best.fit.basis)
+        best.fit.basis = None
         selection = None
         if auto:
             selection = {"chosen": fit.smoothness, "seconds": time.perf_counter() - t0,
@@ -565,5 +574,6 @@ def adaptive_fit(
                   "phases": dict(fit.timings)} if sampled else best.refit)
         best = IterationState(best.knots, best.n_interior, best.space, fit, refit, best.active,
                               selection)
+    best.fit.basis = None
     return best, history, reason
 

@@ -87,6 +87,32 @@ def test_folds_are_balanced_and_keep_duplicates_together():
     twice = np.vstack([uv[:1000], uv[:1000]])
     f2 = fit_module._folds(twice)
     assert np.array_equal(f2[:1000], f2[1000:]) and np.array_equal(f2[:1000], fold[:1000])
+    signed = fit_module._folds(np.array([[0.0, 0.5], [-0.0, 0.5]]))
+    assert signed[0] == signed[1]
+
+
+def test_a_shared_ordering_solves_exactly():
+    """The CV systems are factored in one fill-reducing order (_fill_order, _OrderedLU): the
+    solutions are those of the unpermuted systems, also on the ridged path of a singular one."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    rng = np.random.default_rng(4)
+    B = sp.random(300, 300, density=0.02, random_state=5, format="csr")
+    K = (B @ B.T + sp.identity(300) * 0.1).tocsc()
+    order = fit_module._fill_order(K)
+    assert sorted(order) == list(range(300))
+    for rhs in (rng.random(300), rng.random((300, 3))):
+        x, _ = fit_module._solve(K, rhs, order=order)
+        np.testing.assert_allclose(x, spla.spsolve(K, rhs).reshape(x.shape), rtol=1e-10, atol=0)
+    # rank-deficient (a zero row and column): the ridge path, consistent right-hand side
+    S = K.tolil()
+    S[7, :] = 0.0
+    S[:, 7] = 0.0
+    S = S.tocsc()
+    rhs = S @ rng.random(300)
+    x, _ = fit_module._solve(S, rhs, order=order)
+    assert np.linalg.norm(S @ x - rhs) <= 1e-9 * np.linalg.norm(rhs)
 
 
 def test_duplicated_points_do_not_fool_the_cross_validation(space):
@@ -245,7 +271,29 @@ def test_sampled_iterations_choose_on_all_points_and_keep_a_reached_tolerance(mo
     assert "kept" not in free.report["smoothness_selection"]
 
 
-def test_a_cancelled_run_is_not_refitted():
+@pytest.mark.parametrize("points", [1500, 3000])
+def test_the_loop_reuses_a_basis_only_at_the_same_points_and_frees_them(points, monkeypatch):
+    """The auto refit takes the best iteration's basis unless the iterations fitted a subset;
+    no fit keeps its basis once the loop is done (a basis is ~80 bytes per point)."""
+    import core.refine as refine
+
+    monkeypatch.setattr(refine, "ITERATION_POINTS", 2000)  # 3000 points: sampled iterations
+    calls, results = [], []
+    real = refine.fit_control_points
+
+    def spy(*args, **kwargs):
+        calls.append((args[4] if len(args) > 4 else kwargs.get("smoothness"), kwargs.get("basis")))
+        results.append(real(*args, **kwargs))
+        return results[-1]
+
+    monkeypatch.setattr(refine, "fit_control_points", spy)
+    fit_surface(_noisy_cloud(n=points), smoothness="auto", tolerance=0.0, max_iterations=3,
+                max_control_points=300)
+    final = [basis for smoothness, basis in calls if smoothness == "auto"]
+    assert len(final) == 1
+    assert (final[0] is None) == (points > 2000)
+    assert all(r.basis is None for r in results)
+
     P = _noisy_cloud(n=2000)
     surf = fit_surface(P, smoothness="auto", tolerance=0.0, max_control_points=300,
                        callback=lambda report: report["iteration"] >= 2)
