@@ -271,7 +271,7 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
     """Cross-validated choice of the fairing weight (method.md section 5).
 
     The points are dealt into :data:`FOLDS` folds by :func:`_folds` (same input, same choice;
-    points with the same parameters share a fold). For fold
+    points with (nearly) the same parameters share a fold). For fold
     ``f`` the normal equations of the other points are those of all points minus the fold's
     rows, ``K_f = A^T W A - A_f^T W_f A_f + s G_f`` and ``A^T W P - A_f^T W_f P_f`` (``G_f``
     scaled by the data term of the points kept, as in a fit with the fold's weights set to 0,
@@ -329,18 +329,28 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
     return _one_standard_error(errors, weights[:m])
 
 
+# parameters closer than this fraction of the extent share a cross-validation fold
+FOLD_CELL = 1e-7
+
+
 def _folds(uv: np.ndarray) -> np.ndarray:
-    """The cross-validation fold (N,) of each parameter: a hash of its bits (splitmix64
-    finalizer) modulo :data:`FOLDS`. Points with bit-identical parameters (exact duplicates)
-    fall in the same fold: left out one at a time, each would be predicted by its twin, and
-    the choice would favour too little smoothing. Near duplicates are not grouped. The bits
-    come from the parameterization's floating-point arithmetic, so another machine may deal
-    the folds differently."""
+    """The cross-validation fold (N,) of each parameter: a hash (splitmix64 finalizer) of the
+    cell of a grid of :data:`FOLD_CELL` times the extent that holds it, modulo :data:`FOLDS`.
+
+    Duplicated points, and near duplicates (closer than the cell, e.g. vertices welded badly),
+    fall in the same fold: left out one at a time, each would be predicted by its twin and the
+    choice would favour too little smoothing. Twins that straddle a cell border (a chance of
+    about their distance over the cell) are split. Same input, same folds.
+    """
     uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    bits = np.ascontiguousarray(uv + 0.0).view(np.uint64)  # + 0.0: -0.0 -> 0.0
+    if len(uv) == 0:
+        return np.zeros(0, dtype=np.int64)
+    lo = uv.min(axis=0)
+    cell = FOLD_CELL * max(float(np.ptp(uv, axis=0).max()), 1e-300)
+    keys = np.floor((uv - lo) / cell).astype(np.int64).view(np.uint64)
     h = np.full(len(uv), 0x9E3779B97F4A7C15, dtype=np.uint64)
     with np.errstate(over="ignore"):
-        for col in bits.T:
+        for col in keys.T:
             h = (h ^ col) * np.uint64(0xBF58476D1CE4E5B9)
             h ^= h >> np.uint64(31)
             h = h * np.uint64(0x94D049BB133111EB)
