@@ -251,19 +251,16 @@ def fit_control_points(
 
 def check_smoothness(value):
     """A smoothness as given by a user: a nonnegative number, or ``"auto"``."""
-    if isinstance(value, str):
-        if value.strip().lower() == "auto":
-            return "auto"
-        raise InvalidInputError(f"smoothness must be a nonnegative number or 'auto', got {value!r}")
-    if isinstance(value, (bool, np.bool_)) or np.ndim(value) != 0:
-        raise InvalidInputError(f"smoothness must be a nonnegative number or 'auto', got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InvalidInputError(
-            f"smoothness must be a nonnegative number or 'auto', got {value!r}") from None
+    if isinstance(value, str) and value.strip().lower() == "auto":
+        return "auto"
+    v = np.nan
+    if not isinstance(value, (str, bool, np.bool_)) and np.ndim(value) == 0:
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            pass
     if not (np.isfinite(v) and v >= 0):
-        raise InvalidInputError(f"smoothness must be a nonnegative number or 'auto', got {value}")
+        raise InvalidInputError(f"smoothness must be a nonnegative number or 'auto', got {value!r}")
     return v
 
 
@@ -444,12 +441,8 @@ def _factor(K: sp.csc_matrix, order: np.ndarray | None = None):
 
 def _fill_order(K: sp.csc_matrix) -> np.ndarray | None:
     """The minimum-degree ordering SuperLU chooses for ``K`` (as row/column indices), or None."""
-    try:
-        lu = spla.splu(K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                       options={"SymmetricMode": True})
-    except RuntimeError:
-        return None
-    return np.argsort(lu.perm_c)
+    lu, _ = _factor(K)
+    return None if lu is None else np.argsort(lu.perm_c)
 
 
 def _solve(K: sp.csc_matrix, rhs: np.ndarray, ridge: bool = True,
