@@ -346,7 +346,7 @@ def _local_planes(q: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.nda
 
     def block(bounds):
         s, e = bounds
-        nb = q[idx[s:e]]
+        nb = np.take(q, idx[s:e], axis=0)  # faster row gather than q[idx[s:e]]
         nb -= nb.mean(axis=1, keepdims=True)
         return np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb) / (k + 1))
 
@@ -482,7 +482,7 @@ def _fold_fraction(
     k = idx.shape[1] - 1
     steep = np.abs(normals @ normal) < _FOLD_MIN_COS
     _, jdx = cKDTree(uv).query(uv, k=k + 1, workers=-1)
-    d = q[jdx] - q[:, None, :]  # (n, k+1, 3)
+    d = np.take(q, jdx, axis=0) - q[:, None, :]  # (n, k+1, 3); np.take: faster than q[jdx]
     dn = np.abs(np.einsum("nkj,nj->nk", d, normals))
     dlen = np.sqrt(np.einsum("nkj,nkj->nk", d, d))
     off = (dn > _FOLD_OFF_SURFACE_SIN * dlen) & (dn > _FOLD_NOISE_FACTOR * sigma[:, None])

@@ -95,7 +95,7 @@ def feature_measure(uv: np.ndarray, points: np.ndarray, k: int = 12, max_points:
 
     def block(bounds):
         s, e = bounds
-        Q = P[nb[s:e]]  # (b, k, 3)
+        Q = np.take(P, nb[s:e], axis=0)  # (b, k, 3); np.take: faster row gather than P[...]
         Q = Q - Q.mean(axis=1, keepdims=True)
         return np.linalg.eigvalsh(np.einsum("ski,skj->sij", Q, Q) / k)
 

@@ -85,8 +85,8 @@ class BoxIndex:
             pt = np.repeat(np.arange(s, e), cnt)
             local = np.arange(tot) - np.repeat(np.cumsum(cnt) - cnt, cnt)
             bx = self.ids[start[pt] + local]
-            b = self.boxes[bx]
-            p = points[pt]
+            b = np.take(self.boxes, bx, axis=0)  # np.take: faster row gathers than b[bx]
+            p = np.repeat(points[s:e], cnt, axis=0)  # = points[pt]
             inside = (b[:, 0] <= p[:, 0]) & (p[:, 0] <= b[:, 2]) & (b[:, 1] <= p[:, 1])
             inside &= p[:, 1] <= b[:, 3]
             yield pt[inside], bx[inside]
