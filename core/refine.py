@@ -180,13 +180,13 @@ def _clearance(x: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
     if K < 2:
         return np.full(len(x), np.inf)
     i, j = np.triu_indices(K, 1)
-    a, b = nbrs[:, i], nbrs[:, j]  # (M, P, 2)
+    a, b = np.take(nbrs, i, axis=1), np.take(nbrs, j, axis=1)  # (M, P, 2)
     ab = b - a
-    L2 = (ab * ab).sum(axis=-1)
+    L2 = np.einsum("mpi,mpi->mp", ab, ab)
     xa = x[:, None, :] - a
     det = np.abs(ab[..., 0] * xa[..., 1] - ab[..., 1] * xa[..., 0])
-    mid = 0.5 * (a + b)
-    near = ((mid - x[:, None, :]) ** 2).sum(axis=-1) <= L2
+    dm = 0.5 * (a + b) - x[:, None, :]
+    near = np.einsum("mpi,mpi->mp", dm, dm) <= L2
     r = np.where(near, det / np.where(near, np.maximum(L2, 1e-300), 1.0), np.inf)
     return r.min(axis=1)
 
@@ -236,7 +236,7 @@ def place_clear_of_lines(
             own = nb == (E + sel)[:, None]
             own[~own.any(axis=1), K] = True
             nb = nb[~own].reshape(len(sel), K)
-            c = _clearance(y, allp[nb])
+            c = _clearance(y, np.take(allp, nb, axis=0))
             ps = np.flatnonzero(pending)
             better = c > best_c[ps]
             best[ps[better]], best_c[ps[better]] = y[better], c[better]
