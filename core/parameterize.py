@@ -169,6 +169,13 @@ def principal_axes(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return sv, np.ascontiguousarray(v[:, ::-1].T)
 
 
+def box_normalization(p: np.ndarray) -> Normalization:
+    """The :class:`Normalization` of ``(n, 3)`` points: bounding-box centre and half-diagonal,
+    without the checks of :func:`normalize` (for points it has already accepted)."""
+    lo, hi = column_bounds(p)
+    return Normalization(center=_readonly(0.5 * (lo + hi)), scale=0.5 * float(np.linalg.norm(hi - lo)))
+
+
 def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
     """Validate a point cloud and map it into the box centred at 0 with half-diagonal 1.
 
@@ -194,10 +201,8 @@ def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
         raise InvalidInputError(
             f"at least {MIN_POINTS} points are needed to fit a surface; got {n}"
         )
-    lo, hi = column_bounds(p)
-    center = 0.5 * (lo + hi)
-    scale = 0.5 * float(np.linalg.norm(hi - lo))
-    if not scale > 0.0:
+    norm = box_normalization(p)
+    if not norm.scale > 0.0:
         raise InvalidInputError(
             f"all {n} points are identical; a surface needs points spread in two directions"
         )
@@ -207,7 +212,7 @@ def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
             f"only {n - n_dup} distinct points ({n_dup} of {n} are exact duplicates); at least "
             f"{MIN_POINTS} distinct points are needed to fit a surface"
         )
-    q = (p - center) / scale
+    q = norm.apply(p)
     # Rank test: RMS distance of the points from their best line, relative to the scale (1 now).
     sv, _ = principal_axes(q - q.mean(axis=0))
     if sv[1] / np.sqrt(n) <= _COLLINEAR_RTOL:
@@ -215,7 +220,7 @@ def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
             f"all {n} points lie on one straight line; a surface needs points spread in two "
             "directions"
         )
-    return q, Normalization(center=_readonly(center), scale=scale)
+    return q, norm
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:

@@ -30,7 +30,8 @@ from scipy.spatial import Delaunay, cKDTree
 
 from .configurations import Configurations
 from .errors import FileFormatError, InvalidInputError
-from .parameterize import Parameterization, normalize, parameterize
+from .geometry import column_bounds
+from .parameterize import Parameterization, box_normalization, normalize, parameterize
 from .refine import RefineOptions, adaptive_fit
 from .spline_space import SplineSpace
 from .simplex import orient2d
@@ -463,16 +464,23 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0):
     return p, x
 
 
-def _run(points, param, options, callback, start=None, rings=None, history=()):
+def _run(points, param, options, callback, start=None, rings=None, history=(), checked=False):
+    """Fit ``points`` over ``param``; ``checked``: ``parameterize_points`` has just accepted
+    these very points (a cloud), so :func:`normalize` need not check them again."""
     t0 = time.perf_counter()
     used = np.asarray(param.used, dtype=bool)
-    extent = np.ptp(np.asarray(param.uv)[used], axis=0)
+    lo, hi = column_bounds(np.asarray(param.uv)[used])
+    extent = hi - lo
     if extent.min() < MIN_ASPECT * extent.max():
         raise InvalidInputError(
             f"the points lie almost on a curve: their parameter domain is {extent.min() / extent.max():.1e} "
             "times as wide as it is long; a surface needs points spread in two directions"
         )
-    q, norm = normalize(points[used])
+    if checked and param.faces is None:
+        norm = box_normalization(points)
+        q = norm.apply(points)
+    else:
+        q, norm = normalize(points[used])
     diag_norm = 2.0  # normalize() maps the bounding box to half-diagonal 1
     uv = np.asarray(param.uv)[used]
     fit_uv, fit_q = uv, q
@@ -619,4 +627,4 @@ def fit_surface(
     except (TypeError, ValueError):
         raise InvalidInputError("points must be an (N, 3) array of numbers") from None
     param = parameterize(points, faces)
-    return _run(points, param, options, callback)
+    return _run(points, param, options, callback, checked=faces is None)

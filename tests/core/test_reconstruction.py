@@ -182,6 +182,25 @@ def test_same_input_gives_the_same_surface():
     np.testing.assert_array_equal(a.control_points, b.control_points)
 
 
+def test_a_cloud_is_checked_once_and_refine_checks_its_points_again():
+    """fit_surface skips the second normalize() of a cloud that parameterize() has just
+    accepted: the surface is bit-identical to the one made with the check, and refine(), which
+    gets the points anew, still refuses bad ones."""
+    from core.parameterize import parameterize
+    from core.refine import RefineOptions
+    from core.surface import _run
+
+    points = ridge_cloud(2000)
+    fast = fit_surface(points, max_iterations=2)
+    options = RefineOptions(max_iterations=2)
+    checked = _run(points, parameterize(points), options, None, checked=False)
+    np.testing.assert_array_equal(fast.control_points, checked.control_points)
+    bad = points.copy()
+    bad[5] = np.nan
+    with pytest.raises(InvalidInputError, match="NaN"):
+        fast.refine(bad)
+
+
 def test_refine_continues_with_a_tighter_tolerance():
     points = ridge_cloud(3000)
     coarse = fit_surface(points, max_iterations=2, tolerance=0)
