@@ -157,13 +157,15 @@ def principal_axes(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     centred ``(n, 3)`` array ``x``, as ``np.linalg.svd(x, full_matrices=False)`` gives them.
 
     From the eigen-decomposition of the 3 x 3 scatter matrix ``x^T x`` (5-8x faster than the SVD
-    of the tall matrix at 1e6 points); that squares the condition number, so when
-    ``s_1 < 1e-5 s_0`` (nearly collinear points, where the rank test needs ``s_1`` to ~1e-9
-    relative) the SVD of ``x`` itself is taken.
+    of the tall matrix at 1e6 points); that squares the condition number: ``s_2`` of a flat
+    cloud comes out near ``1e-8 s_0`` instead of 0, and ``s_1`` of exactly collinear points
+    near ``1e-8 s_0`` (1e-6 at 2e7 points). So when ``s_1 < 1e-3 s_0`` (a thin strip or nearly
+    collinear points, where the rank test needs ``s_1`` to ~1e-9 relative) the SVD of ``x``
+    itself is taken.
     """
     w, v = np.linalg.eigh(x.T @ x)
     sv = np.sqrt(np.maximum(w[::-1], 0.0))
-    if not sv[1] > 1e-5 * sv[0]:
+    if not sv[1] > 1e-3 * sv[0]:
         _, sv, vt = np.linalg.svd(x, full_matrices=False)
         return sv, vt
     return sv, np.ascontiguousarray(v[:, ::-1].T)

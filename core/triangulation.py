@@ -321,6 +321,29 @@ def _candidate_triangles(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     return chord, trip, good
 
 
+def _line_forms(P: np.ndarray, ii: np.ndarray, jj: np.ndarray) -> tuple:
+    """The lines through the vertex pairs ``(ii, jj)`` of ``L`` polygons ``P`` (L, m, 2) as
+    affine forms ``side(x) = A x_u + B x_v + C = det(P_i, P_j, x)``: ``(A, B, C)``, each
+    (L, pairs)."""
+    A = P[:, ii, 1] - P[:, jj, 1]
+    B = P[:, jj, 0] - P[:, ii, 0]
+    return A, B, -(A * P[:, ii, 0] + B * P[:, ii, 1])
+
+
+def _link_sides(P, forms, ii, jj, link: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``det(P_i, P_j, x)`` (b, pairs) for points ``x`` (b, 2) of the polygons ``link`` (b,),
+    from the :func:`_line_forms`: three row gathers per point instead of two vertex gathers and
+    the full predicate. Exactly 0 at both ends of every line, as :func:`orient2d` is (the form
+    alone is exact only at ``P_i``; a data point on a knot then fell out of closed triangles)."""
+    A, B, C = forms
+    side = np.take(A, link, axis=0) * x[:, 0:1]
+    side += np.take(B, link, axis=0) * x[:, 1:2]
+    side += np.take(C, link, axis=0)
+    at = (x[:, None, :] == np.take(P, link, axis=0)).all(axis=2)  # (b, m): x is vertex k
+    side[at[:, ii] | at[:, jj]] = 0.0
+    return side
+
+
 def _min_cost_triangulations(poly: np.ndarray, chord: np.ndarray, trip: np.ndarray,
                              tcost: np.ndarray) -> list:
     """Dynamic programme over sub-polygons ``i..j`` for ``L`` polygons at once: the
@@ -494,18 +517,11 @@ class FeatureLinkTriangulator:
         pair = np.full((m, m), -1)
         pair[ii, jj] = np.arange(len(ii))
         e01, e12, e02 = (pair[trip[:, a], trip[:, b]] for a, b in ((0, 1), (1, 2), (0, 2)))
-        # the lines as affine forms side(x) = A x_u + B x_v + C = det(P_i, P_j, x), (L, pairs):
-        # three gathers per point instead of two vertex gathers and the full predicate
-        A = P[:, ii, 1] - P[:, jj, 1]
-        B = P[:, jj, 0] - P[:, ii, 0]
-        Cc = -(A * P[:, ii, 0] + B * P[:, ii, 1])
+        forms = _line_forms(P, ii, jj)
         member = np.empty((len(flat), len(trip)), dtype=bool)
         step = max(1, (1 << 20) // len(ii))  # about 1e6 side tests per chunk (bounded memory)
         for s in range(0, len(flat), step):
-            lk, xs = link[s : s + step], x[s : s + step]
-            side = np.take(A, lk, axis=0) * xs[:, 0:1]  # (b, pairs)
-            side += np.take(B, lk, axis=0) * xs[:, 1:2]
-            side += np.take(Cc, lk, axis=0)
+            side = _link_sides(P, forms, ii, jj, link[s : s + step], x[s : s + step])
             left, right = side >= 0, side <= 0
             member[s : s + step] = left[:, e01] & left[:, e12] & right[:, e02]
         # the points of the closed link polygon: those in one of its admissible triangles

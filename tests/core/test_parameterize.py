@@ -123,19 +123,21 @@ def test_normalize_rejects_bad_input_with_specific_messages() -> None:
         normalize([["a", "b", "c"]] * 12)
 
 
-@pytest.mark.parametrize("spread", [1.0, 1e-3, 1e-7, 1e-11])
-def test_principal_axes_match_the_svd(spread: float) -> None:
+@pytest.mark.parametrize("spread, thickness", [(1.0, 0.3), (0.01, 0.3), (1.0, 0.0), (1e-4, 0.3),
+                                               (1e-7, 0.3), (1e-11, 0.3)])
+def test_principal_axes_match_the_svd(spread: float, thickness: float) -> None:
     """The scatter-matrix eigen-decomposition gives the SVD's singular values and axes (up to
-    sign); nearly collinear clouds (``spread``: width over length) take the SVD itself, so the
-    rank test still resolves a width of 1e-11."""
+    sign; a flat cloud's zero ``s_2`` only to ~1e-8 ``s_0``); thin and nearly collinear clouds
+    (``spread``: width over length) take the SVD itself, so the rank test still resolves a
+    width of 1e-11."""
     rng = np.random.default_rng(3)
-    t = rng.normal(size=(5000, 3)) * [1.0, spread, 0.3 * spread]
+    t = rng.normal(size=(5000, 3)) * [1.0, spread, thickness * spread]
     rot, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     x = t @ rot.T
     x -= x.mean(axis=0)
     _, sv_ref, vt_ref = np.linalg.svd(x, full_matrices=False)
     sv, vt = principal_axes(x)
-    np.testing.assert_allclose(sv, sv_ref, rtol=1e-7, atol=1e-14 * sv_ref[0])
+    np.testing.assert_allclose(sv, sv_ref, rtol=1e-7, atol=(1e-7 if thickness == 0 else 1e-14) * sv_ref[0])
     np.testing.assert_allclose(np.abs((vt * vt_ref).sum(axis=1)), 1.0, atol=1e-7)
     if spread >= 1e-7:
         normalize(x)
