@@ -72,12 +72,19 @@ def _smoothness_text(report: dict) -> str:
     return text
 
 
-def _check_output(path: str | None, what: str) -> None:
-    if path is not None and Path(path).suffix.lower() not in WRITE_EXTENSIONS:
+def _check_output(path: str | None, what: str, extensions=WRITE_EXTENSIONS) -> None:
+    """Refuse an output path before the fit, not after it: a wrong extension or a missing
+    folder."""
+    if path is None:
+        return
+    if Path(path).suffix.lower() not in extensions:
         raise TCBError(
             f"cannot write the {what} as {Path(path).suffix or 'a file without extension'}: "
-            f"use one of {', '.join(sorted(WRITE_EXTENSIONS))}"
+            f"use one of {', '.join(sorted(extensions))}"
         )
+    folder = Path(path).parent
+    if not folder.is_dir():
+        raise TCBError(f"cannot write the {what} to {path}: the folder {folder} does not exist")
 
 
 def _progress(quiet: bool):
@@ -101,6 +108,9 @@ def _fit(args) -> int:
 
     _check_output(args.output, "surface")
     _check_output(args.net, "control net")
+    _check_output(args.spline, "spline", {".npz"})
+    if args.resolution < 2:
+        raise TCBError(f"--resolution must be at least 2, got {args.resolution}")
     t0 = time.perf_counter()
     points, faces = read_geometry(args.input)
     if not args.quiet:

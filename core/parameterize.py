@@ -262,6 +262,10 @@ class Parameterization:
             plane normal (plane only).
         scale: 3D length of one uv unit (plane only): ``uv = ((p - origin) @ axes[:2].T) /
             scale``.
+        stretch: ``(n,) float64`` (disk only): at each vertex, the largest ratio of 3D to uv
+            length over its mesh edges (NaN for unused vertices); the map to the disk
+            compresses steep and outlying parts of a mesh, and the tessellation refines there.
+            None for a point cloud (and for files written before it existed).
     """
 
     uv: np.ndarray
@@ -273,6 +277,7 @@ class Parameterization:
     origin: np.ndarray | None = None
     axes: np.ndarray | None = None
     scale: float | None = None
+    stretch: np.ndarray | None = None
 
     def contains(self, uv: np.ndarray, tol: float = 1e-12) -> np.ndarray:
         """Mask of parameters inside ``domain_polygon`` (points on its edges count as inside).
@@ -878,6 +883,14 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
             "parameter domain; this happens with zero-area (sliver) triangles: clean up the mesh "
             "(Blender: Mesh > Clean Up > Degenerate Dissolve) and try again"
         )
+    # how much the map compresses each vertex's surroundings: 3D over uv length of its edges
+    ratio = np.linalg.norm(p[ea] - p[eb], axis=1) / np.maximum(
+        np.linalg.norm(uv[ea] - uv[eb], axis=1), 1e-300
+    )
+    stretch = np.zeros(n)
+    np.maximum.at(stretch, ea, ratio)
+    np.maximum.at(stretch, eb, ratio)
+    stretch[~used] = np.nan
     return Parameterization(
         uv=_readonly(uv),
         kind="disk",
@@ -885,6 +898,7 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
         used=_readonly(used),
         boundary=_readonly(loop.astype(np.int64)),
         faces=_readonly(tris),
+        stretch=_readonly(stretch),
     )
 
 

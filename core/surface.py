@@ -46,7 +46,16 @@ FORMAT_VERSION = 2
 MAX_FIT_POINTS = 2_000_000
 # A parameter domain thinner than this (width / length) is a curve, not a surface.
 MIN_ASPECT = 1e-3
-_PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes")
+# tessellation: rounds of edge splits where the data parameters are denser than on average
+TESSELLATION_SPLITS = 4
+_PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes", "stretch")
+
+
+def _umask() -> int:
+    """The process's umask (read by setting it and putting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def _readonly(a):
@@ -154,7 +163,15 @@ class TCBSurface:
 
         The domain is the disk polygon for meshes and the convex hull of the parameters for
         clouds, trimmed to where data is (triangles farther than a few data spacings from any
-        data parameter are dropped). ``resolution`` grid steps span the longer side.
+        data parameter are dropped). ``resolution`` grid steps span the longer side; where the
+        parameterization compresses the surface more than on average (a mesh's map to the disk
+        compresses steep and outlying parts, a projection steep slopes), edges are split until
+        their length times the local compression is at most two grid steps
+        (:data:`TESSELLATION_SPLITS` rounds at most), so the surface mesh does not coarsen in 3D
+        where the parameters are crowded. The parameters depend only on the
+        data, not on the control points (``evaluation_matrix`` of them re-evaluates edits).
+        Meshes use the vertex ``stretch`` of their parameterization (3D over uv edge length)
+        instead of the density, when it is there.
         """
         resolution = int(resolution)
         if resolution < 2:
@@ -177,27 +194,67 @@ class TCBSurface:
         grid = np.stack(np.meshgrid(gu, gv), -1).reshape(-1, 2)
         inside = self._param.contains(grid) & (_distance_to_polygon(grid, poly) > 0.3 * d)
         uv = np.vstack([boundary, grid[inside]])
-        tri = Delaunay(uv).simplices
-        cen = uv[tri].mean(axis=1)
-        keep = self._param.contains(cen)
+        data = np.asarray(self._param.uv)
+        ok = np.isfinite(data).all(axis=1)
+        data = data[ok]
+        full = cKDTree(data)
+        trim = None
         if self._param.kind == "plane":
-            data = self._param.uv
-            tree = cKDTree(data)
-            sample = data[:: max(1, len(data) // 5000)]
-            spacing = float(np.median(tree.query(sample, k=2)[0][:, 1]))
-            keep &= tree.query(cen)[0] <= max(4 * spacing, 1.5 * d)
-        a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
-        det = orient2d(a, b, c)
-        # Delaunay joins collinear points of a straight boundary stretch into zero-area
-        # triangles: they cover nothing and have no normal, drop them
-        keep &= np.abs(det) > 1e-9 * d * d
-        tri = np.where((det < 0)[:, None], tri[:, [0, 2, 1]], tri)[keep]
+            spacing = float(np.median(full.query(data[:: max(1, len(data) // 5000)], k=2)[0][:, 1]))
+            trim = max(4 * spacing, 1.5 * d)
+        tri = self._domain_triangles(uv, d, full, trim)
+        stretch = self._local_stretch(data, full, np.asarray(self._param.stretch)[ok]
+                                      if self._param.stretch is not None else None)
+        for _ in range(TESSELLATION_SPLITS if stretch is not None else 0):
+            e = np.unique(np.sort(tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+            mid = 0.5 * (uv[e[:, 0]] + uv[e[:, 1]])
+            length = np.linalg.norm(uv[e[:, 0]] - uv[e[:, 1]], axis=1)
+            split = (length * stretch(mid) > 2.0 * d) & (length > d / 2**TESSELLATION_SPLITS)
+            if not split.any():
+                break
+            uv = np.vstack([uv, mid[split]])
+            tri = self._domain_triangles(uv, d, full, trim)
         used = np.unique(tri)
         remap = np.full(len(uv), -1)
         remap[used] = np.arange(len(used))
         result = (_readonly(uv[used]), _readonly(remap[tri]))
         self._tess_cache[resolution] = result
         return result
+
+    @staticmethod
+    def _local_stretch(data, tree, stretch):
+        """``f(x)``: how much the parameterization compresses the surface near parameters ``x``
+        (m, 2), relative to its median; from a mesh's vertex ``stretch`` (the nearest used
+        vertex) or else from the density of the data parameters (median spacing of the 16th
+        nearest neighbour over the local one, of at most 20 000 of them: a scanner samples the
+        surface evenly, so the data lie denser in uv where the map compresses). None with too
+        few data."""
+        if stretch is not None and np.isfinite(stretch).all() and len(stretch):
+            typical = float(np.median(stretch))
+            if typical > 0:
+                return lambda x: stretch[tree.query(x)[1]] / typical
+        data = data[:: max(1, len(data) // 20_000)]
+        k = min(16, len(data) - 1)
+        if k < 2:
+            return None
+        sample = cKDTree(data)
+        typical = float(np.median(sample.query(data, k=k + 1)[0][:, k]))
+        return lambda x: typical / np.maximum(sample.query(x, k=k)[0][:, k - 1], 1e-300)
+
+    def _domain_triangles(self, uv, d, tree, trim) -> np.ndarray:
+        """CCW Delaunay triangles of ``uv`` inside the domain (and, for clouds, within ``trim``
+        of the data parameters in ``tree``), without zero-area ones."""
+        tri = Delaunay(uv).simplices
+        cen = uv[tri].mean(axis=1)
+        keep = self._param.contains(cen)
+        if trim is not None:
+            keep &= tree.query(cen)[0] <= trim
+        a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
+        det = orient2d(a, b, c)
+        # Delaunay joins collinear points of a straight boundary stretch into zero-area
+        # triangles: they cover nothing and have no normal, drop them
+        keep &= np.abs(det) > 1e-9 * d * d
+        return np.where((det < 0)[:, None], tri[:, [0, 2, 1]], tri)[keep]
 
     def tessellate(self, resolution: int = 64) -> tuple[np.ndarray, np.ndarray]:
         """Vertices (V, 3) and triangles (F, 3) of the surface over the data's domain."""
@@ -252,8 +309,14 @@ class TCBSurface:
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         uv_t, _ = self.tessellation_uv(96)
         lo, hi = uv_t.min(axis=0), uv_t.max(axis=0)
-        _, nearest = cKDTree(self(uv_t)).query(p)
-        x = uv_t[nearest].copy()
+        # starts: the nearest of the tessellation's vertices and of the surface points at (up
+        # to 20 000 of) the data's own parameters, which stay close to the data where the map
+        # is stretched (a data point is then at most its fit error from its start)
+        data = np.asarray(self._param.uv)
+        data = data[np.isfinite(data).all(axis=1)]
+        starts = np.vstack([uv_t, np.clip(data[:: max(1, len(data) // 20_000)], lo, hi)])
+        _, nearest = cKDTree(self(starts)).query(p)
+        x = starts[nearest].copy()
         x, d = self._newton_closest(p, x, self._surface_and_gradient(x), lo, hi, iterations)
         if self._param.kind == "plane" and self._param.origin is not None:
             # a cloud's own projection is another start; keep the better result (starting from
@@ -399,15 +462,25 @@ class TCBSurface:
             raise FileFormatError(f"{what} is damaged or incomplete ({type(exc).__name__}: {exc})") from None
 
     def save(self, path) -> None:
-        """Write a versioned ``.npz``; atomically (temporary file, then rename)."""
+        """Write a versioned ``.npz`` (the path must end in ``.npz``); atomically (temporary
+        file, then rename), with the permissions a new file gets from the umask."""
         path = Path(path)
+        if path.suffix.lower() != ".npz":
+            raise InvalidInputError(
+                f"a surface is saved as a .npz archive: name the file *.npz (got {path.name})"
+            )
+        if not path.parent.is_dir():
+            raise InvalidInputError(
+                f"cannot save to {path}: the folder {path.parent} does not exist"
+            )
         data = self.to_bytes()
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent or ".")
+        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
         try:
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)
                 fh.flush()
                 os.fsync(fh.fileno())
+            os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it 0600
             os.replace(tmp, path)
         except BaseException:
             if os.path.exists(tmp):

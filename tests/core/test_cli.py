@@ -60,3 +60,20 @@ def test_bad_path_and_malformed_file_give_one_line_and_exit_2(tmp_path):
     r = run("fit", ROOT / "data" / "nefertiti.off", "-o", tmp_path / "s.stl")
     assert r.returncode == 2 and ".stl" in r.stderr
     assert not (tmp_path / "s.obj").exists()
+
+
+def test_bad_options_are_refused_before_the_fit(tmp_path):
+    """A resolution below 2, an output folder that does not exist or a spline file that is not
+    .npz: one line and exit 2 before reading or fitting anything (the input does not even
+    exist here, so a check made after the fit would report the missing input instead)."""
+    missing_input = tmp_path / "never-read.ply"
+    cases = [
+        (["-o", tmp_path / "s.obj", "--resolution", "1"], "--resolution must be at least 2"),
+        (["-o", tmp_path / "nope" / "s.obj"], "does not exist"),
+        (["-o", tmp_path / "s.obj", "--net", tmp_path / "nope" / "n.ply"], "does not exist"),
+        (["-o", tmp_path / "s.obj", "--spline", tmp_path / "s.obj"], "use one of .npz"),
+    ]
+    for options, words in cases:
+        r = run("fit", missing_input, *options)
+        assert r.returncode == 2, r.stderr
+        assert r.stderr.strip().count("\n") == 0 and words in r.stderr, r.stderr

@@ -1,8 +1,11 @@
 """Reconstruction end to end (method.md sections 4-7): accuracy on known data, creases, disk
 meshes, local control, files, cancellation and bad input."""
 
+import io
+
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from core import (
     FileFormatError,
@@ -15,6 +18,7 @@ from core import (
 )
 from core.fit import fit_control_points
 from core.meshio import read_geometry
+from core.simplex import orient2d
 from knotsets import knot_set
 
 DATA = __import__("pathlib").Path(__file__).resolve().parents[2] / "data"
@@ -140,6 +144,23 @@ def test_save_load_round_trips_bit_exactly(nefertiti, tmp_path):
     np.testing.assert_array_equal(back.control_net()[1], surf.control_net()[1])
     assert back.report == surf.report
     assert TCBSurface.from_bytes(surf.to_bytes()).report == surf.report
+
+
+def test_save_names_what_is_wrong_and_gives_the_file_the_umask_permissions(nefertiti, tmp_path):
+    import os
+
+    _, _, surf = nefertiti
+    with pytest.raises(InvalidInputError, match=r"\*\.npz \(got face\.obj\)"):
+        surf.save(tmp_path / "face.obj")
+    with pytest.raises(InvalidInputError, match="the folder .*nope does not exist"):
+        surf.save(tmp_path / "nope" / "face.npz")
+    assert not list(tmp_path.iterdir())  # no file, no temporary left
+    old = os.umask(0o022)
+    try:
+        surf.save(tmp_path / "face.npz")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "face.npz").stat().st_mode & 0o777 == 0o644
 
 
 def test_load_refuses_damaged_and_future_files(nefertiti, tmp_path):
@@ -396,3 +417,52 @@ def test_distances_recover_known_offsets_along_the_normal():
         np.testing.assert_allclose(surf.distances(p), np.abs(t), rtol=0,
                                    atol=1e-6 * surf.report["diagonal"])
         np.testing.assert_allclose(surf.closest_parameters(p), uv, rtol=0, atol=1e-5)
+
+
+@pytest.fixture(scope="module")
+def three_peaks():
+    points, faces = read_geometry(DATA / "three_peaks.off")
+    return points, faces, fit_surface(points, faces)
+
+
+def test_tessellation_refines_where_the_mesh_map_compresses_and_ignores_the_control_points(
+    three_peaks,
+):
+    """three_peaks' map to the disk squeezes steep walls (mesh edges up to 46x longer in 3D per
+    uv length than the median): a uniform uv grid at resolution 64 left input vertices 8% of the
+    diagonal from every surface vertex. Refined by the vertex stretch, the surface mesh comes
+    within 2%; its parameters depend on the data only, so an edited surface keeps them."""
+    points, faces, surf = three_peaks
+    diag = np.linalg.norm(np.ptp(points, axis=0))
+    verts, tris = surf.tessellate(64)
+    gap, _ = cKDTree(verts).query(points)
+    assert gap.max() < 0.02 * diag
+    edges = np.linalg.norm(verts[tris] - verts[tris[:, [1, 2, 0]]], axis=2)
+    assert edges.max() < 5 * np.median(edges)
+    uv, tri = surf.tessellation_uv(64)
+    moved = surf.with_control_points(surf.control_points * 1.5)
+    uv2, tri2 = moved.tessellation_uv(64)
+    np.testing.assert_array_equal(uv, uv2)
+    np.testing.assert_array_equal(tri, tri2)
+    assert np.all(orient2d(uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]) > 0)
+    # saved with the surface; a file from before the stretch existed falls back to the density
+    back = TCBSurface.from_bytes(surf.to_bytes())
+    np.testing.assert_array_equal(back.parameterization.stretch, surf.parameterization.stretch)
+    np.testing.assert_array_equal(back.tessellation_uv(64)[0], uv)
+    arrays = dict(np.load(io.BytesIO(surf.to_bytes())))
+    del arrays["param_stretch"]
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    old = TCBSurface.from_bytes(buf.getvalue())
+    assert old.parameterization.stretch is None
+    assert len(old.tessellate(64)[0]) > 0
+
+
+def test_distances_to_the_fitted_data_are_at_most_the_fit_errors(three_peaks):
+    """The closest point search also starts from the surface at the data's own parameters, so
+    a data point is never reported farther than its fit error (refined three_peaks: the search
+    from the tessellation alone reported 1.45 against a largest error of 0.145)."""
+    points, faces, surf = three_peaks
+    for s in (surf, surf.refine(points, faces, tolerance=0, max_iterations=2)):
+        d = s.distances(points)
+        assert np.all(d <= s.errors * (1 + 1e-9) + 1e-12)
