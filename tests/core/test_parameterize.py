@@ -497,3 +497,40 @@ def test_parameterization_is_immutable() -> None:
         par.kind = "plane"  # type: ignore[misc]
     with pytest.raises(InvalidInputError, match="point-cloud"):
         par.project(np.zeros((1, 3)))
+
+
+def _hexagon_grid(n: int = 14):
+    """A height field meshed with hexagons merged from two quads, listed from an end of their
+    collinear side, and the same grid as quads."""
+    g = np.linspace(0.0, 1.0, n)
+    x, y = np.meshgrid(g, g)
+    v = np.c_[x.ravel(), y.ravel(), 0.2 * np.sin(3 * x.ravel())]
+    at = lambda i, j: j * n + i  # noqa: E731
+    quads = [(at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1))
+             for j in range(n - 1) for i in range(n - 1)]
+    hexes = [(at(i + 1, j), at(i + 1, j + 1), at(i + 1, j + 2), at(i, j + 2), at(i, j + 1), at(i, j))
+             for j in range(0, n - 2, 2) for i in range(n - 1)]
+    return v, np.array(quads), np.array(hexes)
+
+
+def test_fanned_ngons_with_collinear_vertices_lose_their_zero_area_triangles() -> None:
+    """Fanning such a hexagon from an end of its collinear side makes a zero-area triangle;
+    the parameterization flips it away (same faces count, every triangle with area, uv
+    embedded), so the hexagon mesh fits like the quad mesh (before: 3.6x the control points,
+    tolerance missed)."""
+    from core import fit_surface
+
+    v, quads, hexes = _hexagon_grid()
+    tris = np.concatenate([[(h[0], h[j], h[j + 1]) for j in range(1, 5)] for h in hexes])
+    area = np.linalg.norm(np.cross(v[tris[:, 1]] - v[tris[:, 0]], v[tris[:, 2]] - v[tris[:, 0]]), axis=1)
+    assert (area < 1e-12).sum() == len(hexes)  # one cap per hexagon as given
+    param = parameterize_mesh(v, hexes)
+    f = param.faces
+    assert len(f) == len(tris)
+    area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    assert area.min() > 1e-6
+    uv = param.uv
+    assert np.all(np.cross(uv[f[:, 1]] - uv[f[:, 0]], uv[f[:, 2]] - uv[f[:, 0]]) > 0)
+    a, b = fit_surface(v, quads), fit_surface(v, hexes)
+    assert b.report["stop_reason"] == "tolerance reached"
+    assert b.report["control_points"] <= 1.2 * a.report["control_points"]
