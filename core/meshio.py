@@ -71,6 +71,8 @@ def read_geometry(path: PathLike) -> tuple[np.ndarray, np.ndarray | None]:
     """
     p = Path(path)
     ext = p.suffix.lower()
+    if p.is_dir():
+        raise FileFormatError(f"{str(p)!r} is a folder; give the path of a file in it")
     if not p.is_file():
         raise FileFormatError(f"no such file: {str(p)!r}; check the path")
     if ext not in _READERS:

@@ -25,7 +25,7 @@ from .configurations import (
     link_triangulation_procedure,
     triangulate_polygon,
 )
-from .errors import InvalidKnotsError
+from .errors import InvalidInputError, InvalidKnotsError
 from .parallel import pmap, row_blocks
 from .simplex import SimplexBatch, orient2d
 from .spatial import BoxIndex
@@ -33,6 +33,21 @@ from .spatial import BoxIndex
 __all__ = ["SplineSpace", "build_space", "validate_knots"]
 
 _DERIVATIVES = {(0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)}
+
+
+def as_parameters(uv) -> np.ndarray:
+    """``uv`` as an (m, 2) float64 array (a single ``(2,)`` point is one row); any other
+    shape is an :class:`InvalidInputError` (reshaping an (m, 3) array into pairs would silently
+    evaluate the wrong points)."""
+    try:
+        a = np.asarray(uv, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError("parameters must be an (m, 2) array of numbers (u, v)") from None
+    if a.shape == (2,):
+        return a.reshape(1, 2)
+    if a.ndim != 2 or a.shape[1] != 2:
+        raise InvalidInputError(f"parameters must be an (m, 2) array of (u, v); got shape {a.shape}")
+    return a
 
 
 def validate_knots(knots) -> np.ndarray:
@@ -279,7 +294,7 @@ class SplineSpace:
         for der in ders:
             if der not in _DERIVATIVES:
                 raise ValueError(f"derivative must be one of {sorted(_DERIVATIVES)}, got {der}")
-        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        uv = as_parameters(uv)
 
         def block(bounds):
             s, e = bounds

@@ -418,6 +418,10 @@ class TCBSurface:
     @classmethod
     def from_bytes(cls, data: bytes, what: str = "the data") -> "TCBSurface":
         """Inverse of :meth:`to_bytes`; raises :class:`FileFormatError` on bad content."""
+        if not data.startswith(b"PK"):  # a .npz is a zip archive (a .npy, text, ... is not)
+            raise FileFormatError(
+                f"{what} is not a TCB surface file (a .npz archive written by save())"
+            )
         try:
             with np.load(io.BytesIO(data), allow_pickle=False) as z:
                 arrays = {k: z[k] for k in z.files}

@@ -466,3 +466,18 @@ def test_distances_to_the_fitted_data_are_at_most_the_fit_errors(three_peaks):
     for s in (surf, surf.refine(points, faces, tolerance=0, max_iterations=2)):
         d = s.distances(points)
         assert np.all(d <= s.errors * (1 + 1e-9) + 1e-12)
+
+
+def test_wrong_shaped_parameters_directories_and_npy_files_get_specific_errors(nefertiti, tmp_path):
+    """An (m, 3) array is not reshaped into pairs (12 numbers made 6 wrong points), a folder
+    is not "no such file", and a .npy is not a surface file with numpy's words."""
+    _, _, surf = nefertiti
+    uv = surf.tessellation_uv(8)[0][:4]
+    np.testing.assert_array_equal(surf(uv[0]), surf(uv[:1]))  # one (2,) point is one row
+    with pytest.raises(InvalidInputError, match=r"\(m, 2\) array of \(u, v\); got shape \(4, 3\)"):
+        surf(np.c_[uv, uv[:, :1]])
+    with pytest.raises(FileFormatError, match="is a folder"):
+        read_geometry(tmp_path)
+    np.save(tmp_path / "x.npy", np.zeros(3))
+    with pytest.raises(FileFormatError, match=r"not a TCB surface file \(a \.npz archive"):
+        TCBSurface.load(tmp_path / "x.npy")
