@@ -648,11 +648,14 @@ def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     return tris.reshape(-1, 3)
 
 
-def _triangle_areas2(tris: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Squared doubled 3D areas ``|(b - a) x (c - a)|^2`` of ``tris`` (f,)."""
+def _is_cap(tris: np.ndarray, p: np.ndarray, rtol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cap mask (f,) of ``tris``: height over the longest edge at most ``rtol`` times its length
+    (``|(b - a) x (c - a)| <= rtol L^2``), and the squared edge lengths (f, 3), edge ``j`` from
+    vertex ``j`` to ``j + 1``."""
     a, b, c = (np.take(p, tris[:, j], axis=0) for j in range(3))
+    length2 = np.stack([((b - a) ** 2).sum(1), ((c - b) ** 2).sum(1), ((a - c) ** 2).sum(1)], 1)
     n = np.cross(b - a, c - a)
-    return np.einsum("ij,ij->i", n, n)
+    return np.einsum("ij,ij->i", n, n) <= rtol**2 * length2.max(axis=1) ** 2, length2
 
 
 def _flip_caps(tris: np.ndarray, p: np.ndarray, rtol: float = 1e-10) -> np.ndarray:
@@ -662,46 +665,49 @@ def _flip_caps(tris: np.ndarray, p: np.ndarray, rtol: float = 1e-10) -> np.ndarr
     merged from two quads); left in, they give the mean-value map angles of 0 and pi, and a
     fit of 400 vertices used 1983 control points without reaching the tolerance (547 as quads).
 
-    A flip keeps the vertices and the boundary (``ab`` is interior); it is made only when both
-    new triangles have area and ``cd`` is not already an edge. Passes of non-overlapping flips
-    (vectorized) until no cap can be flipped; caps on the boundary stay. Orientation is made
-    consistent afterwards (:func:`_orient_consistently`).
+    A flip keeps the vertices and the boundary (``ab`` is interior, shared by exactly two
+    triangles); it is made only when neither new triangle is a cap and ``cd`` is not already an
+    edge, so every flip lowers the number of caps and the passes end. Each pass makes
+    non-overlapping flips (vectorized; where two caps share a neighbour, the first one flips);
+    passes repeat until no cap can be flipped (a collinear run of k vertices takes k - 1). Caps
+    on the boundary or at non-manifold edges stay (the topology checks report the latter).
+    Orientation is made consistent afterwards (:func:`_orient_consistently`).
     """
     n = len(p)
     tris = tris.copy()
-    for _ in range(20):
-        e = np.stack([tris, np.roll(tris, -1, axis=1)], axis=-1)  # (f, 3, 2) edges (j, j+1)
-        length2 = ((np.take(p, e[..., 0], axis=0) - np.take(p, e[..., 1], axis=0)) ** 2).sum(-1)
-        cap = np.flatnonzero(_triangle_areas2(tris, p) <= rtol**2 * length2.max(axis=1) ** 2)
+    for _ in range(len(tris) + 1):  # each pass flips at least one cap or stops
+        cap_mask, length2 = _is_cap(tris, p, rtol)
+        cap = np.flatnonzero(cap_mask)
         if len(cap) == 0:
             break
+        e = np.stack([tris, np.roll(tris, -1, axis=1)], axis=-1)  # (f, 3, 2) edges (j, j+1)
         key = np.minimum(e[..., 0], e[..., 1]) * n + np.maximum(e[..., 0], e[..., 1])  # (f, 3)
         flat = key.reshape(-1)
         order = np.argsort(flat, kind="stable")
         sorted_keys = flat[order]
         j = length2[cap].argmax(axis=1)  # the longest edge: (a, b) = tris[t, j], tris[t, j+1]
-        a, b = tris[cap, j], tris[cap, (j + 1) % 3]
-        c = tris[cap, (j + 2) % 3]
         k = key[cap, j]
         lo = np.searchsorted(sorted_keys, k)
         hi = np.searchsorted(sorted_keys, k, side="right")
-        ok = hi - lo == 2  # an interior, manifold edge: exactly one other triangle
-        other = order[np.where(ok, lo, 0)] // 3
-        other = np.where(other == cap, order[np.minimum(lo + 1, len(order) - 1)] // 3, other)
-        t2 = tris[other]
-        d = t2.sum(axis=1) - a - b  # the vertex of the other triangle off ab
+        shared = hi - lo == 2  # an interior, manifold edge: exactly one other triangle
+        cap, j, lo = cap[shared], j[shared], lo[shared]
+        a, b, c = tris[cap, j], tris[cap, (j + 1) % 3], tris[cap, (j + 2) % 3]
+        other = order[lo] // 3
+        other = np.where(other == cap, order[lo + 1] // 3, other)
+        d = tris[other].sum(axis=1) - a - b  # the vertex of the other triangle off ab
         new1, new2 = np.stack([a, d, c], 1), np.stack([d, b, c], 1)
-        exists = np.isin(np.minimum(c, d) * n + np.maximum(c, d), sorted_keys)
-        floor = rtol**2 * length2[cap].max(axis=1) ** 2
-        ok &= ~exists & (d != c)
-        ok &= (_triangle_areas2(new1, p) > floor) & (_triangle_areas2(new2, p) > floor)
-        # one flip per triangle and pass
-        both = np.concatenate([cap[ok], other[ok]])
-        counts = np.bincount(both, minlength=len(tris))
-        ok[ok] &= (counts[cap[ok]] == 1) & (counts[other[ok]] == 1)
-        if not ok.any():
+        ok = (d != c) & ~np.isin(np.minimum(c, d) * n + np.maximum(c, d), sorted_keys)
+        ok &= ~_is_cap(new1, p, rtol)[0] & ~_is_cap(new2, p, rtol)[0]
+        cap, other, new1, new2 = cap[ok], other[ok], new1[ok], new2[ok]
+        if len(cap) == 0:
             break
-        tris[cap[ok]], tris[other[ok]] = new1[ok], new2[ok]
+        # one flip per triangle and pass: a candidate flips when it is the first to touch
+        # both of its triangles (the first candidate always does)
+        m = len(cap)
+        first = np.full(len(tris), m)
+        np.minimum.at(first, np.concatenate([cap, other]), np.tile(np.arange(m), 2))
+        go = (first[cap] == np.arange(m)) & (first[other] == np.arange(m))
+        tris[cap[go]], tris[other[go]] = new1[go], new2[go]
     return tris
 
 

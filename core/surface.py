@@ -19,7 +19,8 @@ from __future__ import annotations
 import io
 import json
 import os
-import tempfile
+import secrets
+import stat
 import time
 import warnings
 from pathlib import Path
@@ -48,14 +49,8 @@ MAX_FIT_POINTS = 2_000_000
 MIN_ASPECT = 1e-3
 # tessellation: rounds of edge splits where the data parameters are denser than on average
 TESSELLATION_SPLITS = 4
+TESSELLATION_REFINE_POINTS = 50_000
 _PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes", "stretch")
-
-
-def _umask() -> int:
-    """The process's umask (read by setting it and putting it back)."""
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
 
 
 def _readonly(a):
@@ -167,7 +162,8 @@ class TCBSurface:
         parameterization compresses the surface more than on average (a mesh's map to the disk
         compresses steep and outlying parts, a projection steep slopes), edges are split until
         their length times the local compression is at most two grid steps
-        (:data:`TESSELLATION_SPLITS` rounds at most), so the surface mesh does not coarsen in 3D
+        (:data:`TESSELLATION_SPLITS` rounds at most; none above
+        :data:`TESSELLATION_REFINE_POINTS` grid points), so the surface mesh does not coarsen in 3D
         where the parameters are crowded. The parameters depend only on the
         data, not on the control points (``evaluation_matrix`` of them re-evaluates edits).
         Meshes use the vertex ``stretch`` of their parameterization (3D over uv edge length)
@@ -205,10 +201,16 @@ class TCBSurface:
         tri = self._domain_triangles(uv, d, full, trim)
         stretch = self._local_stretch(data, full, np.asarray(self._param.stretch)[ok]
                                       if self._param.stretch is not None else None)
-        for _ in range(TESSELLATION_SPLITS if stretch is not None else 0):
-            e = np.unique(np.sort(tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
-            mid = 0.5 * (uv[e[:, 0]] + uv[e[:, 1]])
-            length = np.linalg.norm(uv[e[:, 0]] - uv[e[:, 1]], axis=1)
+        # each round triangulates again: above TESSELLATION_REFINE_POINTS (resolution ~250 on a
+        # disk) that costs more than the finer grid leaves to gain, and rounds are skipped
+        refine = stretch is not None and len(uv) <= TESSELLATION_REFINE_POINTS
+        rounds = TESSELLATION_SPLITS if refine else 0
+        for _ in range(rounds):
+            ends = np.sort(tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+            key = np.unique(ends[:, 0] * len(uv) + ends[:, 1])  # each edge once
+            i, j = key // len(uv), key % len(uv)
+            mid = 0.5 * (uv[i] + uv[j])
+            length = np.linalg.norm(uv[i] - uv[j], axis=1)
             split = (length * stretch(mid) > 2.0 * d) & (length > d / 2**TESSELLATION_SPLITS)
             if not split.any():
                 break
@@ -233,7 +235,9 @@ class TCBSurface:
             typical = float(np.median(stretch))
             if typical > 0:
                 return lambda x: stretch[tree.query(x)[1]] / typical
-        data = data[:: max(1, len(data) // 20_000)]
+        # distinct parameters only: duplicated points would read as density (+14-31% vertices
+        # for doubled clouds; with most points doubled the median spacing was 0)
+        data = np.unique(data[:: max(1, len(data) // 20_000)], axis=0)
         k = min(16, len(data) - 1)
         if k < 2:
             return None
@@ -306,7 +310,13 @@ class TCBSurface:
 
     def _closest(self, points, iterations: int = 4) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`closest_parameters` and the distances ``|S(x) - p|`` there, (m, 2), (m,)."""
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        p = np.asarray(points, dtype=np.float64)
+        if p.shape == (3,):
+            p = p.reshape(1, 3)
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise InvalidInputError(
+                f"points must be an (m, 3) array of (x, y, z); got shape {p.shape}"
+            )
         uv_t, _ = self.tessellation_uv(96)
         lo, hi = uv_t.min(axis=0), uv_t.max(axis=0)
         # starts: the nearest of the tessellation's vertices and of the surface points at (up
@@ -467,7 +477,8 @@ class TCBSurface:
 
     def save(self, path) -> None:
         """Write a versioned ``.npz`` (the path must end in ``.npz``); atomically (temporary
-        file, then rename), with the permissions a new file gets from the umask."""
+        file, then rename), with the permissions a new file gets from the umask (an existing
+        file keeps its own)."""
         path = Path(path)
         if path.suffix.lower() != ".npz":
             raise InvalidInputError(
@@ -478,13 +489,23 @@ class TCBSurface:
                 f"cannot save to {path}: the folder {path.parent} does not exist"
             )
         data = self.to_bytes()
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+        # the temporary file is created with mode 0666 and the kernel applies the umask (what
+        # a plain open() gives; mkstemp makes 0600); an existing file keeps its own mode
+        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+        while True:
+            tmp = str(path.parent / f"{path.name}.{secrets.token_hex(4)}.tmp")
+            try:
+                fd = os.open(tmp, flags, 0o666)
+                break
+            except FileExistsError:
+                continue
         try:
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)
                 fh.flush()
                 os.fsync(fh.fileno())
-            os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it 0600
+            if path.exists():
+                os.chmod(tmp, stat.S_IMODE(path.stat().st_mode))
             os.replace(tmp, path)
         except BaseException:
             if os.path.exists(tmp):

@@ -534,3 +534,48 @@ def test_fanned_ngons_with_collinear_vertices_lose_their_zero_area_triangles() -
     a, b = fit_surface(v, quads), fit_surface(v, hexes)
     assert b.report["stop_reason"] == "tolerance reached"
     assert b.report["control_points"] <= 1.2 * a.report["control_points"]
+
+
+def test_cap_flips_handle_long_runs_shared_neighbours_and_boundary_caps() -> None:
+    """A band polygon with 30 collinear vertices per side fanned from a corner (caps in a row:
+    one pass each), two caps sharing a neighbour, and a cap on the boundary (not flippable:
+    left, no crash) - every flippable cap goes, faces and boundary edges stay."""
+    from core.parameterize import _flip_caps, _is_cap
+
+    def boundary_edges(t):
+        e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+        u, c = np.unique(e, axis=0, return_counts=True)
+        return {tuple(x) for x in u[c == 1]}
+
+    # bands between grid rows, each one polygon (bottom row left to right, top row back)
+    m, rows = 30, 4
+    g = np.linspace(0, 1, m)
+    v = np.array([(x, y, 0.1 * np.sin(3 * y)) for y in np.linspace(0, 1, rows) for x in g])
+    polys = [list(range(r * m, r * m + m)) + list(range((r + 1) * m + m - 1, (r + 1) * m - 1, -1))
+             for r in range(rows - 1)]
+    fans = np.array([(q[0], q[j], q[j + 1]) for q in polys for j in range(1, len(q) - 1)])
+    assert _is_cap(fans, v, 1e-10)[0].sum() > 10
+    flipped = _flip_caps(fans, v)
+    assert not _is_cap(flipped, v, 1e-10)[0].any() and len(flipped) == len(fans)
+    assert boundary_edges(flipped) == boundary_edges(fans)
+    param = parameterize_mesh(v, fans)
+    assert np.all(np.cross(param.uv[param.faces[:, 1]] - param.uv[param.faces[:, 0]],
+                           param.uv[param.faces[:, 2]] - param.uv[param.faces[:, 0]]) > 0)
+
+    # two caps sharing the neighbour (a, b, e)
+    a, b, e = [0, 0, 0], [2, 0, 0], [2, 2, 0]
+    pts = np.array([a, b, e, [1, 0, 0], [2, 1, 0], [1, -1, 0], [3, 1, 0]], float)
+    A, B, E, C, F, X, Y = range(7)
+    tris = np.array([(A, B, E), (A, C, B), (E, B, F), (A, X, C), (C, X, B), (B, Y, F), (F, Y, E)])
+    flipped = _flip_caps(tris, pts)
+    assert not _is_cap(flipped, pts, 1e-10)[0].any()
+    assert boundary_edges(flipped) == boundary_edges(tris)
+
+    # a cap whose longest edge is on the boundary stays; the mesh is handled without a crash
+    pts = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0], [1, 0, 0]], float)
+    tris = np.array([(3, 0, 4), (3, 4, 1), (3, 1, 2), (0, 1, 4)])
+    np.testing.assert_array_equal(_flip_caps(tris, pts), tris)
+    try:
+        parameterize_mesh(pts, tris)
+    except (TopologyError, ParameterizationError, InvalidInputError):
+        pass

@@ -161,6 +161,10 @@ def test_save_names_what_is_wrong_and_gives_the_file_the_umask_permissions(nefer
     finally:
         os.umask(old)
     assert (tmp_path / "face.npz").stat().st_mode & 0o777 == 0o644
+    (tmp_path / "face.npz").chmod(0o600)  # an existing file keeps its mode
+    surf.save(tmp_path / "face.npz")
+    assert (tmp_path / "face.npz").stat().st_mode & 0o777 == 0o600
+    assert [f.name for f in tmp_path.iterdir()] == ["face.npz"]
 
 
 def test_load_refuses_damaged_and_future_files(nefertiti, tmp_path):
@@ -476,8 +480,22 @@ def test_wrong_shaped_parameters_directories_and_npy_files_get_specific_errors(n
     np.testing.assert_array_equal(surf(uv[0]), surf(uv[:1]))  # one (2,) point is one row
     with pytest.raises(InvalidInputError, match=r"\(m, 2\) array of \(u, v\); got shape \(4, 3\)"):
         surf(np.c_[uv, uv[:, :1]])
+    assert surf([]).shape == (0, 3)
+    with pytest.raises(InvalidInputError, match=r"\(m, 3\) array of \(x, y, z\); got shape \(4, 2\)"):
+        surf.distances(uv)
     with pytest.raises(FileFormatError, match="is a folder"):
         read_geometry(tmp_path)
     np.save(tmp_path / "x.npy", np.zeros(3))
     with pytest.raises(FileFormatError, match=r"not a TCB surface file \(a \.npz archive"):
         TCBSurface.load(tmp_path / "x.npy")
+
+
+def test_duplicated_points_do_not_refine_the_tessellation():
+    """The density that drives the tessellation's refinement counts distinct parameters: a
+    cloud given twice gets the same surface mesh (doubled clouds got 14-31% more vertices)."""
+    points = ridge_cloud(3000)
+    once = fit_surface(points, max_iterations=1)
+    twice = fit_surface(np.vstack([points, points]), max_iterations=1)
+    a, b = once.tessellation_uv(48)[0], twice.tessellation_uv(48)[0]
+    assert a.shape == b.shape  # (the parameters of the doubled cloud differ in the last bits)
+    np.testing.assert_allclose(a, b, atol=1e-12)
