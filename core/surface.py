@@ -163,11 +163,11 @@ class TCBSurface:
         compresses steep and outlying parts, a projection steep slopes), edges are split until
         their length times the local compression is at most two grid steps
         (:data:`TESSELLATION_SPLITS` rounds at most; none above
-        :data:`TESSELLATION_REFINE_POINTS` grid points), so the surface mesh does not coarsen in 3D
-        where the parameters are crowded. The parameters depend only on the
+        :data:`TESSELLATION_REFINE_POINTS` grid points), so the surface mesh does not coarsen in
+        3D where the parameters are crowded. Meshes measure the compression by the vertex
+        ``stretch`` of their parameterization (3D over uv edge length), clouds (and files
+        without it) by the density of the data parameters. The parameters depend only on the
         data, not on the control points (``evaluation_matrix`` of them re-evaluates edits).
-        Meshes use the vertex ``stretch`` of their parameterization (3D over uv edge length)
-        instead of the density, when it is there.
         """
         resolution = int(resolution)
         if resolution < 2:
@@ -190,9 +190,7 @@ class TCBSurface:
         grid = np.stack(np.meshgrid(gu, gv), -1).reshape(-1, 2)
         inside = self._param.contains(grid) & (_distance_to_polygon(grid, poly) > 0.3 * d)
         uv = np.vstack([boundary, grid[inside]])
-        data = np.asarray(self._param.uv)
-        ok = np.isfinite(data).all(axis=1)
-        data = data[ok]
+        data, ok = self._data_parameters()
         full = cKDTree(data)
         trim = None
         if self._param.kind == "plane":
@@ -222,6 +220,12 @@ class TCBSurface:
         result = (_readonly(uv[used]), _readonly(remap[tri]))
         self._tess_cache[resolution] = result
         return result
+
+    def _data_parameters(self) -> tuple[np.ndarray, np.ndarray]:
+        """The data's parameters (without a mesh's unused vertices) and the mask of them."""
+        uv = np.asarray(self._param.uv)
+        ok = np.isfinite(uv).all(axis=1)
+        return uv[ok], ok
 
     @staticmethod
     def _local_stretch(data, tree, stretch):
@@ -322,8 +326,7 @@ class TCBSurface:
         # starts: the nearest of the tessellation's vertices and of the surface points at (up
         # to 20 000 of) the data's own parameters, which stay close to the data where the map
         # is stretched (a data point is then at most its fit error from its start)
-        data = np.asarray(self._param.uv)
-        data = data[np.isfinite(data).all(axis=1)]
+        data, _ = self._data_parameters()
         starts = np.vstack([uv_t, np.clip(data[:: max(1, len(data) // 20_000)], lo, hi)])
         _, nearest = cKDTree(self(starts)).query(p)
         x = starts[nearest].copy()
