@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from .errors import InvalidInputError, TCBError
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 
@@ -47,6 +49,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="tessellation steps across the longer side of the domain (default 64)")
     f.add_argument("--net", help="write the control net (.obj or .ply) here")
     f.add_argument("--spline", help="write the spline (.npz, TCBSurface.save) here")
+    f.add_argument("--drop-invalid", action="store_true",
+                   help="leave out points with NaN or infinite coordinates (point clouds)")
     f.add_argument("--quiet", action="store_true", help="no progress output")
     return p
 
@@ -113,6 +117,17 @@ def _fit(args) -> int:
         raise TCBError(f"--resolution must be at least 2, got {args.resolution}")
     t0 = time.perf_counter()
     points, faces = read_geometry(args.input)
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any() and faces is None:
+        if not args.drop_invalid:
+            raise TCBError(
+                f"{int(bad.sum())} of {len(points)} points have NaN or infinite coordinates; "
+                "pass --drop-invalid to leave them out"
+            )
+        points = points[~bad]
+        if not args.quiet:
+            print(f"left out {int(bad.sum())} points with NaN or infinite coordinates",
+                  file=sys.stderr)
     if not args.quiet:
         kind = f"mesh with {len(faces)} faces" if faces is not None else "point cloud"
         print(f"read {args.input}: {len(points)} points, {kind}", file=sys.stderr)

@@ -77,3 +77,19 @@ def test_bad_options_are_refused_before_the_fit(tmp_path):
         r = run("fit", missing_input, *options)
         assert r.returncode == 2, r.stderr
         assert r.stderr.strip().count("\n") == 0 and words in r.stderr, r.stderr
+
+
+def test_nan_rows_name_the_option_that_drops_them(tmp_path):
+    """A cloud with NaN rows: the message names --drop-invalid (not numpy code), and with it
+    the fit runs on the finite points."""
+    pts = np.random.default_rng(3).random((600, 3)) * [1, 1, 0.1]
+    pts[[4, 9, 77]] = np.nan
+    src = tmp_path / "cloud.xyz"
+    np.savetxt(src, pts)
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--quiet")
+    assert r.returncode == 2 and "3 of 600 points have NaN" in r.stderr
+    assert "--drop-invalid" in r.stderr and r.stderr.strip().count("\n") == 0
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--quiet", "--drop-invalid",
+            "--max-control-points", "100", "--max-iterations", "1")
+    assert r.returncode == 0, r.stderr
+    assert "597 points" in r.stdout
