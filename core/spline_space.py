@@ -37,8 +37,8 @@ _DERIVATIVES = {(0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)}
 
 def as_parameters(uv) -> np.ndarray:
     """``uv`` as an (m, 2) float64 array (a single ``(2,)`` point is one row, an empty array
-    none); any other shape is an :class:`InvalidInputError` (reshaping an (m, 3) array into pairs would silently
-    evaluate the wrong points)."""
+    none); any other shape is an :class:`InvalidInputError` (reshaping an (m, 3) array into
+    pairs would silently evaluate the wrong points)."""
     try:
         a = np.asarray(uv, dtype=np.float64)
     except (TypeError, ValueError):
@@ -46,7 +46,9 @@ def as_parameters(uv) -> np.ndarray:
     if a.shape == (2,) or a.size == 0:
         return a.reshape(-1, 2)
     if a.ndim != 2 or a.shape[1] != 2:
-        raise InvalidInputError(f"parameters must be an (m, 2) array of (u, v); got shape {a.shape}")
+        raise InvalidInputError(
+            f"parameters must be an (m, 2) array of (u, v); got shape {a.shape}"
+        )
     return a
 
 

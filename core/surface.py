@@ -32,7 +32,9 @@ from scipy.spatial import Delaunay, cKDTree
 from .configurations import Configurations
 from .errors import FileFormatError, InvalidInputError
 from .geometry import column_bounds
-from .parameterize import Parameterization, box_normalization, normalize, parameterize
+from .parameterize import (
+    Parameterization, _as_points, box_normalization, normalize, parameterize,
+)
 from .refine import RefineOptions, adaptive_fit
 from .spline_space import SplineSpace
 from .simplex import orient2d
@@ -315,12 +317,7 @@ class TCBSurface:
     def _closest(self, points, iterations: int = 4) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`closest_parameters` and the distances ``|S(x) - p|`` there, (m, 2), (m,)."""
         p = np.asarray(points, dtype=np.float64)
-        if p.shape == (3,):
-            p = p.reshape(1, 3)
-        if p.ndim != 2 or p.shape[1] != 3:
-            raise InvalidInputError(
-                f"points must be an (m, 3) array of (x, y, z); got shape {p.shape}"
-            )
+        p = _as_points(p.reshape(1, 3) if p.shape == (3,) else p)
         uv_t, _ = self.tessellation_uv(96)
         lo, hi = uv_t.min(axis=0), uv_t.max(axis=0)
         # starts: the nearest of the tessellation's vertices and of the surface points at (up

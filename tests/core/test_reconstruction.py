@@ -481,7 +481,7 @@ def test_wrong_shaped_parameters_directories_and_npy_files_get_specific_errors(n
     with pytest.raises(InvalidInputError, match=r"\(m, 2\) array of \(u, v\); got shape \(4, 3\)"):
         surf(np.c_[uv, uv[:, :1]])
     assert surf([]).shape == (0, 3)
-    with pytest.raises(InvalidInputError, match=r"\(m, 3\) array of \(x, y, z\); got shape \(4, 2\)"):
+    with pytest.raises(InvalidInputError, match=r"\(N, 3\) array of x, y, z coordinates; got shape \(4, 2\)"):
         surf.distances(uv)
     with pytest.raises(FileFormatError, match="is a folder"):
         read_geometry(tmp_path)
