@@ -52,6 +52,8 @@ MIN_ASPECT = 1e-3
 # tessellation: rounds of edge splits where the data parameters are denser than on average
 TESSELLATION_SPLITS = 4
 TESSELLATION_REFINE_POINTS = 50_000
+# the spline is defined where its basis sums to 1 to within this (TCBSurface.covers)
+_COVER_TOL = 1e-9
 _PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes", "stretch")
 
 
@@ -133,22 +135,52 @@ class TCBSurface:
     def evaluation_matrix(self, uv, derivative=(0, 0)) -> sp.csr_matrix:
         """Sparse (m, n) matrix ``M`` with ``surface(uv) = M @ control_points`` for ``uv`` in
         the data's domain (outside it the border functions, which are not control points, add
-        to the surface)."""
+        to the surface, and outside :meth:`covers` the rows sum to less than 1)."""
         A = self._space.evaluate(uv, derivative)
         return A if len(self._active) == self._space.n_basis else A[:, self._active]
 
     def __call__(self, uv) -> np.ndarray:
-        """Surface points (m, 3) at parameters ``uv`` (m, 2)."""
-        return self._space.evaluate(uv) @ self._c
+        """Surface points (m, 3) at parameters ``uv`` (m, 2); NaN rows where the spline is not
+        defined (outside :meth:`covers`)."""
+        return self._evaluate(uv, [(0, 0)])[0]
 
     def derivative(self, uv, derivative=(1, 0)) -> np.ndarray:
-        """Partial derivative ``d^(du+dv) S / du^du dv^dv`` (m, 3); ``du + dv <= 2``."""
-        return self._space.evaluate(uv, derivative) @ self._c
+        """Partial derivative ``d^(du+dv) S / du^du dv^dv`` (m, 3); ``du + dv <= 2``; NaN rows
+        outside :meth:`covers`."""
+        return self._evaluate(uv, [tuple(derivative)])[0]
 
     def normals(self, uv) -> np.ndarray:
-        """Unit normals ``S_u x S_v / |S_u x S_v|`` (m, 3)."""
-        n = np.cross(self.derivative(uv, (1, 0)), self.derivative(uv, (0, 1)))
+        """Unit normals ``S_u x S_v / |S_u x S_v|`` (m, 3); NaN rows outside :meth:`covers`."""
+        su, sv = self._evaluate(uv, [(1, 0), (0, 1)])
+        n = np.cross(su, sv)
         return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+    def covers(self, uv) -> np.ndarray:
+        """Mask (m,) of the parameters where the spline is defined: where its basis is a
+        partition of unity, ``|sum_I B_I(x) - 1| <= 1e-9`` (method.md section 2.2). That region
+        holds the data's domain and part of the border rings around it (method.md section 3);
+        beyond it the links of the outer ring do not close, the basis sums to less than 1 and
+        fades to 0, so the surface would be pulled towards the origin. :meth:`__call__`,
+        :meth:`derivative` and :meth:`normals` give NaN there."""
+        return self._covered(self._space.evaluate(uv))
+
+    @staticmethod
+    def _covered(values: sp.csr_matrix) -> np.ndarray:
+        return np.abs(np.asarray(values.sum(axis=1)).ravel() - 1.0) <= _COVER_TOL
+
+    def _evaluate(self, uv, derivatives) -> list:
+        """``M @ coefficients`` for each derivative order, with NaN rows outside the region
+        where the basis is a partition of unity (the values share one basis pass)."""
+        derivatives = [tuple(int(d) for d in der) for der in derivatives]
+        mats = self._space.evaluate_many(uv, [(0, 0)] + [d for d in derivatives if d != (0, 0)])
+        covered = self._covered(mats[0])
+        it = iter(mats[1:])
+        out = []
+        for der in derivatives:
+            r = (mats[0] if der == (0, 0) else next(it)) @ self._c
+            r[~covered] = np.nan
+            out.append(r)
+        return out
 
     def domain_contains(self, uv) -> np.ndarray:
         """Mask of parameters inside the data's parameter domain."""

@@ -423,6 +423,29 @@ def test_distances_recover_known_offsets_along_the_normal():
         np.testing.assert_allclose(surf.closest_parameters(p), uv, rtol=0, atol=1e-5)
 
 
+def test_the_surface_is_nan_where_its_basis_is_not_a_partition_of_unity(nefertiti):
+    """Beyond the border rings the basis fades to 0 and the surface would be pulled towards the
+    origin: there the surface, its derivatives and normals are NaN, and covers() says so; the
+    data's domain is covered and finite."""
+    surf = nefertiti[2]
+    g = np.linspace(-4, 4, 81)
+    uv = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    sums = np.asarray(surf.space.evaluate(uv).sum(axis=1)).ravel()
+    covered = surf.covers(uv)
+    np.testing.assert_array_equal(covered, np.abs(sums - 1) <= 1e-9)
+    assert covered[np.linalg.norm(uv, axis=1) <= 1].all()  # the disk of the mesh's map
+    assert not covered.all() and (sums[~covered] < 1 - 1e-9).any()
+    for values in (surf(uv), surf.derivative(uv, (1, 0)), surf.derivative(uv, (0, 2)),
+                   surf.normals(uv)):
+        assert np.isnan(values[~covered]).all()
+        assert np.isfinite(values[covered]).all()
+    tess_uv, _ = surf.tessellation_uv(64)
+    assert surf.covers(tess_uv).all()
+    inside = covered & surf.domain_contains(uv)
+    np.testing.assert_allclose(surf(uv[inside]), surf.evaluation_matrix(uv[inside])
+                               @ surf.control_points, rtol=0, atol=1e-12)
+
+
 @pytest.fixture(scope="module")
 def three_peaks():
     points, faces = read_geometry(DATA / "three_peaks.off")
