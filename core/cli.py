@@ -51,6 +51,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--spline", help="write the spline (.npz, TCBSurface.save) here")
     f.add_argument("--drop-invalid", action="store_true",
                    help="leave out points with NaN or infinite coordinates (point clouds)")
+    f.add_argument("--drop-outliers", action="store_true",
+                   help="leave out points far from all others (point clouds; refused otherwise)")
     f.add_argument("--quiet", action="store_true", help="no progress output")
     return p
 
@@ -136,6 +138,7 @@ def _fit(args) -> int:
         relative=args.relative, max_control_points=args.max_control_points,
         max_iterations=args.max_iterations, smoothness=args.smoothness,
         criterion=args.criterion, callback=_progress(args.quiet),
+        drop_outliers=args.drop_outliers,
     )
     verts, tris = surf.tessellate(args.resolution)
     write_mesh(args.output, verts, tris)
@@ -146,7 +149,8 @@ def _fit(args) -> int:
         surf.save(args.spline)
     r = surf.report
     rows = [
-        ("input", f"{args.input} ({r['points']} points)"),
+        ("input", f"{args.input} ({r['points']} points"
+                  + (f", {r['outliers']} outliers left out)" if r.get("outliers") else ")")),
         ("mode / degree", f"{r['mode']} / {r['degree']}"),
         ("knots (interior)", f"{r['knots']} ({r['interior_knots']})"),
         ("control points", f"{r['control_points']}"),

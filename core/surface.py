@@ -77,7 +77,8 @@ class TCBSurface:
     active : (n,) int, the basis index (in ``space``) of each control point
     coefficients : (n_basis, 3) float64, read-only, the coefficients of every basis function
     parameterization : Parameterization of the data it was fitted to
-    errors : (N,) float64, ``|S(x_j) - p_j|`` of the last fit (NaN for unused mesh vertices)
+    errors : (N,) float64, ``|S(x_j) - p_j|`` of the last fit (NaN for unused mesh vertices and
+        dropped outliers)
     report : dict, statistics of the fit (knots, control points, rms, max, history, ...)
     n_interior : int, the first ``n_interior`` knots are interior knots, the rest border rings
     """
@@ -607,8 +608,9 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
             "times as wide as it is long; a surface needs points spread in two directions"
         )
     if checked and param.faces is None:
-        norm = box_normalization(points)
-        q = norm.apply(points)
+        cloud = points if used.all() else points[used]
+        norm = box_normalization(cloud)
+        q = norm.apply(cloud)
     else:
         q, norm = normalize(points[used])
     diag_norm = 2.0  # normalize() maps the bounding box to half-diagonal 1
@@ -652,6 +654,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         "mode": options.mode,
         "degree": options.degree,
         "points": int(used.sum()),
+        # points of a cloud left out as outliers (drop_outliers=True); NaN in ``errors``
+        "outliers": int(len(used) - used.sum()) if param.faces is None else 0,
         "knots": int(len(best.knots)),
         "interior_knots": int(best.n_interior),
         "control_points": int(best.n_control),
@@ -694,6 +698,7 @@ def fit_surface(
     knots_per_iteration: int | None = None,
     feature_sensitive: bool = True,
     seed: int = 0,
+    drop_outliers: bool = False,
 ) -> TCBSurface:
     """Fit a TCB-spline surface to a point cloud or a disk-like mesh (method.md sections 4-6).
 
@@ -737,6 +742,11 @@ def fit_surface(
         Delaunay ones.
     seed : int
         Seed of the random choices (knot sampling, jitter): same input, same surface.
+    drop_outliers : bool
+        Point clouds only. Points far from all others (stray returns, spikes; see
+        ``core.parameterize.isolated_points``) are refused with an error that names them
+        (default), or, with True, left out of the fit: their ``errors`` are NaN and
+        ``report["outliers"]`` counts them.
 
     Raises
     ------
@@ -756,5 +766,5 @@ def fit_surface(
         points = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):
         raise InvalidInputError("points must be an (N, 3) array of numbers") from None
-    param = parameterize(points, faces)
+    param = parameterize(points, faces, drop_outliers=drop_outliers)
     return _run(points, param, options, callback, checked=faces is None)

@@ -120,6 +120,8 @@ def parse_args(args: list[str]) -> argparse.Namespace:
     ap.add_argument("--smoothness", type=smoothness_arg, default=1e-4,
                     help="weight of the smoothing term, or 'auto' (chosen by cross-validation; "
                     "default 1e-4)")
+    ap.add_argument("--drop-outliers", action="store_true",
+                    help="leave out points far from all others (point clouds; refused otherwise)")
     ap.add_argument("--resolution", type=int, default=64,
                     help="subdivisions of the output surface mesh per side (default %(default)s)")
     ap.add_argument("--no-live-net", dest="live_net", action="store_false",
@@ -335,7 +337,7 @@ def fit(bpy, objs, ns):
         max_control_points=ns.max_control_points, max_iterations=ns.max_iterations,
         degree=str(ns.degree), mode=ns.mode.upper(),
         smoothness=1e-4 if ns.smoothness == "auto" else ns.smoothness,
-        auto_smoothness=ns.smoothness == "auto",
+        auto_smoothness=ns.smoothness == "auto", drop_outliers=ns.drop_outliers,
         resolution=ns.resolution, show_net=True, live_net=ns.live_net,
     )  # fmt: skip
     override = dict(selected_objects=list(objs), active_object=objs[0], object=objs[0])

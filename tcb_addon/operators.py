@@ -337,7 +337,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
             relative=self.relative, max_control_points=self.max_control_points,
             max_iterations=self.max_iterations,
             smoothness="auto" if self.auto_smoothness else self.smoothness,
-            criterion=self.criterion.lower(),
+            criterion=self.criterion.lower(), drop_outliers=self.drop_outliers,
         )  # fmt: skip
 
     def prepare(self, context):

@@ -87,6 +87,15 @@ class FitSettings:
         ),
         default=False,
     )  # fmt: skip
+    drop_outliers: BoolProperty(
+        name="Drop Outliers",
+        description=(
+            "Leave out points far from all others (stray scan returns, spikes) instead of "
+            "stopping with an error that names them (point clouds; mesh faces hold their "
+            "vertices)"
+        ),
+        default=False,
+    )  # fmt: skip
     resolution: IntProperty(
         name="Resolution",
         description="Subdivisions of the output surface mesh along each side of the domain",
@@ -96,7 +105,7 @@ class FitSettings:
 
 FIT_KEYS = (
     "tolerance", "relative", "criterion", "max_control_points", "max_iterations", "degree", "mode",
-    "smoothness", "auto_smoothness", "resolution",
+    "smoothness", "auto_smoothness", "drop_outliers", "resolution",
 )  # fmt: skip
 
 
@@ -178,7 +187,8 @@ def draw_fit_settings(layout, owner, short_labels: bool = False) -> None:
     row.prop(owner, "tolerance")
     row.prop(owner, "relative", text="", icon="DRIVER_DISTANCE")
     for key in ("criterion", "max_control_points", "max_iterations", "degree", "mode",
-                "smoothness", "resolution", "show_net", "live_net"):  # fmt: skip
+                "smoothness", "drop_outliers", "resolution", "show_net",
+                "live_net"):  # fmt: skip
         if short_labels and key == "max_control_points":
             col.prop(owner, key, text="Max Control Pts")
         elif key == "smoothness":

@@ -431,6 +431,23 @@ def test_error_nan_positions(clean_scene):
     _expect_error(bpy, [add_mesh(bpy, "Broken", verts)], "(?i)nan|finite")
 
 
+def test_an_outlier_is_refused_by_name_or_dropped_with_the_option(clean_scene, addon):
+    """A stray point: ERROR naming it and the Drop Outliers option, nothing built; with the
+    option the fit leaves it out (NaN error there) and the source is untouched."""
+    bpy = clean_scene
+    verts, _ = grid(20)
+    verts[7] = [0.0, 0.0, 25.0]
+    cloud = add_point_cloud(bpy, "Spiky", verts)
+    before = snapshot(cloud)
+    _expect_error(bpy, [cloud], r"1 of the 400 points lie far from all others.*#7 .*Drop Outliers")
+    assert fit(bpy, cloud, drop_outliers=True) == {"FINISHED"}
+    surf = spline_of(addon, bpy.context.view_layer.objects.active)
+    assert surf.report["outliers"] == 1 and surf.report["points"] == 399
+    assert np.isnan(surf.errors[7]) and np.isfinite(np.delete(surf.errors, 7)).all()
+    assert surf.report["rms_rel"] <= 2e-3
+    assert snapshot(cloud) == before
+
+
 # --- panels -------------------------------------------------------------------------------------
 
 

@@ -79,6 +79,23 @@ def test_bad_options_are_refused_before_the_fit(tmp_path):
         assert r.stderr.strip().count("\n") == 0 and words in r.stderr, r.stderr
 
 
+def test_outliers_name_the_option_that_drops_them(tmp_path):
+    """A cloud with a stray point: one line naming it and --drop-outliers; with the option the
+    fit runs without it and the table says so."""
+    pts = np.random.default_rng(3).random((600, 3)) * [1, 1, 0.1]
+    pts[42] = [40.0, 40.0, 0.0]
+    src = tmp_path / "cloud.xyz"
+    np.savetxt(src, pts)
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--quiet")
+    assert r.returncode == 2 and "1 of the 600 points lie far from all others" in r.stderr
+    assert "#42" in r.stderr and "--drop-outliers" in r.stderr
+    assert r.stderr.strip().count("\n") == 0
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--quiet", "--drop-outliers",
+            "--max-control-points", "100", "--max-iterations", "1")
+    assert r.returncode == 0, r.stderr
+    assert "599 points, 1 outliers left out" in r.stdout
+
+
 def test_nan_rows_name_the_option_that_drops_them(tmp_path):
     """A cloud with NaN rows: the message names --drop-invalid (not numpy code), and with it
     the fit runs on the finite points."""

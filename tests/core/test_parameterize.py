@@ -18,7 +18,9 @@ from core.parameterize import (
     Normalization,
     Parameterization,
     _distance_to_hull,
+    _fold_sample,
     count_duplicates,
+    isolated_points,
     normalize,
     parameterize,
     parameterize_mesh,
@@ -579,3 +581,54 @@ def test_cap_flips_handle_long_runs_shared_neighbours_and_boundary_caps() -> Non
         parameterize_mesh(pts, tris)
     except (TopologyError, ParameterizationError, InvalidInputError):
         pass
+
+
+def _franke_cloud(n: int, seed: int) -> np.ndarray:
+    xy = np.random.default_rng(seed).random((n, 2))
+    x, y = xy.T
+    return np.c_[xy, 0.75 * np.exp(-((9 * x - 2) ** 2 + (9 * y - 2) ** 2) / 4) + 0.5 * x * y]
+
+
+@pytest.mark.parametrize("n", [2000, 60_000])  # all points are the reference; a sample is
+def test_isolated_points_finds_strays_spikes_and_small_groups_only(n) -> None:
+    rng = np.random.default_rng(7)
+    q = _franke_cloud(n, 1)
+    # where the strays go: in a sampled cloud, points outside the reference sample
+    slots = np.setdiff1d(np.arange(n), _fold_sample(q)) if n > 40_000 else np.arange(n)
+    spike, pair, group = slots[10], slots[11:13], slots[20:25]
+    q[spike] = [0.5, 0.5, 5.0]
+    q[pair] = [[3.0, 3.0, 0.3], [3.001, 3.0, 0.3]]
+    q[group] = [-2.0, 0.5, 0.0] + rng.normal(0, 0.01, (5, 3))
+    found = isolated_points(normalize(q)[0])
+    np.testing.assert_array_equal(found, np.sort(np.r_[spike, pair, group]))
+    # a group of 9 within the reference is a second piece of surface
+    q2 = _franke_cloud(2000, 1)
+    q2[30:39] = [0.5, -2.0, 0.0] + rng.normal(0, 0.01, (9, 3))
+    assert len(isolated_points(normalize(q2)[0])) == 0
+
+
+def test_isolated_points_keeps_sparse_regions_duplicates_and_tiny_clouds() -> None:
+    rng = np.random.default_rng(5)
+    r = np.exp(rng.uniform(0.0, np.log(50.0), 20_000))  # density ~ 1/r^2, as a scanner sees
+    t = rng.uniform(0.0, np.pi / 2, 20_000)
+    cases = [
+        np.c_[r * np.cos(t), r * np.sin(t), 0.05 * np.sin(r)],
+        np.repeat(_franke_cloud(3000, 2), 5, axis=0),  # every point five times
+        np.vstack([_franke_cloud(300, 3), np.repeat([[0.5, 0.5, 0.5]], 1700, axis=0)]),
+        _franke_cloud(30, 4),
+        read_geometry(DATA / "jacksboro_fault_dem.npz")[0],
+    ]
+    for pts in cases:
+        assert len(isolated_points(normalize(pts)[0])) == 0
+
+
+def test_parameterize_drops_outliers_only_when_asked() -> None:
+    pts = _franke_cloud(1000, 6)
+    pts[3] = [9.0, 9.0, 9.0]
+    with pytest.raises(InvalidInputError, match=r"1 of the 1000 points lie far .* #3 \(9, 9, 9\)"):
+        parameterize(pts)
+    par = parameterize(pts, drop_outliers=True)
+    assert not par.used[3] and par.used.sum() == 999 and np.isnan(par.uv[3]).all()
+    ref = parameterize(np.delete(pts, 3, axis=0))
+    np.testing.assert_array_equal(par.uv[par.used], ref.uv)
+    np.testing.assert_array_equal(par.domain_polygon, ref.domain_polygon)

@@ -446,6 +446,25 @@ def test_the_surface_is_nan_where_its_basis_is_not_a_partition_of_unity(nefertit
                                @ surf.control_points, rtol=0, atol=1e-12)
 
 
+def test_outliers_are_refused_by_name_or_left_out_as_if_they_were_not_there():
+    xy = np.random.default_rng(2).random((2000, 2))
+    clean = np.c_[xy, franke(*xy.T)]
+    for stray in ([30.0, 30.0, 0.3], [0.5, 0.5, 30.0]):  # far in the plane; a spike
+        points = clean.copy()
+        points[0] = stray
+        with pytest.raises(InvalidInputError, match=r"1 of the 2000 points .* #0 .*drop_outliers"):
+            fit_surface(points, max_control_points=200)
+        dropped = fit_surface(points, max_control_points=200, drop_outliers=True)
+        without = fit_surface(points[1:], max_control_points=200)
+        assert dropped.report["outliers"] == 1 and dropped.report["points"] == 1999
+        assert np.isnan(dropped.errors[0])
+        np.testing.assert_array_equal(dropped.errors[1:], without.errors)
+        np.testing.assert_array_equal(dropped.coefficients, without.coefficients)
+        np.testing.assert_array_equal(dropped.tessellate(32)[0], without.tessellate(32)[0])
+        assert dropped.report["rms_rel"] <= 2e-3  # the budget of 200 ends the loop
+    assert fit_surface(clean, max_control_points=200).report["outliers"] == 0
+
+
 @pytest.fixture(scope="module")
 def three_peaks():
     points, faces = read_geometry(DATA / "three_peaks.off")
