@@ -41,4 +41,9 @@ class SingularSystemError(TCBError):
 
 
 class CancelledError(TCBError):
-    """Raised internally when a callback requested cancellation."""
+    """Not raised by the engine (kept as a name for code that catches it).
+
+    A callback that returns True ends the fit early without an exception: ``fit_surface`` and
+    ``TCBSurface.refine`` return the best surface so far, with
+    ``report["stop_reason"] == "cancelled"``.
+    """

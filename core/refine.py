@@ -15,6 +15,8 @@ rms_rel, max_rel, seconds) and may return True to cancel: the best surface so fa
 
 from __future__ import annotations
 
+import copy
+import numbers
 import time
 from dataclasses import dataclass
 
@@ -28,7 +30,7 @@ from .fit import DEFAULT_SMOOTHNESS, FitResult, check_smoothness, fit_control_po
 from .geometry import column_bounds
 from .parallel import pmap, row_blocks
 from .simplex import orient2d
-from .spline_space import SplineSpace, build_space, validate_knots
+from .spline_space import SplineSpace, _number, _whole, build_space, validate_knots
 from .triangulation import FeatureLinkTriangulator, PlaneFitCost, feature_triangulation, locate
 
 __all__ = [
@@ -42,9 +44,20 @@ __all__ = [
 ]
 
 
+_WHOLE = ("degree", "max_control_points", "max_iterations", "initial_knots",
+          "knots_per_iteration", "seed")
+_WORDS = {"mode": ("tcb", "dcb"), "criterion": ("rms", "max")}
+_FLAGS = ("relative", "feature_sensitive")
+
+
 @dataclass(frozen=True)
 class RefineOptions:
-    """Settings of the adaptive loop (see :func:`core.fit_surface` for their meaning)."""
+    """Settings of the adaptive loop (see :func:`core.fit_surface` for their meaning).
+
+    Values that mean a valid setting are stored in one spelling (``2.0`` and ``np.int64(2)``
+    as ``2``, ``"TCB"`` as ``"tcb"``, numpy bools as bools); :meth:`validate` refuses the rest
+    with :class:`InvalidInputError`.
+    """
 
     degree: int = 2
     mode: str = "tcb"
@@ -60,23 +73,80 @@ class RefineOptions:
     seed: int = 0
 
     def __post_init__(self):
+        def put(name, value):
+            object.__setattr__(self, name, value)
+
         if isinstance(self.smoothness, str):  # " AUTO " -> "auto" (what files store)
-            object.__setattr__(self, "smoothness", check_smoothness(self.smoothness))
+            put("smoothness", check_smoothness(self.smoothness))
+        elif _number(self.smoothness) is not None:
+            put("smoothness", _number(self.smoothness))
+        for name in _WHOLE:
+            if _whole(getattr(self, name)) is not None:
+                put(name, _whole(getattr(self, name)))
+        for name in _WORDS:
+            if isinstance(getattr(self, name), str):
+                put(name, getattr(self, name).strip().lower())
+        for name in _FLAGS:
+            if isinstance(getattr(self, name), np.bool_):
+                put(name, bool(getattr(self, name)))
+        if _number(self.tolerance) is not None:
+            put("tolerance", _number(self.tolerance))
 
     def validate(self) -> None:
-        if self.degree not in (2, 3):
-            raise InvalidInputError(f"degree must be 2 or 3, got {self.degree}")
-        if self.mode not in ("tcb", "dcb"):
-            raise InvalidInputError(f"mode must be 'tcb' or 'dcb', got {self.mode!r}")
-        if self.criterion not in ("rms", "max"):
-            raise InvalidInputError(f"criterion must be 'rms' or 'max', got {self.criterion!r}")
-        if not (np.isfinite(self.tolerance) and self.tolerance >= 0):
-            raise InvalidInputError(f"tolerance must be a nonnegative number, got {self.tolerance}")
-        if self.max_control_points < 10:
-            raise InvalidInputError("max_control_points must be at least 10")
-        if self.max_iterations < 1:
-            raise InvalidInputError("max_iterations must be at least 1")
+        """Raise :class:`InvalidInputError` saying which setting is wrong and what it accepts."""
+        if type(self.degree) is not int or self.degree not in (2, 3):
+            raise InvalidInputError(f"degree must be 2 or 3, got {self.degree!r}")
+        for name, words in _WORDS.items():
+            if not isinstance(getattr(self, name), str) or getattr(self, name) not in words:
+                raise InvalidInputError(
+                    f"{name} must be {words[0]!r} or {words[1]!r} (any case), "
+                    f"got {getattr(self, name)!r}"
+                )
+        if not (isinstance(self.tolerance, float) and np.isfinite(self.tolerance)
+                and self.tolerance >= 0):
+            raise InvalidInputError(
+                f"tolerance must be a nonnegative number, got {self.tolerance!r}"
+            )
+        for name in _FLAGS:
+            value = getattr(self, name)
+            if not isinstance(value, bool):
+                raise InvalidInputError(f"{name} must be True or False, got {value!r}")
+        for name, least in (("max_control_points", 10), ("max_iterations", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < least:
+                raise InvalidInputError(f"{name} must be a whole number of at least {least}, "
+                                        f"got {value!r}")
+        for name, auto in (("initial_knots", "the automatic start (about 1/12 of the budget)"),
+                           ("knots_per_iteration", "the automatic 15% more per iteration")):
+            value = getattr(self, name)
+            if value is not None and (not isinstance(value, int) or isinstance(value, bool)
+                                      or value < 1):
+                raise InvalidInputError(
+                    f"{name} must be a whole number of at least 1, or None for {auto}; "
+                    f"got {value!r}"
+                )
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            raise InvalidInputError(f"seed must be a nonnegative whole number, got {self.seed!r}")
         check_smoothness(self.smoothness)
+
+
+def check_callback(callback) -> None:
+    """Refuse a ``callback`` that is neither None nor callable (before any work is done)."""
+    if callback is not None and not callable(callback):
+        raise InvalidInputError(
+            f"callback must be a function callback(report) -> bool (or None), got {callback!r}"
+        )
+
+
+def _cancel_requested(callback, report: dict) -> bool:
+    """Call ``callback`` with (a copy of) an iteration's report; True means cancel."""
+    answer = callback(copy.deepcopy(report))
+    if answer is None or isinstance(answer, (bool, np.bool_)):
+        return bool(answer)
+    raise InvalidInputError(
+        "the callback must return None or False (go on) or True (cancel), "
+        f"got {type(answer).__name__} {answer!r:.60}"
+    )
 
 
 def feature_measure(uv: np.ndarray, points: np.ndarray, k: int = 12, max_points: int = 20_000,
@@ -382,6 +452,7 @@ def adaptive_fit(
     Returns the best iteration, the per-iteration reports and why the loop stopped.
     """
     options.validate()
+    check_callback(callback)
     rng_seed = options.seed
     tol = options.tolerance * (diagonal if options.relative else 1.0 / unit)
     lo, hi = column_bounds(uv)
@@ -505,7 +576,7 @@ def adaptive_fit(
         if sampled:
             report["sampled_points"] = len(uv)
         history.append(report)
-        if callback is not None and callback(dict(report)):
+        if callback is not None and _cancel_requested(callback, report):
             reason = "cancelled"
             break
         if value <= tol:

@@ -53,8 +53,11 @@ class BoxIndex:
         self.ptr = np.searchsorted(cid[order], np.arange(nx * ny + 1))
 
     def _cell_coords(self, p: np.ndarray):
-        g = np.floor((p - self.origin) / self.cell).astype(np.int64)
-        return np.clip(g[:, 0], 0, self.shape[0] - 1), np.clip(g[:, 1], 0, self.shape[1] - 1)
+        """Cell of each point, clamped to the grid (NaN coordinates give cell 0: callers
+        leave non-finite points out); clamped before the cast, which warns on NaN and inf."""
+        g = np.floor((p - self.origin) / self.cell)
+        g = np.clip(np.nan_to_num(g), 0, np.subtract(self.shape, 1)).astype(np.int64)
+        return g[:, 0], g[:, 1]
 
     def pairs(self, points: np.ndarray, max_pairs: int = 1 << 17) -> Iterator[tuple]:
         """Yield ``(point_index, box_index)`` arrays, chunked, for all points inside boxes.

@@ -11,6 +11,8 @@ the region where every link closed, and are evaluated as sparse CSR matrices ove
 
 from __future__ import annotations
 
+import dataclasses
+import numbers
 from typing import Sequence
 
 import numpy as np
@@ -33,6 +35,68 @@ from .spatial import BoxIndex
 __all__ = ["SplineSpace", "build_space", "validate_knots"]
 
 _DERIVATIVES = {(0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)}
+
+
+def _whole(value):
+    """``value`` as a Python int if it is a whole real number (``2``, ``np.int64(2)``, ``2.0``),
+    else None (strings, bools, fractions, NaN, inf, None, arrays)."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        return None
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    v = float(value)
+    return int(v) if np.isfinite(v) and v.is_integer() else None
+
+
+def _number(value):
+    """``value`` as a Python float if it is a real number (not a bool or a string), else None."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        return None
+    return float(value)
+
+
+def derivative_order(derivative) -> tuple[int, int]:
+    """``derivative`` as a pair ``(du, dv)`` of ints with ``du + dv <= 2``, or raise
+    :class:`InvalidInputError` listing the accepted ones."""
+    try:
+        pair = tuple(_whole(d) for d in derivative)
+    except TypeError:  # not a sequence
+        pair = ()
+    if pair not in _DERIVATIVES:
+        raise InvalidInputError(
+            f"derivative must be a pair (du, dv), one of {sorted(_DERIVATIVES)}; got {derivative!r}"
+        )
+    return pair
+
+
+def frozen(a: np.ndarray) -> np.ndarray:
+    """``a`` itself if it is read-only, else a read-only view of it (no copy; the owner of
+    ``a`` keeps its own writeable array): what a space or surface exposes cannot be edited
+    in place (``space.knots[:] += 1`` raises instead of silently changing the basis)."""
+    a = np.asarray(a)
+    if not a.flags.writeable:
+        return a
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
+def _frozen_configurations(configurations: Configurations) -> Configurations:
+    """``configurations`` with read-only arrays (a new object only if one was writeable)."""
+    arrays = [configurations.knots, *configurations.triangles, *configurations.interior]
+    if not any(np.asarray(a).flags.writeable for a in arrays):
+        return configurations
+    return dataclasses.replace(
+        configurations,
+        knots=frozen(configurations.knots),
+        triangles=[frozen(t) for t in configurations.triangles],
+        interior=[frozen(i) for i in configurations.interior],
+        open_links=list(configurations.open_links),
+    )
 
 
 def as_parameters(uv) -> np.ndarray:
@@ -135,7 +199,7 @@ def _set_keys(sets: np.ndarray, n: int) -> np.ndarray:
 class SplineSpace:
     """A TCB or DCB spline space of degree ``k`` over a knot set (use :func:`build_space`).
 
-    Attributes
+    Attributes (the arrays are read-only)
     ----------
     knots : (n, 2) float64
     degree : int
@@ -148,6 +212,8 @@ class SplineSpace:
     """
 
     def __init__(self, knots: np.ndarray, degree: int, mode: str, configurations: Configurations):
+        knots = frozen(np.asarray(knots, dtype=np.float64))
+        configurations = _frozen_configurations(configurations)
         self.knots = knots
         self.degree = degree
         self.mode = mode
@@ -167,6 +233,8 @@ class SplineSpace:
             self.interior_sets = I
         self.n_basis = int(len(self.interior_sets))
         self.greville = knots[self.interior_sets].mean(axis=1) if self.n_basis else np.zeros((0, 2))
+        for a in (self.config_basis, self.interior_sets, self.greville):
+            a.flags.writeable = False
         p, q, r = knots[T[:, 0]], knots[T[:, 1]], knots[T[:, 2]]
         weights = np.abs(orient2d(p, q, r))
         self._batch = SimplexBatch(knots, np.concatenate([T, I], axis=1), weights)
@@ -178,7 +246,7 @@ class SplineSpace:
         """Control-net triangles (computed on first use: a fit does not need them, and they
         took 0.1 s of each space's construction at 4400 functions)."""
         if self._net_faces is None:
-            self._net_faces = (
+            self._net_faces = frozen(
                 self._centroid_triangulation() if self.mode == "tcb" else np.zeros((0, 3), int)
             )
         return self._net_faces
@@ -292,10 +360,7 @@ class SplineSpace:
 
     def evaluate_many(self, uv, derivatives) -> list:
         """:meth:`evaluate` for several derivative orders at the same points, in one pass."""
-        ders = [tuple(int(d) for d in der) for der in derivatives]
-        for der in ders:
-            if der not in _DERIVATIVES:
-                raise ValueError(f"derivative must be one of {sorted(_DERIVATIVES)}, got {der}")
+        ders = [derivative_order(der) for der in derivatives]
         uv = as_parameters(uv)
 
         def block(bounds):
@@ -355,7 +420,7 @@ def build_space(
         Distinct knots, not all collinear.
     degree : int
         1, 2 (C^1, the default) or 3.
-    mode : "tcb" or "dcb"
+    mode : "tcb" or "dcb" (any case)
         TCB: one function per interior set. DCB: one per Delaunay configuration (then
         ``triangulation`` and ``link_triangulator`` must be left unset).
     triangulation : (t, 3) int, optional
@@ -365,10 +430,14 @@ def build_space(
         :mod:`core.configurations`.
     """
     knots = validate_knots(knots)
+    given = degree
+    degree = _whole(degree)  # 2.0 and np.int64(2) are 2
     if degree not in (1, 2, 3):
-        raise ValueError(f"degree must be 1, 2 or 3, got {degree}")
-    if mode not in ("tcb", "dcb"):
-        raise ValueError(f"mode must be 'tcb' or 'dcb', got {mode!r}")
+        raise InvalidInputError(f"degree must be 1, 2 or 3, got {given!r}")
+    if isinstance(mode, str):
+        mode = mode.strip().lower()
+    if not isinstance(mode, str) or mode not in ("tcb", "dcb"):
+        raise InvalidInputError(f"mode must be 'tcb' or 'dcb' (any case), got {mode!r}")
     if mode == "dcb" and (triangulation is not None or link_triangulator is not None):
         raise ValueError("mode 'dcb' uses the Delaunay configurations; do not pass a triangulation")
     configs = link_triangulation_procedure(

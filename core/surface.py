@@ -16,6 +16,8 @@ same affine map, so the surface is exactly the fit in the user's units.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import io
 import json
 import os
@@ -35,8 +37,8 @@ from .geometry import column_bounds
 from .parameterize import (
     Parameterization, _as_points, box_normalization, normalize, parameterize,
 )
-from .refine import RefineOptions, adaptive_fit
-from .spline_space import SplineSpace
+from .refine import RefineOptions, adaptive_fit, check_callback
+from .spline_space import SplineSpace, _whole, derivative_order, frozen
 from .simplex import orient2d
 
 __all__ = ["TCBSurface", "fit_surface", "FORMAT_VERSION"]
@@ -52,8 +54,11 @@ MIN_ASPECT = 1e-3
 # tessellation: rounds of edge splits where the data parameters are denser than on average
 TESSELLATION_SPLITS = 4
 TESSELLATION_REFINE_POINTS = 50_000
+# tessellation_uv keeps this many of the most recent resolutions (a fine one is megabytes)
+TESSELLATION_CACHE = 4
 # the spline is defined where its basis sums to 1 to within this (TCBSurface.covers)
 _COVER_TOL = 1e-9
+_OPTION_NAMES = tuple(f.name for f in dataclasses.fields(RefineOptions))
 _PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes", "stretch")
 
 
@@ -63,10 +68,19 @@ def _readonly(a):
     return a
 
 
+def _frozen_parameterization(param: Parameterization) -> Parameterization:
+    """``param`` with read-only arrays (a new object only if one was writeable, e.g. read
+    from a file; :func:`parameterize` makes them read-only already)."""
+    writeable = {name: frozen(getattr(param, name)) for name in _PARAM_FIELDS
+                 if isinstance(getattr(param, name), np.ndarray)
+                 and getattr(param, name).flags.writeable}
+    return dataclasses.replace(param, **writeable) if writeable else param
+
+
 class TCBSurface:
     """A TCB (or DCB) spline surface ``S(x) = sum_I c_I B_I(x)`` fitted to data.
 
-    Attributes
+    Attributes (arrays are read-only, and so are those of ``space`` and ``parameterization``)
     ----------
     space : SplineSpace (knots, configurations, degree, basis)
     control_points : (n, 3) float64, read-only, in the data's units: one per basis function
@@ -79,7 +93,8 @@ class TCBSurface:
     parameterization : Parameterization of the data it was fitted to
     errors : (N,) float64, ``|S(x_j) - p_j|`` of the last fit (NaN for unused mesh vertices and
         dropped outliers)
-    report : dict, statistics of the fit (knots, control points, rms, max, history, ...)
+    report : dict, statistics of the fit (knots, control points, rms, max, history, ...); a new
+        deep copy on every access
     n_interior : int, the first ``n_interior`` knots are interior knots, the rest border rings
     """
 
@@ -107,12 +122,22 @@ class TCBSurface:
             active = np.flatnonzero(space.meets(parameterization.domain_polygon))
         self._active = _readonly(np.asarray(active, dtype=np.int64))
         self._ctrl = _readonly(self._c[self._active])
-        self._param = parameterization
+        self._param = _frozen_parameterization(parameterization)
         self._errors = _readonly(errors)
         self._report = report
         self._n_interior = int(n_interior)
         self._options = options or RefineOptions(degree=space.degree, mode=space.mode)
-        self._tess_cache: dict = {}
+        self._tess_cache: dict = {}  # resolution -> (uv, triangles), most recent last
+
+    def __getstate__(self) -> dict:
+        """Pickle/copy state: everything but the tessellation cache (rebuilt on demand)."""
+        state = self.__dict__.copy()
+        state["_tess_cache"] = {}
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._tess_cache = {}
 
     # ---- read-only state ----------------------------------------------------------------
     space = property(lambda self: self._space)
@@ -121,7 +146,8 @@ class TCBSurface:
     coefficients = property(lambda self: self._c)
     parameterization = property(lambda self: self._param)
     errors = property(lambda self: self._errors)
-    report = property(lambda self: dict(self._report))
+    # a deep copy: editing it (e.g. appending to its history) cannot change the surface
+    report = property(lambda self: copy.deepcopy(self._report))
     n_interior = property(lambda self: self._n_interior)
     options = property(lambda self: self._options)
     degree = property(lambda self: self._space.degree)
@@ -148,7 +174,7 @@ class TCBSurface:
     def derivative(self, uv, derivative=(1, 0)) -> np.ndarray:
         """Partial derivative ``d^(du+dv) S / du^du dv^dv`` (m, 3); ``du + dv <= 2``; NaN rows
         outside :meth:`covers`."""
-        return self._evaluate(uv, [tuple(derivative)])[0]
+        return self._evaluate(uv, [derivative])[0]
 
     def normals(self, uv) -> np.ndarray:
         """Unit normals ``S_u x S_v / |S_u x S_v|`` (m, 3); NaN rows outside :meth:`covers`."""
@@ -172,7 +198,7 @@ class TCBSurface:
     def _evaluate(self, uv, derivatives) -> list:
         """``M @ coefficients`` for each derivative order, with NaN rows outside the region
         where the basis is a partition of unity (the values share one basis pass)."""
-        derivatives = [tuple(int(d) for d in der) for der in derivatives]
+        derivatives = [derivative_order(der) for der in derivatives]
         mats = self._space.evaluate_many(uv, [(0, 0)] + [d for d in derivatives if d != (0, 0)])
         covered = self._covered(mats[0])
         it = iter(mats[1:])
@@ -204,11 +230,19 @@ class TCBSurface:
         without it) by the density of the data parameters. The parameters depend only on the
         data, not on the control points (``evaluation_matrix`` of them re-evaluates edits).
         """
-        resolution = int(resolution)
+        given = resolution
+        try:  # a number of grid steps: int() of it, as always (2.9 -> 2, "8" -> 8)
+            resolution = int(resolution)
+        except (TypeError, ValueError, OverflowError):  # None, NaN, inf, "abc"
+            resolution = 0
         if resolution < 2:
-            raise InvalidInputError("the tessellation resolution must be at least 2")
-        if resolution in self._tess_cache:
-            return self._tess_cache[resolution]
+            raise InvalidInputError(
+                f"the tessellation resolution must be a whole number of at least 2, got {given!r}"
+            )
+        cached = self._tess_cache.pop(resolution, None)
+        if cached is not None:  # most recent last
+            self._tess_cache[resolution] = cached
+            return cached
         poly = np.asarray(self._param.domain_polygon, dtype=np.float64)
         lo, hi = poly.min(axis=0), poly.max(axis=0)
         d = float(np.max(hi - lo)) / resolution
@@ -254,6 +288,8 @@ class TCBSurface:
         remap[used] = np.arange(len(used))
         result = (_readonly(uv[used]), _readonly(remap[tri]))
         self._tess_cache[resolution] = result
+        for old in list(self._tess_cache)[:-TESSELLATION_CACHE]:
+            self._tess_cache.pop(old, None)
         return result
 
     def _data_parameters(self) -> tuple[np.ndarray, np.ndarray]:
@@ -321,7 +357,7 @@ class TCBSurface:
         """A new surface with other control points (n, 3) (same space; the coefficients of
         the border functions stay); this one is unchanged. All ``space.n_basis`` coefficients
         (as in ``coefficients``) are accepted too."""
-        c = np.asarray(control_points, dtype=np.float64)
+        c = _as_control_points(control_points)
         if c.shape == (len(self._active), 3):
             full = np.array(self._c)
             full[self._active] = c
@@ -349,8 +385,26 @@ class TCBSurface:
 
     def _closest(self, points, iterations: int = 4) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`closest_parameters` and the distances ``|S(x) - p|`` there, (m, 2), (m,)."""
-        p = np.asarray(points, dtype=np.float64)
-        p = _as_points(p.reshape(1, 3) if p.shape == (3,) else p)
+        steps = _whole(iterations)
+        if steps is None or steps < 0:
+            raise InvalidInputError(
+                f"iterations must be a nonnegative whole number, got {iterations!r}"
+            )
+        try:
+            p = np.asarray(points, dtype=np.float64)
+        except (TypeError, ValueError):
+            p = points  # _as_points says what is wrong with them
+        else:
+            p = p.reshape(1, 3) if p.shape == (3,) else p
+        p = _as_points(p)
+        bad = np.flatnonzero(~np.isfinite(p).all(axis=1))
+        if len(bad):
+            rows = ", ".join(map(str, bad[:10])) + (", ..." if len(bad) > 10 else "")
+            raise InvalidInputError(
+                f"{len(bad)} of {len(p)} points have NaN or infinite coordinates (rows {rows}); "
+                "closest points need finite ones: leave those out, e.g. "
+                "points[np.isfinite(points).all(axis=1)]"
+            )
         uv_t, _ = self.tessellation_uv(96)
         lo, hi = uv_t.min(axis=0), uv_t.max(axis=0)
         # starts: the nearest of the tessellation's vertices and of the surface points at (up
@@ -360,13 +414,13 @@ class TCBSurface:
         starts = np.vstack([uv_t, np.clip(data[:: max(1, len(data) // 20_000)], lo, hi)])
         _, nearest = cKDTree(self(starts)).query(p)
         x = starts[nearest].copy()
-        x, d = self._newton_closest(p, x, self._surface_and_gradient(x), lo, hi, iterations)
+        x, d = self._newton_closest(p, x, self._surface_and_gradient(x), lo, hi, steps)
         if self._param.kind == "plane" and self._param.origin is not None:
             # a cloud's own projection is another start; keep the better result (starting from
             # the better start only was 1.6x faster on the DEM but 2% of the distances came out
             # larger, by up to 2% of the largest)
             y = np.clip(self._param.project(p), lo, hi)
-            y, e = self._newton_closest(p, y, self._surface_and_gradient(y), lo, hi, iterations)
+            y, e = self._newton_closest(p, y, self._surface_and_gradient(y), lo, hi, steps)
             b = e < d
             x[b], d[b] = y[b], e[b]
         return x, d
@@ -415,8 +469,9 @@ class TCBSurface:
         """Continue the adaptive loop from this surface on the same data.
 
         ``points`` (and ``faces``) must be the data this surface was fitted to (same count);
-        ``changes`` override settings, e.g. ``tolerance=``, ``max_control_points=``,
-        ``max_iterations=`` (default: 5 more iterations).
+        ``changes`` override settings (the fields of :class:`RefineOptions`), e.g.
+        ``tolerance=``, ``max_control_points=``, ``max_iterations=`` (default: 5 more
+        iterations); an unknown name is an :class:`InvalidInputError`.
         """
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or len(points) != len(self._param.uv):
@@ -424,8 +479,16 @@ class TCBSurface:
                 "refine() needs the points this surface was fitted to "
                 f"({len(self._param.uv)} points, got {len(points)})"
             )
+        unknown = sorted(set(changes) - set(_OPTION_NAMES))
+        if unknown:
+            raise InvalidInputError(
+                f"refine() has no option {', '.join(map(repr, unknown))}; the options are "
+                f"{', '.join(_OPTION_NAMES)}"
+            )
         fields = self._options.__dict__ | {"max_iterations": 5} | changes
         options = RefineOptions(**fields)
+        options.validate()
+        check_callback(callback)
         return _run(points, self._param, options, callback,
                     start=self.knots[: self._n_interior], rings=self.knots[self._n_interior:],
                     history=self._report.get("history", []))
@@ -509,10 +572,10 @@ class TCBSurface:
             raise FileFormatError(f"{what} is damaged or incomplete ({type(exc).__name__}: {exc})") from None
 
     def save(self, path) -> None:
-        """Write a versioned ``.npz`` (the path must end in ``.npz``); atomically (temporary
-        file, then rename), with the permissions a new file gets from the umask (an existing
-        file keeps its own)."""
-        path = Path(path)
+        """Write a versioned ``.npz`` (the path, a str, bytes or path object in which ``~``
+        means the home folder, must end in ``.npz``); atomically (temporary file, then rename),
+        with the permissions a new file gets from the umask (an existing file keeps its own)."""
+        path = _user_path(path)
         if path.suffix.lower() != ".npz":
             raise InvalidInputError(
                 f"a surface is saved as a .npz archive: name the file *.npz (got {path.name})"
@@ -520,6 +583,10 @@ class TCBSurface:
         if not path.parent.is_dir():
             raise InvalidInputError(
                 f"cannot save to {path}: the folder {path.parent} does not exist"
+            )
+        if path.is_dir():
+            raise InvalidInputError(
+                f"cannot save to {path}: that is a folder; give the name of a .npz file"
             )
         data = self.to_bytes()
         # the temporary file is created with mode 0666 and the kernel applies the umask (what
@@ -547,8 +614,8 @@ class TCBSurface:
 
     @classmethod
     def load(cls, path) -> "TCBSurface":
-        """Read a surface written by :meth:`save`."""
-        path = Path(path)
+        """Read a surface written by :meth:`save` (``path`` as for :meth:`save`)."""
+        path = _user_path(path)
         if not path.is_file():
             raise FileFormatError(f"no such file: {path}")
         return cls.from_bytes(path.read_bytes(), what=str(path))
@@ -559,6 +626,36 @@ class TCBSurface:
             f"TCBSurface(mode={self.mode!r}, degree={self.degree}, knots={len(self.knots)}, "
             f"control_points={len(self._active)}, rms_rel={r.get('rms_rel', float('nan')):.3g})"
         )
+
+
+def _as_control_points(value) -> np.ndarray:
+    """Control points given by a user as a float64 array, or an :class:`InvalidInputError`
+    for what numpy would refuse or silently change (sparse matrices, ragged lists, complex
+    numbers, strings); the shape is checked by the caller."""
+    what = "control points must be a dense (n, 3) array of real numbers"
+    if sp.issparse(value):
+        raise InvalidInputError(f"{what}, got a scipy sparse matrix (use .toarray())")
+    try:
+        a = np.asarray(value)
+    except ValueError:  # ragged nested lists
+        raise InvalidInputError(f"{what}; the rows have different lengths") from None
+    if np.iscomplexobj(a):
+        raise InvalidInputError(f"{what}, got complex numbers (take .real if that is meant)")
+    try:
+        return np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{what}, got {a.dtype} values") from None
+
+
+def _user_path(path) -> Path:
+    """A file name given by a user (str, bytes or path object) as a Path, ``~`` expanded."""
+    try:
+        name = os.fspath(path)
+    except TypeError:
+        raise InvalidInputError(
+            f"a file name must be a str, bytes or path object, got {path!r}"
+        ) from None
+    return Path(os.fsdecode(name)).expanduser()
 
 
 def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:
@@ -710,7 +807,7 @@ def fit_surface(
         Triangles of a disk-topology mesh (then the mesh is parameterized over the unit disk;
         otherwise the cloud is projected on its best-fit plane).
     degree : 2 (C^1, default) or 3 (C^2)
-    mode : "tcb" (feature-sensitive configurations) or "dcb" (Delaunay configurations)
+    mode : "tcb" (feature-sensitive configurations) or "dcb" (Delaunay configurations); any case
     tolerance : float
         Stop when the RMS (or max, see ``criterion``) error is at most this; relative to the
         bounding-box diagonal when ``relative`` is True, else in the data's units.
@@ -729,24 +826,29 @@ def fit_surface(
     callback : callable, optional
         ``callback(report: dict) -> bool``: called after every iteration with keys
         ``iteration, knots, control_points, rms, max, rms_rel, max_rel, seconds``; return True to
-        cancel (the best surface so far is returned). Above 200 000 points (criterion "rms")
+        cancel (the best surface so far is returned, ``report["stop_reason"] == "cancelled"``;
+        no exception), None or False to go on. Above 200 000 points (criterion "rms")
         the iterations fit a seeded random subset of 200 000 (their reports add
         ``sampled_points`` and their errors are those of the subset) and the chosen knots are
         fitted to all points at the end (``report["refit"]``); ``surf.errors`` and the final
         ``rms``/``max`` are always those of all points.
-    criterion : "rms" or "max"
-    initial_knots, knots_per_iteration : int, optional
-        Override the automatic sizes (about 1/12 of the budget to start; 15% more per iteration).
+    criterion : "rms" or "max"; any case
+    initial_knots, knots_per_iteration : int >= 1, optional
+        Override the automatic sizes (about 1/12 of the budget to start; 15% more per
+        iteration); None (the default) keeps them automatic.
     feature_sensitive : bool
         TCB only: choose ``Gamma_0`` and the link triangulations from the data (default) or use
         Delaunay ones.
-    seed : int
+    seed : int >= 0
         Seed of the random choices (knot sampling, jitter): same input, same surface.
     drop_outliers : bool
         Point clouds only. Points far from all others (stray returns, spikes; see
         ``core.parameterize.isolated_points``) are refused with an error that names them
         (default), or, with True, left out of the fit: their ``errors`` are NaN and
         ``report["outliers"]`` counts them.
+
+    Counts (``degree``, ``max_control_points``, ...) are whole numbers (``2.0`` is 2), flags
+    (``relative``, ``feature_sensitive``) Python or numpy bools; anything else is refused.
 
     Raises
     ------
@@ -757,11 +859,14 @@ def fit_surface(
     """
     options = RefineOptions(
         degree=degree, mode=mode, tolerance=tolerance, relative=relative, criterion=criterion,
-        max_control_points=int(max_control_points), max_iterations=int(max_iterations),
+        max_control_points=max_control_points, max_iterations=max_iterations,
         smoothness=smoothness, initial_knots=initial_knots,
         knots_per_iteration=knots_per_iteration, feature_sensitive=feature_sensitive, seed=seed,
     )
     options.validate()
+    check_callback(callback)
+    if not isinstance(drop_outliers, (bool, np.bool_)):
+        raise InvalidInputError(f"drop_outliers must be True or False, got {drop_outliers!r}")
     try:
         points = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):

@@ -296,6 +296,74 @@ def test_bad_input_raises_a_specific_error(case, error, words):
     assert isinstance(info.value, (TCBError, ValueError))
 
 
+@pytest.mark.parametrize(
+    "options, words",
+    [
+        ({"tolerance": "1e-3"}, "tolerance must be a nonnegative number, got '1e-3'"),
+        ({"tolerance": None}, "tolerance must be a nonnegative number, got None"),
+        ({"max_control_points": np.inf}, "max_control_points must be a whole number"),
+        ({"max_control_points": np.nan}, "max_control_points must be a whole number"),
+        ({"max_control_points": None}, "max_control_points must be a whole number"),
+        ({"max_control_points": 400.5}, "max_control_points .* got 400.5"),
+        ({"max_iterations": 2.5}, "max_iterations must be a whole number"),
+        ({"degree": "2"}, "degree must be 2 or 3, got '2'"),
+        ({"degree": 2.5}, "degree must be 2 or 3, got 2.5"),
+        ({"initial_knots": -5}, "initial_knots must be .* at least 1, or None .*got -5"),
+        ({"initial_knots": 0}, "initial_knots .* or None for the automatic"),
+        ({"knots_per_iteration": 1.5}, "knots_per_iteration must be a whole number"),
+        ({"knots_per_iteration": -3}, "knots_per_iteration .* got -3"),
+        ({"seed": -1}, "seed must be a nonnegative whole number, got -1"),
+        ({"seed": "a"}, "seed must be a nonnegative whole number, got 'a'"),
+        ({"relative": "no"}, "relative must be True or False, got 'no'"),
+        ({"feature_sensitive": 0.5}, "feature_sensitive must be True or False"),
+        ({"mode": "tcbx"}, "mode must be 'tcb' or 'dcb' \\(any case\\), got 'tcbx'"),
+        ({"criterion": "mean"}, "criterion must be 'rms' or 'max'"),
+        ({"callback": 5}, "callback must be a function"),
+    ],
+)
+def test_bad_options_raise_a_specific_error_before_the_fit(options, words):
+    points = ridge_cloud(300)
+    with pytest.raises(InvalidInputError, match=words):
+        fit_surface(points, **options)
+    if "callback" not in options:  # refine() checks its changes the same way
+        surf = fit_surface(points, max_iterations=1, max_control_points=100)
+        with pytest.raises(InvalidInputError, match=words):
+            surf.refine(points, **options)
+
+
+def test_option_spellings_that_mean_a_valid_setting_are_accepted_and_stored_plainly(tmp_path):
+    """2.0, numpy integers and bools, upper-case words: the same fit as the plain spelling,
+    options stored as plain Python values (a file keeps them)."""
+    points = ridge_cloud(300)
+    plain = fit_surface(points, max_iterations=2, max_control_points=100, seed=1)
+    odd = fit_surface(points, degree=2.0, mode=" TCB", criterion="RMS", relative=np.bool_(True),
+                      max_iterations=np.int64(2), max_control_points=100.0, seed=np.int32(1),
+                      tolerance=np.float32(1e-3))
+    np.testing.assert_array_equal(plain.coefficients, odd.coefficients)
+    assert odd.options.degree == 2 and type(odd.options.degree) is int
+    assert odd.options.mode == "tcb" and odd.options.criterion == "rms"
+    assert odd.options.relative is True and type(odd.options.seed) is int
+    odd.save(tmp_path / "odd.npz")
+    assert TCBSurface.load(tmp_path / "odd.npz").options == odd.options
+
+
+def test_refine_names_the_options_it_knows():
+    points = ridge_cloud(300)
+    surf = fit_surface(points, max_iterations=1, max_control_points=100)
+    with pytest.raises(InvalidInputError, match="no option 'foo'.*max_control_points"):
+        surf.refine(points, foo=1)
+
+
+def test_a_callback_must_return_a_bool_or_none():
+    points = ridge_cloud(300)
+    with pytest.raises(InvalidInputError, match="callback must return None or False"):
+        fit_surface(points, max_iterations=2, callback=lambda report: np.array([1, 2]))
+    seen = []
+    surf = fit_surface(points, max_iterations=3, tolerance=0,
+                       callback=lambda report: seen.append(report) or np.bool_(len(seen) == 2))
+    assert surf.report["stop_reason"] == "cancelled" and len(seen) == 2
+
+
 def test_huge_inputs_are_fitted_on_a_subset_with_a_warning(monkeypatch):
     import core.surface
 

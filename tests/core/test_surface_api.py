@@ -1,0 +1,165 @@
+"""The public surface API as a contract: read-only state, a bounded tessellation cache that is
+not pickled, a report that cannot be edited from outside, and specific InvalidInputErrors
+(never a numpy/scipy/Python traceback from deep inside) for bad arguments of its methods."""
+
+import copy
+import pickle
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import core
+from core import CancelledError, InvalidInputError, TCBSurface, build_space, fit_surface
+
+
+def ridge_cloud(n=300, seed=0):
+    xy = np.random.default_rng(seed).random((n, 2))
+    return np.c_[xy, 0.25 * np.abs(xy[:, 1] - 0.5 - 0.15 * np.sin(4 * xy[:, 0]))]
+
+
+@pytest.fixture(scope="module")
+def surf():
+    return fit_surface(ridge_cloud(), max_iterations=2, max_control_points=100)
+
+
+def exposed_arrays(s: TCBSurface) -> dict:
+    space, param = s.space, s.parameterization
+    arrays = {
+        "knots": s.knots, "control_points": s.control_points, "coefficients": s.coefficients,
+        "active": s.active, "errors": s.errors, "space.knots": space.knots,
+        "greville": space.greville, "config_triangles": space.config_triangles,
+        "config_interior": space.config_interior, "config_basis": space.config_basis,
+        "interior_sets": space.interior_sets, "net_faces": space.net_faces,
+        "configurations.knots": s.configurations.knots,
+    }
+    for lvl, (T, I) in enumerate(zip(s.configurations.triangles, s.configurations.interior)):
+        arrays[f"triangles_{lvl}"], arrays[f"interior_{lvl}"] = T, I
+    for name in ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes",
+                 "stretch"):
+        if getattr(param, name) is not None:
+            arrays[f"parameterization.{name}"] = getattr(param, name)
+    return arrays
+
+
+def test_the_arrays_a_surface_exposes_are_read_only_also_after_loading(surf, tmp_path):
+    surf.save(tmp_path / "a.npz")
+    loaded = TCBSurface.load(tmp_path / "a.npz")
+    for s in (surf, loaded, surf.with_control_points(surf.control_points)):
+        for name, a in exposed_arrays(s).items():
+            assert not a.flags.writeable, name
+    for a in (surf.knots, surf.space.greville, surf.configurations.triangles[0]):
+        with pytest.raises(ValueError, match="read-only"):
+            a[:] += 1
+    surf.save(tmp_path / "b.npz")
+    np.testing.assert_array_equal(TCBSurface.load(tmp_path / "b.npz").knots, loaded.knots)
+    # no copies per access
+    assert surf.knots is surf.knots and surf.space.greville is surf.space.greville
+
+
+def test_build_space_leaves_the_callers_knots_writeable():
+    knots = np.random.default_rng(1).random((30, 2))
+    space = build_space(knots)
+    assert knots.flags.writeable and not space.knots.flags.writeable
+    assert not space.greville.flags.writeable and not space.configurations.triangles[0].flags.writeable
+    # a spelled-out degree and mode are fine
+    assert build_space(knots, degree=2.0, mode="TCB").n_basis == space.n_basis
+    with pytest.raises(InvalidInputError, match="degree must be 1, 2 or 3, got '2'"):
+        build_space(knots, degree="2")
+
+
+def test_the_tessellation_cache_is_bounded_and_not_pickled(surf):
+    s = surf.with_control_points(surf.control_points)
+    for r in range(8, 20):
+        s.tessellation_uv(r)
+    assert len(s._tess_cache) <= 4 and 19 in s._tess_cache
+    s.tessellation_uv(16)  # a hit becomes the most recent one
+    s.tessellation_uv(40)
+    assert 16 in s._tess_cache and len(s._tess_cache) <= 4
+    plain = len(pickle.dumps(surf.with_control_points(surf.control_points)))
+    assert len(pickle.dumps(s)) == plain
+    for twin in (pickle.loads(pickle.dumps(s)), copy.copy(s), copy.deepcopy(s)):
+        assert twin._tess_cache == {}
+        np.testing.assert_array_equal(twin.coefficients, s.coefficients)
+        np.testing.assert_array_equal(twin.knots, s.knots)
+        assert twin.report == s.report and twin.options == s.options
+        np.testing.assert_array_equal(twin.tessellate(16)[0], s.tessellate(16)[0])
+        assert twin.to_bytes() == s.to_bytes()
+
+
+def test_the_report_is_a_deep_copy(surf):
+    n = len(surf.report["history"])
+    r = surf.report
+    r["history"].append({"iteration": 99})
+    r["history"][0]["rms"] = -1.0
+    r["history"][0]["phases"]["fit"] = -1.0
+    assert len(surf.report["history"]) == n
+    assert surf.report["history"][0]["rms"] > 0
+    assert surf.report["history"][0]["phases"].get("fit", 0) != -1.0
+
+
+def test_cancelling_returns_the_best_surface_and_raises_nothing():
+    s = fit_surface(ridge_cloud(), max_iterations=4, tolerance=0, callback=lambda r: True)
+    assert s.report["stop_reason"] == "cancelled" and s.report["iterations"] == 1
+    assert "CancelledError" in core.__all__
+    doc = CancelledError.__doc__.lower()
+    assert "not raised" in doc and "stop_reason" in doc
+
+
+@pytest.mark.parametrize(
+    "call, words",
+    [
+        (lambda s: s.tessellate(None), "resolution must be a whole number .* got None"),
+        (lambda s: s.tessellate(np.nan), "resolution .* got nan"),
+        (lambda s: s.tessellate(np.inf), "resolution .* got inf"),
+        (lambda s: s.tessellate(1), "resolution .* at least 2"),
+        (lambda s: s.closest_parameters([[0.5, 0.5, 0.0]], iterations=2.5),
+         "iterations must be a nonnegative whole number, got 2.5"),
+        (lambda s: s.derivative([[0.1, 0.1]], "u"), r"derivative must be a pair .*got 'u'"),
+        (lambda s: s.derivative([[0.1, 0.1]], (3, 0)), r"derivative must be .*got \(3, 0\)"),
+        (lambda s: s.distances([[0, 0, 0], [np.nan, 0, 0], [0, 0, 1], [0, np.inf, 0]]),
+         r"2 of 4 points have NaN or infinite coordinates \(rows 1, 3\)"),
+        (lambda s: s.closest_parameters([[np.nan, 0, 0]]), r"\(rows 0\)"),
+        (lambda s: s.with_control_points(sp.csr_matrix(s.control_points)), "sparse"),
+        (lambda s: s.with_control_points([[1.0, 2.0, 3.0], [1.0, 2.0]]), "different lengths"),
+        (lambda s: s.with_control_points(s.control_points + 1j), "complex"),
+        (lambda s: s.save(None), "file name must be a str"),
+    ],
+)
+def test_bad_method_arguments_raise_a_specific_error(surf, call, words):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # e.g. ComplexWarning instead of an error
+        with pytest.raises(InvalidInputError, match=words):
+            call(surf)
+
+
+def test_documented_resolutions_still_work(surf):
+    assert len(surf.tessellate(2.9)[0]) == len(surf.tessellate(2)[0])
+    assert len(surf.tessellate("8")[0]) == len(surf.tessellate(8)[0])
+
+
+def test_save_takes_bytes_and_home_paths_and_refuses_folders(surf, tmp_path, monkeypatch):
+    surf.save(str(tmp_path / "b.npz").encode())
+    assert TCBSurface.load(str(tmp_path / "b.npz").encode()).to_bytes() == surf.to_bytes()
+    monkeypatch.setenv("HOME", str(tmp_path))
+    surf.save("~/home.npz")
+    assert (tmp_path / "home.npz").is_file()
+    assert TCBSurface.load("~/home.npz").to_bytes() == surf.to_bytes()
+    (tmp_path / "x.npz").mkdir()
+    with pytest.raises(InvalidInputError, match="x.npz: that is a folder") as info:
+        surf.save(tmp_path / "x.npz")
+    assert ".tmp" not in str(info.value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.npz", "home.npz", "x.npz"]
+
+
+def test_non_finite_parameters_give_nan_rows_without_warnings(surf):
+    uv = np.array([[0.0, 0.0], [np.nan, 0.0], [0.0, np.inf], [-np.inf, np.nan], [0.1, -0.1]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for values in (surf(uv), surf.derivative(uv, (1, 0)), surf.derivative(uv, (1, 1)),
+                       surf.normals(uv)):
+            assert np.isnan(values[1:4]).all()
+            assert np.isfinite(values[[0, 4]]).all()
+        np.testing.assert_array_equal(surf.covers(uv), [True, False, False, False, True])
+        assert surf.evaluation_matrix(uv)[1:4].nnz == 0
