@@ -7,13 +7,22 @@ Minimizes, over the control points ``C`` (n_basis, 3),
       + beta  sum_q a_q (|S_uu|^2 + 2 |S_uv|^2 + |S_vv|^2)
 
 through the sparse normal equations
-``(A^T W A + alpha G1 + beta G2) C = A^T W P`` with ``G1 = Du^T Q Du + Dv^T Q Dv`` and
+``(A^T W A + alpha G1 + beta G2) C = A^T W P + (alpha G1 + beta G2) L`` with
+``G1 = Du^T Q Du + Dv^T Q Dv`` and
 ``G2 = Duu^T Q Duu + 2 Duv^T Q Duv + Dvv^T Q Dvv`` (``Q`` the quadrature weights ``a_q``). ``A^T W A``
 and ``A^T W P`` are accumulated over chunks of points; the sparse chunks of ``A`` are kept (up to
 :data:`KEEP_BYTES`, more than the 2e6 points ``fit_surface`` fits) for iterative refinement and
 the errors, so the basis is evaluated once per fit. ``alpha`` and ``beta`` are given relative to
 ``trace(A^T W A) / trace(G)``, so one ``smoothness`` works at any scale and knot density. One
 sparse LU factorization serves the three coordinates.
+
+The fairing measures the surface minus its reference ``L``: the control points ``L_I = M
+[xi_I, 1]`` of the weighted least-squares affine map ``(u, v) -> p`` of the data (``xi_I`` the
+Greville points, which reproduce it exactly, method.md section 2.2), i.e. the energies above are
+those of ``S - (affine fit)``. The second-order energy of an affine map is 0 anyway; the
+first-order one is not, so without the reference the fairing pulled the surface towards a
+constant: a plane was not reproduced (in-plane errors of 7e-4 of its size, edges drawn in),
+and a cloud's in-plane coordinates, which are exactly affine in its parameters, were bent.
 
 Quadrature: three points per triangle of ``Gamma_0`` (the rule exact for quadratics, weights
 ``area / 3``). ``Gamma_0`` covers the convex hull of all knots, including the border rings, so every
@@ -35,7 +44,7 @@ from .geometry import column_bounds
 from .simplex import orient2d
 
 __all__ = ["FitResult", "fit_control_points", "fairing_quadrature", "check_smoothness",
-           "PARTITION_TOL", "AUTO_SMOOTHNESS"]
+           "affine_reference", "PARTITION_TOL", "AUTO_SMOOTHNESS"]
 
 PARTITION_TOL = 1e-9
 CHUNK = 200_000
@@ -191,6 +200,8 @@ def fit_control_points(
     if G2 is not None:
         G = G + (data_trace / max(G2.diagonal().sum(), 1e-300)) * G2
     G = G.tocsr()
+    L = affine_reference(space, uv, points, weights)
+    GL = G @ L
     if not (has_data | (G.diagonal() > 0)).all():
         raise SingularSystemError(
             f"{int((~(has_data | (G.diagonal() > 0))).sum())} of the {n} control points have no "
@@ -207,20 +218,21 @@ def fit_control_points(
         t_select = time.perf_counter() - ts
     t2 = time.perf_counter()
     if smoothness > 0:
-        C, solver = _solve((AtA + smoothness * G).tocsc(), AtP, ridge=True)
+        C, solver = _solve((AtA + smoothness * G).tocsc(), AtP + smoothness * GL, ridge=True)
         if keep:
-            C = _refine(C, solver, chunks, weights, points, lambda c: smoothness * (G @ c))
+            C = _refine(C, solver, chunks, weights, points,
+                        lambda c: smoothness * (G @ c - GL))
     else:
         # no fairing: pure least squares for the functions that see data, then the functions
-        # without data minimize the fairing energy with the others held (they do not touch
-        # the data, so the fit at the data is the exact least-squares one)
+        # without data minimize the fairing energy of S - (affine fit) with the others held
+        # (they do not touch the data, so the fit at the data is the exact least-squares one)
         d, u = np.flatnonzero(has_data), np.flatnonzero(~has_data)
         C = np.zeros((n, 3))
         C[d], solver = _solve(AtA[d][:, d].tocsc(), AtP[d], ridge=True)
         if keep:
             C[d] = _refine(C[d], solver, [A[:, d] for A in chunks], weights, points, None)
         if len(u):
-            C[u], _ = _solve(G[u][:, u].tocsc(), -(G[u][:, d] @ C[d]), ridge=True)
+            C[u], _ = _solve(G[u][:, u].tocsc(), GL[u] - G[u][:, d] @ C[d], ridge=True)
     t_solve = time.perf_counter() - t2
 
     t3 = time.perf_counter()
@@ -250,6 +262,24 @@ def fit_control_points(
     )
 
 
+def affine_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Control points ``L`` (n_basis, 3) of the weighted least-squares affine map
+    ``(u, v) -> p`` of the data, ``L_I = M^T [xi_I, 1]`` with ``M`` (3, 3) minimizing
+    ``sum_j w_j |[x_j, 1] M - p_j|^2`` and ``xi_I`` the Greville points: the spline with these
+    control points is that affine map where the basis is a partition of unity (linear
+    reproduction, method.md section 2.2). The fairing pulls towards it (module docstring).
+    Computed in coordinates centred on the weighted means, so that it is exact for a plane."""
+    w = np.asarray(weights, dtype=np.float64)
+    total = float(w.sum())
+    if not total > 0:
+        return np.zeros((space.n_basis, 3))
+    cu = (w @ uv) / total
+    cp = (w @ points) / total
+    sw = np.sqrt(w)[:, None]
+    M, *_ = np.linalg.lstsq(sw * (uv - cu), sw * (points - cp), rcond=None)  # (2, 3)
+    return cp + (np.asarray(space.greville) - cu) @ M
+
+
 def check_smoothness(value):
     """A smoothness as given by a user: a nonnegative number, or ``"auto"``."""
     if isinstance(value, str) and value.strip().lower() == "auto":
@@ -271,7 +301,8 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
     The points are dealt into :data:`FOLDS` folds by :func:`_folds` (same input, same choice;
     points with (nearly) the same parameters share a fold). For fold
     ``f`` the normal equations of the other points are those of all points minus the fold's
-    rows, ``K_f = A^T W A - A_f^T W_f A_f + s G_f`` and ``A^T W P - A_f^T W_f P_f`` (``G_f``
+    rows, ``K_f = A^T W A - A_f^T W_f A_f + s G_f`` and ``A^T W P - A_f^T W_f P_f + s G_f L_f``
+    (``L_f`` the affine reference of the points kept; ``G_f``
     scaled by the data term of the points kept, as in a fit with the fold's weights set to 0,
     without its final iterative refinement); every candidate ``s`` of :data:`AUTO_SMOOTHNESS`
     is solved on them (one sparse factorization each; the basis is not evaluated again) and
@@ -312,11 +343,13 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
         rhs = AtP - WAf.T @ Pf
         # G is scaled by the data term (module docstring): here by that of the points kept
         G_fit = (K_fit.diagonal().sum() / data_trace) * G
+        GL_fit = G_fit @ affine_reference(space, uv, points, np.where(fold == f, 0.0, weights))
         for s in AUTO_SMOOTHNESS:
             if s in failed:
                 continue
             try:
-                C, _ = _solve((K_fit + s * G_fit).tocsc(), rhs, ridge=True, order=order)
+                C, _ = _solve((K_fit + s * G_fit).tocsc(), rhs + s * GL_fit, ridge=True,
+                              order=order)
             except SingularSystemError:
                 failed.add(s)
                 continue
