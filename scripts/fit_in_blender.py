@@ -25,7 +25,9 @@ What it does, with Blender's own operators:
 3. selects it and runs ``bpy.ops.tcb.fit_surface`` (synchronously: ``execute``), then
    ``bpy.ops.tcb.deviation_map`` (the surface's ``tcb_deviation_color`` attribute);
 4. saves the ``.blend`` (surface, live control net, source), exports the surface mesh
-   (``--export``: ``.obj``/``.ply``, same coordinates as the input file) and renders a picture
+   (``--export``: ``.obj``/``.ply``, same coordinates as the input file; from the engine's
+   float64 tessellation with ``core.meshio`` when the surface object is exactly it, so the file
+   keeps full precision far from the origin; else with Blender's exporter) and renders a picture
    (``--render``: Cycles on the CPU, surface colored by deviation, control net as tubes);
 5. prints a report table (knots, control points, RMS / max errors, seconds).
 
@@ -311,10 +313,11 @@ def import_input(bpy, addon: str, path: Path) -> list:
         raise ScriptError(first_line(ex)) from None
     if len(points) == 0:
         raise ScriptError(f"{path} contains no points")
-    mesh = bridge.new_mesh(path.stem, points, faces)
-    obj = bpy.data.objects.new(path.stem, mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    return [obj]
+    # far from the world origin (georeferenced data) the object gets an origin near the points
+    # and the mesh coordinates relative to it: 32-bit world coordinates would round them
+    origin = bridge.local_origin(points)
+    mesh = bridge.new_mesh(path.stem, points - origin, faces)
+    return [bridge.link_new_object(bpy.context.scene.collection, path.stem, mesh, origin)]
 
 
 def select_only(bpy, objs) -> None:
@@ -359,8 +362,50 @@ def deviation_map(bpy, surface) -> None:
         raise ScriptError(f"deviation map: {first_line(ex)}") from None
 
 
-def export_surface(bpy, surface, path: Path) -> None:
+def engine_tessellation(bpy, addon: str, surface):
+    """(vertices, triangles) in float64 when the surface object shows exactly the stored
+    spline's tessellation at its resolution (its net unedited, or edited and re-tessellated):
+    the same faces, and vertices within 32-bit rounding of it. Else None."""
+    import numpy as np
+
+    ops = importlib.import_module(f"{addon}.tcb_addon.operators")
+    bridge = importlib.import_module(f"{addon}.tcb_addon.bridge")
+    try:
+        verts, tris = ops.stored_surface(surface).tessellate(surface.tcb.resolution)
+    except ops._user_errors():
+        return None
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    mesh = surface.evaluated_get(depsgraph).data
+    if len(mesh.vertices) != len(verts) or len(mesh.polygons) != len(tris):
+        return None
+    sizes = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("loop_total", sizes)
+    corners = np.empty(len(mesh.loops), np.int32)
+    mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
+    if np.any(sizes != 3) or not np.array_equal(corners, np.ravel(tris)):
+        return None
+    shown = bridge.read_world_positions(surface, depsgraph)
+    size = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0)))
+    tol = 1e-5 * size + 2 * np.spacing(np.abs(shown).astype(np.float32))
+    return (verts, tris) if np.all(np.abs(shown - verts) <= tol) else None
+
+
+def export_surface(bpy, addon: str, surface, path: Path) -> None:
+    """The surface mesh, in the input file's coordinates. When it is exactly the engine's
+    tessellation, the file is written from the float64 tessellation by ``core.meshio`` (OBJ
+    with 17 digits, PLY with doubles: vertices and faces); otherwise (e.g. an edited live net)
+    by Blender's exporter, whose 32-bit world coordinates are coarse far from the origin."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    mesh = engine_tessellation(bpy, addon, surface)
+    if mesh is not None:
+        meshio = importlib.import_module(f"{addon}.core.meshio")
+        errors = importlib.import_module(f"{addon}.core.errors")
+        try:
+            meshio.write_mesh(path, *mesh)
+        except errors.TCBError as ex:
+            raise ScriptError(f"exporting {path}: {first_line(ex)}") from None
+        return
+    log("the surface is not the stored spline's tessellation: exported by Blender (32-bit)")
     select_only(bpy, [surface])
     op = getattr(bpy.ops.wm, EXPORT_FORMATS[path.suffix.lower()])
     kwargs = dict(filepath=str(path), export_selected_objects=True, apply_modifiers=True,
@@ -643,7 +688,7 @@ def run(ns: argparse.Namespace, bpy, addon: str, timings: dict) -> None:
     timings["save .blend"] = time.perf_counter() - t
     if ns.export is not None:
         t = time.perf_counter()
-        export_surface(bpy, surface, ns.export)
+        export_surface(bpy, addon, surface, ns.export)
         timings["export"] = time.perf_counter() - t
     if ns.render is not None:
         t = time.perf_counter()
