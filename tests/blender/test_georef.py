@@ -91,13 +91,16 @@ def test_a_net_edit_is_seen_exactly_and_the_rest_keeps_float64(clean_scene, addo
     spec = importlib.util.spec_from_file_location("fib", ROOT / "scripts" / "fit_in_blender.py")
     fib = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(fib)
-    fib.export_surface(bpy, ADDON, surface, tmp_path / "live.obj")
     meshio = importlib.import_module(ADDON + ".core.meshio")
     edited = spline_of(surface).with_control_points(got).tessellate(16)[0]
-    assert np.abs(meshio.read_geometry(tmp_path / "live.obj")[0] - edited).max() < 1e-6
+    for name in ("live.obj", "live.ply"):
+        fib.export_surface(bpy, ADDON, surface, tmp_path / name)
+        assert np.abs(meshio.read_geometry(tmp_path / name)[0] - edited).max() < 1e-6
     surface.modifiers.remove(surface.modifiers["TCB Live Net"])
     fib.export_surface(bpy, ADDON, surface, tmp_path / "static.obj")
-    assert (tmp_path / "static.obj").read_text().startswith("# Blender")
+    shown = spline_of(surface).tessellate(16)[0]  # unedited mesh: Blender's 32-bit coordinates
+    static = meshio.read_geometry(tmp_path / "static.obj")[0]
+    assert 1e-4 < np.abs(static - shown).max() < 1.0
 
     # Export Spline writes the edit; Re-tessellate shows it (the surface mesh is rebuilt from it)
     out = tmp_path / "edited.npz"
@@ -149,8 +152,9 @@ def test_surface_and_net_keep_their_precision_far_from_the_origin(clean_scene, a
 
 
 def test_fit_in_blender_exports_at_full_precision(installed, tmp_path):
-    """scripts/fit_in_blender.py on an .npy survey at OFFSET: the exported OBJ is the stored
-    spline's float64 tessellation (Blender's exporter would give steps of 0.5 in y)."""
+    """scripts/fit_in_blender.py on an .npy survey at OFFSET: the exported OBJ (Blender's, with
+    its normals) has the stored spline's float64 tessellation as vertices (Blender's exporter
+    alone gives steps of 0.5 in y)."""
     bpy = installed
     src, blend, obj = tmp_path / "utm.npy", tmp_path / "utm.blend", tmp_path / "utm.obj"
     np.save(src, patch() + OFFSET)
@@ -163,6 +167,7 @@ def test_fit_in_blender_exports_at_full_precision(installed, tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     meshio = importlib.import_module(ADDON + ".core.meshio")
     verts, faces = meshio.read_geometry(obj)
+    assert sum(ln.startswith("vn ") for ln in obj.read_text().splitlines()) == len(verts)
     bpy.ops.wm.open_mainfile(filepath=str(blend))
     surface = next(o for o in bpy.data.objects if o.tcb.role == "SURFACE")
     surf = spline_of(surface)
