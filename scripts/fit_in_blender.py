@@ -25,7 +25,9 @@ What it does, with Blender's own operators:
 3. selects it and runs ``bpy.ops.tcb.fit_surface`` (synchronously: ``execute``), then
    ``bpy.ops.tcb.deviation_map`` (the surface's ``tcb_deviation_color`` attribute);
 4. saves the ``.blend`` (surface, live control net, source), exports the surface mesh
-   (``--export``: ``.obj``/``.ply``, same coordinates as the input file) and renders a picture
+   (``--export``: ``.obj``/``.ply`` by Blender's exporter, same coordinates as the input file;
+   with the engine's float64 vertex coordinates when the surface object is exactly its
+   tessellation, so the file keeps full precision far from the origin) and renders a picture
    (``--render``: Cycles on the CPU, surface colored by deviation, control net as tubes);
 5. prints a report table (knots, control points, RMS / max errors, seconds).
 
@@ -313,10 +315,11 @@ def import_input(bpy, addon: str, path: Path) -> list:
         raise ScriptError(first_line(ex)) from None
     if len(points) == 0:
         raise ScriptError(f"{path} contains no points")
-    mesh = bridge.new_mesh(path.stem, points, faces)
-    obj = bpy.data.objects.new(path.stem, mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    return [obj]
+    # far from the world origin (georeferenced data) the object gets an origin near the points
+    # and the mesh coordinates relative to it: 32-bit world coordinates would round them
+    origin = bridge.local_origin(points)
+    mesh = bridge.new_mesh(path.stem, points - origin, faces)
+    return [bridge.link_new_object(bpy.context.scene.collection, path.stem, mesh, origin)]
 
 
 def select_only(bpy, objs) -> None:
@@ -361,7 +364,40 @@ def deviation_map(bpy, surface) -> None:
         raise ScriptError(f"deviation map: {first_line(ex)}") from None
 
 
-def export_surface(bpy, surface, path: Path) -> None:
+def engine_tessellation(bpy, addon: str, surface):
+    """(vertices, triangles) in float64 when the surface object shows exactly the stored
+    spline's tessellation at its resolution (its net unedited, or edited and re-tessellated):
+    the same faces, and vertices within 32-bit rounding of it. Else None."""
+    import numpy as np
+
+    ops = importlib.import_module(f"{addon}.tcb_addon.operators")
+    bridge = importlib.import_module(f"{addon}.tcb_addon.bridge")
+    try:
+        verts, tris = ops.stored_surface(surface).tessellate(surface.tcb.resolution)
+    except ops._user_errors():
+        return None
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    mesh = surface.evaluated_get(depsgraph).data
+    if len(mesh.vertices) != len(verts) or len(mesh.polygons) != len(tris):
+        return None
+    sizes = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("loop_total", sizes)
+    corners = np.empty(len(mesh.loops), np.int32)
+    mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
+    if np.any(sizes != 3) or not np.array_equal(corners, np.ravel(tris)):
+        return None
+    shown = bridge.read_world_positions(surface, depsgraph)
+    size = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0)))
+    tol = 1e-5 * size + 2 * np.spacing(np.abs(shown).astype(np.float32))
+    return (verts, tris) if np.all(np.abs(shown - verts) <= tol) else None
+
+
+def export_surface(bpy, addon: str, surface, path: Path) -> None:
+    """The surface mesh, in the input file's coordinates, by Blender's exporter (OBJ: vertex
+    normals; PLY: the deviation colors and ``tcb_deviation``). Its 32-bit world coordinates are
+    coarse far from the origin (0.5 apart at 4.2e6): when the surface object is exactly the
+    engine's tessellation, the file's vertex coordinates are then replaced with the float64
+    ones (OBJ: 17 digits; PLY: ``double x, y, z``)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     select_only(bpy, [surface])
     op = getattr(bpy.ops.wm, EXPORT_FORMATS[path.suffix.lower()])
@@ -373,6 +409,86 @@ def export_surface(bpy, surface, path: Path) -> None:
         op(**kwargs)
     except RuntimeError as ex:
         raise ScriptError(f"exporting {path}: {first_line(ex)}") from None
+    mesh = engine_tessellation(bpy, addon, surface)
+    if mesh is None:
+        log("the surface is not the stored spline's tessellation: 32-bit coordinates exported")
+    elif not full_precision(path, mesh[0]):
+        log(f"{path.name}: unexpected layout, kept the 32-bit coordinates of Blender's exporter")
+
+
+def _matches(found, verts) -> bool:
+    """``found`` are the file's 32-bit coordinates of ``verts`` (float64), in the same order."""
+    import numpy as np
+
+    if found.shape != verts.shape:
+        return False
+    size = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0)))
+    tol = 1e-4 * size + 4 * np.spacing(np.abs(verts).astype(np.float32)).astype(np.float64)
+    return bool(np.all(np.abs(found - verts) <= tol))
+
+
+def full_precision(path: Path, verts) -> bool:
+    """Replace the vertex coordinates of an OBJ / binary little-endian PLY file written by
+    Blender's exporter with ``verts`` (float64, the same vertices in the same order: checked).
+    Returns False, leaving the file as it is, when its layout is not the expected one."""
+    import numpy as np
+
+    data = path.read_bytes()
+    if path.suffix.lower() == ".obj":
+        lines = data.decode("utf-8").splitlines(keepends=True)
+        rows = [i for i, ln in enumerate(lines) if ln.startswith("v ")]
+        try:
+            found = np.array([[float(t) for t in lines[i].split()[1:4]] for i in rows])
+        except ValueError:
+            return False
+        if not _matches(found.reshape(-1, 3), verts):
+            return False
+        for i, v in zip(rows, verts):
+            lines[i] = "v %.17g %.17g %.17g\n" % tuple(v)
+        path.write_text("".join(lines), encoding="utf-8")
+        return True
+    end = data.find(b"end_header\n")
+    if end < 0:
+        return False
+    header = data[: end + len(b"end_header\n")].decode("ascii").splitlines()
+    types = {"float": "<f4", "double": "<f8", "uchar": "u1", "char": "i1", "ushort": "<u2",
+             "short": "<i2", "uint": "<u4", "int": "<i4"}  # fmt: skip
+    fields, out, count, in_vertex, elements = [], [], 0, False, []
+    for ln in header:
+        words = ln.split()
+        if words[:1] == ["element"]:
+            if len(words) != 3 or not words[2].isdigit():
+                return False
+            elements.append(words[1])
+            in_vertex = words[1] == "vertex"
+            count = int(words[2]) if in_vertex else count
+        elif in_vertex and words[:1] == ["property"]:
+            if len(words) != 3 or words[1] not in types:
+                return False
+            fields.append((words[2], types[words[1]]))
+            if words[2] in ("x", "y", "z"):  # the first three (checked below)
+                ln = f"property double {words[2]}"
+        out.append(ln)
+    names = [f for f, _ in fields]
+    if "format binary_little_endian 1.0" not in header or elements[:1] != ["vertex"]:
+        return False  # the vertex records must come first, right after the header
+    if names[:3] != ["x", "y", "z"] or len(set(names)) != len(names):
+        return False
+    old = np.dtype(fields)
+    start = end + len(b"end_header\n")
+    if len(data) < start + count * old.itemsize:
+        return False
+    rec = np.frombuffer(data, dtype=old, count=count, offset=start)
+    if not _matches(np.c_[rec["x"], rec["y"], rec["z"]].astype(np.float64), verts):
+        return False
+    xyz = ("x", "y", "z")
+    new = np.empty(count, dtype=np.dtype([(n, "<f8" if n in xyz else t) for n, t in fields]))
+    for name, _ in fields:
+        new[name] = rec[name]
+    new["x"], new["y"], new["z"] = verts.T
+    rest = data[start + count * old.itemsize :]
+    path.write_bytes(("\n".join(out) + "\n").encode("ascii") + new.tobytes() + rest)
+    return True
 
 
 # --- render -------------------------------------------------------------------------------------
@@ -645,7 +761,7 @@ def run(ns: argparse.Namespace, bpy, addon: str, timings: dict) -> None:
     timings["save .blend"] = time.perf_counter() - t
     if ns.export is not None:
         t = time.perf_counter()
-        export_surface(bpy, surface, ns.export)
+        export_surface(bpy, addon, surface, ns.export)
         timings["export"] = time.perf_counter() - t
     if ns.render is not None:
         t = time.perf_counter()

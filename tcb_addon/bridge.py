@@ -3,6 +3,10 @@
 Everything here moves data; no mathematics. Geometry is read with ``foreach_get`` into float32 /
 int32 buffers and written with ``foreach_set`` through the attribute API (``position``,
 ``.corner_vert``, ``loop_start``); no Python lists of tuples for large data.
+
+Blender keeps vertex coordinates as 32-bit floats (spacing 0.5 at 4.2e6): results far from the
+world origin (georeferenced data) are written relative to an object origin near them
+(:func:`local_origin`), and object transforms are applied in float64 numpy, never in mathutils.
 """
 
 from __future__ import annotations
@@ -73,7 +77,7 @@ def selection_problem(context) -> str | None:
 
 
 def _world(positions: np.ndarray, matrix) -> np.ndarray:
-    m = np.array(matrix, dtype=np.float64)
+    m = np.array(matrix, dtype=np.float64)  # the float32 matrix, exactly, in float64
     return positions.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
 
 
@@ -220,6 +224,50 @@ def read_world_positions(obj, depsgraph=None) -> np.ndarray:
     return _world(read_positions(obj.data), obj.matrix_world)
 
 
+def read_world_positions_and_rounding(obj) -> tuple[np.ndarray, np.ndarray]:
+    """World positions of a mesh object's vertices (as :func:`read_world_positions`, original
+    data) and, per coordinate, the float32 spacing of the stored vertex coordinates carried into
+    world space: writing float64 positions into the mesh moves them by at most half of it."""
+    local = read_positions(obj.data)
+    m = np.array(obj.matrix_world, dtype=np.float64)
+    spacing = np.spacing(np.abs(local)).astype(np.float64)
+    return _world(local, m), spacing @ np.abs(m[:3, :3]).T
+
+
+def to_local(obj, world: np.ndarray) -> np.ndarray:
+    """(n, 3) float64 world positions in ``obj``'s object space (its world matrix inverted in
+    float64), to be written into its mesh."""
+    m = np.array(obj.matrix_world, dtype=np.float64)
+    w = np.asarray(world, dtype=np.float64).reshape(-1, 3) - m[:3, 3]
+    if np.array_equal(m[:3, :3], np.eye(3)):
+        return w
+    return np.linalg.solve(m[:3, :3], w.T).T
+
+
+# Results whose centre is farther from the world origin than this many times their size get an
+# object origin near them: there 32-bit world coordinates would lose more than 6 bits of the
+# precision that coordinates relative to the result have.
+FAR_FROM_ORIGIN = 64.0
+
+
+def local_origin(points: np.ndarray) -> np.ndarray:
+    """An object origin for a new result object around ``points`` (world, float64): (0, 0, 0)
+    near the world origin, else a float32-exact point next to their bounding-box centre (a
+    multiple of a power of two about 1/16 of their size), so that the mesh's 32-bit coordinates
+    relative to it keep the precision of the points' extent instead of their distance from the
+    world origin."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if not len(pts):
+        return np.zeros(3)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    center = 0.5 * (lo + hi)
+    size = float(np.linalg.norm(hi - lo))
+    if not np.abs(center).max() > FAR_FROM_ORIGIN * size:
+        return np.zeros(3)
+    step = 2.0 ** np.floor(np.log2(size / 16)) if size > 0 else 1.0
+    return (np.round(center / step) * step).astype(np.float32).astype(np.float64)
+
+
 def replace_mesh(obj, mesh) -> None:
     """Give ``obj`` a new mesh datablock, keeping its materials; free the old one if unused."""
     old = obj.data
@@ -236,8 +284,14 @@ def result_collection(context, name: str) -> bpy.types.Collection:
     return coll
 
 
-def link_new_object(coll, name: str, data) -> bpy.types.Object:
+def link_new_object(coll, name: str, data, origin=None) -> bpy.types.Object:
+    """A new object in ``coll``; with ``origin`` (float32-exact, see :func:`local_origin`) placed
+    there, its world matrix set at once (readers need not wait for a depsgraph update)."""
     obj = bpy.data.objects.new(name, data)
+    if origin is not None and np.any(np.asarray(origin) != 0):
+        from mathutils import Matrix
+
+        obj.matrix_world = Matrix.Translation([float(c) for c in origin])
     coll.objects.link(obj)
     return obj
 

@@ -107,15 +107,18 @@ def stored_surface(surface_obj, use_net: bool = True):
     surf = core.TCBSurface.from_bytes(data, what=f"the spline stored with '{surface_obj.name}'")
     net = surface_obj.tcb.net
     if use_net and net is not None and net.type == "MESH":
-        ctrl = bridge.read_world_positions(net)
+        ctrl, rounding = bridge.read_world_positions_and_rounding(net)
         # a net saved before control points left out the border rings' functions has a
         # vertex per basis function: its edits are kept and it is rewritten in today's form
         old_net = len(ctrl) == len(surf.coefficients) != len(surf.control_points)
         ref = surf.coefficients if old_net else surf.control_points
-        if len(ctrl) == len(ref) and not np.allclose(
-            ctrl, ref, rtol=0, atol=1e-6 * (1 + np.abs(ref).max())
-        ):
-            surf = surf.with_control_points(ctrl)
+        if len(ctrl) == len(ref):
+            # The net holds the control points rounded to 32 bits (at most half a spacing
+            # away): a coordinate farther from the stored one than a spacing was edited and
+            # takes the net's value; the others keep the stored float64 value.
+            edited = np.abs(ctrl - ref) > rounding + 8 * np.spacing(np.abs(ref))
+            if edited.any():
+                surf = surf.with_control_points(np.where(edited, ctrl, ref))
         if old_net:
             write_net_mesh(net, surf)
     return surf
@@ -151,7 +154,8 @@ def store_stats(tcb, surf, settings: dict) -> None:
 
 def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = None):
     verts, faces = surf.tessellate(resolution)
-    mesh = bridge.new_mesh(name or surface_obj.data.name, verts, faces)
+    local = bridge.to_local(surface_obj, verts)
+    mesh = bridge.new_mesh(name or surface_obj.data.name, local, faces)
     mesh.shade_smooth()
     bridge.replace_mesh(surface_obj, mesh)
     surface_obj.tcb.has_deviation = False
@@ -159,7 +163,8 @@ def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = No
 
 def write_net_mesh(net_obj, surf, name: str | None = None):
     pts, faces = surf.control_net()
-    bridge.replace_mesh(net_obj, bridge.new_mesh(name or net_obj.data.name, pts, faces))
+    mesh = bridge.new_mesh(name or net_obj.data.name, bridge.to_local(net_obj, pts), faces)
+    bridge.replace_mesh(net_obj, mesh)
 
 
 def _summary(surf) -> str:
@@ -358,13 +363,13 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         coll = bridge.result_collection(context, f"TCB {name}")
 
         verts, faces = surf.tessellate(self.resolution)
-        smesh = bridge.new_mesh(f"{name} TCB Surface", verts, faces)
+        origin = bridge.local_origin(verts)  # (0, 0, 0) unless far from the world origin
+        smesh = bridge.new_mesh(f"{name} TCB Surface", verts - origin, faces)
         smesh.shade_smooth()
-        surface = bridge.link_new_object(coll, f"{name} TCB Surface", smesh)
-        pts, nfaces = surf.control_net()
-        net = bridge.link_new_object(
-            coll, f"{name} TCB Net", bridge.new_mesh(f"{name} TCB Net", pts, nfaces)
-        )
+        surface = bridge.link_new_object(coll, f"{name} TCB Surface", smesh, origin)
+        pts, nfaces = surf.control_net()  # same origin: the live net needs no transform
+        nmesh = bridge.new_mesh(f"{name} TCB Net", pts - origin, nfaces)
+        net = bridge.link_new_object(coll, f"{name} TCB Net", nmesh, origin)
         net.display_type = "WIRE"
         net.show_in_front = True
         net.hide_render = True  # a viewport handle: its faces would hide the surface in renders
@@ -530,7 +535,12 @@ class TCB_OT_deviation_map(bpy.types.Operator):
         st = surface.tcb
         if self.points_copy:
             pts_obj = st.deviation_points
-            mesh = bridge.new_mesh(f"{surface.name} Deviation Points", data.points)
+            if pts_obj is None:
+                origin = bridge.local_origin(data.points)
+                local = data.points - origin
+            else:
+                local = bridge.to_local(pts_obj, data.points)
+            mesh = bridge.new_mesh(f"{surface.name} Deviation Points", local)
             bridge.set_float_attribute(mesh, DEVIATION_ATTR, data_dist)
             bridge.set_color_attribute(
                 mesh, DEVIATION_ATTR + "_color", bridge.ramp_colors(data_dist, vmax)
@@ -541,7 +551,9 @@ class TCB_OT_deviation_map(bpy.types.Operator):
                     if surface.users_collection
                     else context.scene.collection
                 )
-                pts_obj = bridge.link_new_object(coll, f"{surface.name} Deviation Points", mesh)
+                pts_obj = bridge.link_new_object(
+                    coll, f"{surface.name} Deviation Points", mesh, origin
+                )
                 pts_obj.tcb.role = "DEVIATION"
                 pts_obj.tcb.surface = surface
                 st.deviation_points = pts_obj
