@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import hashlib
 import io
 import json
 import os
@@ -35,7 +36,7 @@ from .configurations import Configurations
 from .errors import FileFormatError, InvalidInputError
 from .geometry import column_bounds
 from .parameterize import (
-    Parameterization, _as_points, box_normalization, normalize, parameterize,
+    Parameterization, _as_points, _check_finite, box_normalization, normalize, parameterize,
 )
 from .refine import RefineOptions, adaptive_fit, check_callback
 from .spline_space import SplineSpace, _whole, derivative_order, frozen
@@ -356,7 +357,9 @@ class TCBSurface:
     def with_control_points(self, control_points) -> "TCBSurface":
         """A new surface with other control points (n, 3) (same space; the coefficients of
         the border functions stay); this one is unchanged. All ``space.n_basis`` coefficients
-        (as in ``coefficients``) are accepted too."""
+        (as in ``coefficients``) are accepted too. ``errors`` and ``report`` still describe the
+        fit (the surface keeps no copy of the data): measure an edited surface against the data
+        with :meth:`distances`."""
         c = _as_control_points(control_points)
         if c.shape == (len(self._active), 3):
             full = np.array(self._c)
@@ -468,7 +471,8 @@ class TCBSurface:
     def refine(self, points, faces=None, callback=None, **changes) -> "TCBSurface":
         """Continue the adaptive loop from this surface on the same data.
 
-        ``points`` (and ``faces``) must be the data this surface was fitted to (same count);
+        ``points`` (and ``faces``) must be the data this surface was fitted to (the same
+        values in the same order: a digest of them is kept in ``report["data_digest"]``);
         ``changes`` override settings (the fields of :class:`RefineOptions`), e.g.
         ``tolerance=``, ``max_control_points=``, ``max_iterations=`` (default: 5 more
         iterations); an unknown name is an :class:`InvalidInputError`.
@@ -478,6 +482,14 @@ class TCBSurface:
             raise InvalidInputError(
                 "refine() needs the points this surface was fitted to "
                 f"({len(self._param.uv)} points, got {len(points)})"
+            )
+        stored = self._report.get("data_digest")  # files written before it have none
+        if stored is not None and data_digest(points) != stored:
+            _check_finite(points)  # the more specific message first
+            raise InvalidInputError(
+                f"refine() needs the {len(points)} points this surface was fitted to, in the "
+                "same order; these differ from them (other values or another order). To fit "
+                "other data, call fit_surface()"
             )
         unknown = sorted(set(changes) - set(_OPTION_NAMES))
         if unknown:
@@ -658,6 +670,13 @@ def _user_path(path) -> Path:
     return Path(os.fsdecode(name)).expanduser()
 
 
+def data_digest(points: np.ndarray) -> str:
+    """A digest (BLAKE2b, 128 bits, hex) of the float64 values of ``points`` in their order:
+    ``refine()`` uses it to refuse data other than the data a surface was fitted to."""
+    p = np.ascontiguousarray(points, dtype=np.float64)
+    return hashlib.blake2b(p.tobytes() + str(p.shape).encode(), digest_size=16).hexdigest()
+
+
 def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """Distance (m,) from points to the boundary of a polygon (vectorized over edges)."""
     a = poly
@@ -769,6 +788,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         "stop_reason": reason,
         "subsampled": bool(subsampled),
         "history": list(history) + hist,
+        # refine() checks that it is given the same points (values and order)
+        "data_digest": data_digest(points),
     }
     if best.refit is not None:  # iterations on a subset, the chosen space fitted to all points
         report["refit"] = best.refit
