@@ -251,6 +251,19 @@ def test_refine_continues_with_a_tighter_tolerance():
     assert len(fine.knots) > len(coarse.knots)
 
 
+def test_a_cloud_with_fewer_than_two_points_per_control_point_gets_a_warning():
+    xy = np.random.default_rng(1).random((60, 2))
+    with pytest.warns(RuntimeWarning, match=r"60 points for \d+ control points.*overshoot"):
+        sparse = fit_surface(np.c_[xy, franke(*xy.T)])
+    assert 2 * sparse.report["control_points"] > 60
+    import warnings
+
+    xy = np.random.default_rng(1).random((3000, 2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        fit_surface(np.c_[xy, franke(*xy.T)], max_control_points=400)
+
+
 def test_refine_refuses_other_points_of_the_same_count(tmp_path):
     """Shuffled points or another scan of the same size gave garbage surfaces (relative RMS
     0.24) without an error; the digest kept in the report (also in files) refuses them."""
@@ -564,6 +577,24 @@ def test_outliers_are_refused_by_name_or_left_out_as_if_they_were_not_there():
         np.testing.assert_array_equal(dropped.tessellate(32)[0], without.tessellate(32)[0])
         assert dropped.report["rms_rel"] <= 2e-3  # the budget of 200 ends the loop
     assert fit_surface(clean, max_control_points=200).report["outliers"] == 0
+
+
+def test_closest_points_of_points_off_the_surface_lie_on_the_trimmed_surface(nefertiti):
+    """Points all around a cloud's and a mesh's surface: their closest parameters are in the
+    data's domain (before, 15-20% of them were on the extension over the border rings, at
+    distances up to 0.1 of the diagonal below any point of the surface), and no distance is
+    above the nearest vertex of the starting tessellation."""
+    xy = np.random.default_rng(3).random((1500, 2))
+    cloud = fit_surface(np.c_[xy, franke(*xy.T)], max_control_points=200)
+    for surf in (cloud, nefertiti[2]):
+        v, _ = surf.tessellate(96)
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        q = np.random.default_rng(4).uniform(lo - 0.2 * (hi - lo), hi + 0.2 * (hi - lo), (300, 3))
+        uv = surf.closest_parameters(q)
+        assert surf.domain_contains(uv).all()
+        d = surf.distances(q)
+        np.testing.assert_allclose(d, np.linalg.norm(surf(uv) - q, axis=1), rtol=1e-12)
+        assert (d <= cKDTree(v).query(q)[0] + 1e-12 * np.linalg.norm(hi - lo)).all()
 
 
 @pytest.fixture(scope="module")
