@@ -16,7 +16,6 @@ rms_rel, max_rel, seconds) and may return True to cancel: the best surface so fa
 from __future__ import annotations
 
 import copy
-import numbers
 import time
 from dataclasses import dataclass
 
