@@ -33,7 +33,7 @@ import scipy.sparse as sp
 from scipy.spatial import Delaunay, cKDTree
 
 from .configurations import Configurations
-from .errors import FileFormatError, InvalidInputError
+from .errors import FileFormatError, InvalidInputError, TCBError
 from .geometry import column_bounds
 from .parameterize import (
     Parameterization, _as_points, _check_finite, box_normalization, normalize, parameterize,
@@ -928,9 +928,37 @@ def fit_surface(
     check_callback(callback)
     if not isinstance(drop_outliers, (bool, np.bool_)):
         raise InvalidInputError(f"drop_outliers must be True or False, got {drop_outliers!r}")
+    coarse = _float32_rounding(points)
     try:
         points = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):
         raise InvalidInputError("points must be an (N, 3) array of numbers") from None
-    param = parameterize(points, faces, drop_outliers=drop_outliers)
+    try:
+        param = parameterize(points, faces, drop_outliers=drop_outliers)
+    except TCBError as exc:
+        if coarse is None:
+            raise
+        raise type(exc)(f"{exc} (note: {coarse})") from None
+    if coarse is not None:
+        warnings.warn(coarse, RuntimeWarning, stacklevel=2)
     return _run(points, param, options, callback, checked=faces is None)
+
+
+def _float32_rounding(points) -> str | None:
+    """A note when ``points`` are 32-bit floats whose spacing at their distance from the
+    origin is more than 1e-4 of their extent (georeferenced scans: 0.0625 at 1e6), else
+    None: such data is already rounded to a coarse lattice, and a fit of it shows steps (or,
+    at worst, is refused as a fold)."""
+    if not (isinstance(points, np.ndarray) and points.dtype == np.float32 and points.ndim == 2
+            and points.shape[0] > 1 and points.shape[1] == 3 and np.isfinite(points).all()):
+        return None
+    lo, hi = column_bounds(points.astype(np.float64))
+    extent = float((hi - lo).max())
+    step = float(np.spacing(np.maximum(np.abs(lo), np.abs(hi)).astype(np.float32)).max())
+    if not step > 1e-4 * extent:
+        return None
+    return (
+        f"the points are 32-bit floats, which far from the origin are {step:.3g} apart, "
+        f"{step / max(extent, 1e-300):.1e} of the data's extent: pass float64 coordinates, or "
+        "subtract an offset before converting to 32 bits"
+    )

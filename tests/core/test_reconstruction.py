@@ -264,6 +264,23 @@ def test_a_cloud_with_fewer_than_two_points_per_control_point_gets_a_warning():
         fit_surface(np.c_[xy, franke(*xy.T)], max_control_points=400)
 
 
+def test_coarse_32_bit_coordinates_are_named_in_the_error_or_a_warning():
+    """A unit patch at 1e6 in 32-bit floats is a 1/16 lattice: it was refused as a fold with
+    no word about the real cause; at 1e4 the steps are 1e-3 of it: a warning says so."""
+    import warnings
+
+    xy = np.random.default_rng(0).random((2000, 2))
+    patch = np.c_[xy, 0.3 * np.sin(3 * xy[:, 0])]
+    with pytest.raises(InvalidInputError, match=r"32-bit floats, which far from the origin are 0\.0625"):
+        fit_surface((patch + 1e6).astype(np.float32), max_control_points=200)
+    with pytest.warns(RuntimeWarning, match=r"32-bit floats.*subtract an offset"):
+        fit_surface((patch + 1e4).astype(np.float32), max_control_points=200)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        fit_surface(patch.astype(np.float32), max_control_points=200)
+        fit_surface(patch + 1e6, max_control_points=200)  # float64 at the same offset: fine
+
+
 def test_refine_refuses_other_points_of_the_same_count(tmp_path):
     """Shuffled points or another scan of the same size gave garbage surfaces (relative RMS
     0.24) without an error; the digest kept in the report (also in files) refuses them."""
