@@ -212,7 +212,11 @@ class SplineSpace:
     """
 
     def __init__(self, knots: np.ndarray, degree: int, mode: str, configurations: Configurations):
-        knots = frozen(np.asarray(knots, dtype=np.float64))
+        given = knots
+        # a copy: a read-only view of the caller's array would still change with it
+        knots = frozen(np.array(given, dtype=np.float64))
+        if isinstance(given, np.ndarray) and np.shares_memory(configurations.knots, given):
+            configurations = dataclasses.replace(configurations, knots=knots)
         configurations = _frozen_configurations(configurations)
         self.knots = knots
         self.degree = degree

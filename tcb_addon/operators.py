@@ -174,6 +174,7 @@ def _summary(surf) -> str:
         f"TCB: {n} control points, RMS {rep.get('rms', float('nan')):.4g}, "
         f"max {rep.get('max', float('nan')):.4g} ({100 * rep.get('max_rel', float('nan')):.3g}% "
         f"of the diagonal), {rep.get('seconds', 0.0):.2f} s"
+        + (f", {rep['outliers']} outliers left out" if rep.get("outliers") else "")
     )
 
 
@@ -521,9 +522,16 @@ class TCB_OT_deviation_map(bpy.types.Operator):
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
 
+        # points the fit left out (Drop Outliers) keep their distance on the point copy but
+        # do not set the statistics or the colour range
+        used = np.asarray(surf.parameterization.used, dtype=bool)
+        counted = used if len(used) == len(data_dist) else np.ones(len(data_dist), dtype=bool)
+        left_out = int(len(data_dist) - counted.sum())
+        fitted_dist = data_dist[counted]
         verts = bridge.read_world_positions(surface, context.evaluated_depsgraph_get())
-        surf_dist = bridge.nearest_distances(verts, data.points, data.faces)
-        vmax = float(max(surf_dist.max(initial=0.0), data_dist.max(initial=0.0)))
+        cloud = data.points if data.faces is not None else data.points[counted]
+        surf_dist = bridge.nearest_distances(verts, cloud, data.faces)
+        vmax = float(max(surf_dist.max(initial=0.0), fitted_dist.max(initial=0.0)))
         bridge.set_float_attribute(surface.data, DEVIATION_ATTR, surf_dist)
         bridge.set_color_attribute(
             surface.data, DEVIATION_ATTR + "_color", bridge.ramp_colors(surf_dist, vmax)
@@ -562,12 +570,13 @@ class TCB_OT_deviation_map(bpy.types.Operator):
 
         st.has_deviation = True
         st.deviation_max = vmax
-        st.deviation_rms = float(np.sqrt(np.mean(data_dist**2))) if len(data_dist) else 0.0
+        st.deviation_rms = float(np.sqrt(np.mean(fitted_dist**2))) if len(fitted_dist) else 0.0
         st.rms = st.deviation_rms
-        st.max = float(data_dist.max(initial=0.0))
+        st.max = float(fitted_dist.max(initial=0.0))
         _show_attribute_colors(context)
+        note = f" ({left_out} outliers left out of the fit not counted)" if left_out else ""
         self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.rms:.4g}, max {st.max:.4g}; "
-                              f"color range 0 - {vmax:.4g}")  # fmt: skip
+                              f"color range 0 - {vmax:.4g}{note}")  # fmt: skip
         return {"FINISHED"}
 
 

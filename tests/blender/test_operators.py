@@ -445,6 +445,16 @@ def test_an_outlier_is_refused_by_name_or_dropped_with_the_option(clean_scene, a
     assert surf.report["outliers"] == 1 and surf.report["points"] == 399
     assert np.isnan(surf.errors[7]) and np.isfinite(np.delete(surf.errors, 7)).all()
     assert surf.report["rms_rel"] <= 2e-3
+    # the deviation map measures the stray too, but its statistics are those of the fit
+    surface = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.deviation_map(points_copy=True) == {"FINISHED"}
+    assert surface.tcb.deviation_max < 0.1 and surface.tcb.max < 0.1
+    pts = surface.tcb.deviation_points
+    assert len(pts.data.vertices) == 400
+    dev = np.empty(400, np.float32)
+    pts.data.attributes["tcb_deviation"].data.foreach_get("value", dev)
+    assert dev[7] > 20 and np.delete(dev, 7).max() < 0.1
     assert snapshot(cloud) == before
 
 

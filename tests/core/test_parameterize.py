@@ -618,8 +618,32 @@ def test_isolated_points_keeps_sparse_regions_duplicates_and_tiny_clouds() -> No
         _franke_cloud(30, 4),
         read_geometry(DATA / "jacksboro_fault_dem.npz")[0],
     ]
+    # density borders (review): a DEM at spacing 1 around a lidar inset at 0.05; scan lines
+    # 0.001-sampled with one 0.02-sampled line; a grid next to one 20x coarser
+    g = np.arange(0.0, 20.5, 1.0)
+    coarse = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    coarse = coarse[~((np.abs(coarse - 7.5) <= 2.5).all(axis=1))]
+    f = np.arange(5.0, 10.0 + 1e-9, 0.05)
+    inset = np.vstack([coarse, np.stack(np.meshgrid(f, f), -1).reshape(-1, 2)])
+    cases.append(np.c_[inset, 0.1 * np.sin(inset[:, 0])])
+    lines = [np.c_[x, np.full_like(x, y), 0.1 * x] for y, x in (
+        (y, np.arange(0.0, 1.0, 0.02 if j == 7 else 0.001))
+        for j, y in enumerate(np.arange(0.0, 1.0, 0.05)))]
+    cases.append(np.vstack(lines))
+    a = np.stack(np.meshgrid(np.arange(0, 1, 0.01), np.arange(0, 1, 0.01)), -1).reshape(-1, 2)
+    b = np.stack(np.meshgrid(np.arange(1, 2, 0.2), np.arange(0, 1, 0.2)), -1).reshape(-1, 2)
+    cases.append(np.c_[np.vstack([a, b]), np.zeros(len(a) + len(b))])
     for pts in cases:
         assert len(isolated_points(normalize(pts)[0])) == 0
+
+
+def test_a_stray_among_repeated_points_and_a_repeated_stray_are_found() -> None:
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 30), np.linspace(0, 1, 30)), -1).reshape(-1, 2)
+    grid = np.c_[g, np.zeros(len(g))]
+    spiky = np.r_[np.tile(grid, (9, 1)), [[0.5, 0.5, 5.0]]]  # every point nine times
+    np.testing.assert_array_equal(isolated_points(normalize(spiky)[0]), [len(spiky) - 1])
+    twice = np.r_[grid, np.tile([[0.5, 0.5, 5.0]], (9, 1))]  # the stray nine times
+    np.testing.assert_array_equal(isolated_points(normalize(twice)[0]), np.arange(900, 909))
 
 
 def test_parameterize_drops_outliers_only_when_asked() -> None:
