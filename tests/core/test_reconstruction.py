@@ -609,6 +609,9 @@ def test_closest_points_of_points_off_the_surface_lie_on_the_trimmed_surface(nef
         q = np.random.default_rng(4).uniform(lo - 0.2 * (hi - lo), hi + 0.2 * (hi - lo), (300, 3))
         uv = surf.closest_parameters(q)
         assert surf.domain_contains(uv).all()
+        # the wedge test of the convex domain agrees with the polygon test
+        probe = np.random.default_rng(5).uniform(-1.3, 1.3, (20000, 2))
+        np.testing.assert_array_equal(surf._in_domain(probe), surf.domain_contains(probe))
         d = surf.distances(q)
         np.testing.assert_allclose(d, np.linalg.norm(surf(uv) - q, axis=1), rtol=1e-12)
         assert (d <= cKDTree(v).query(q)[0] + 1e-12 * np.linalg.norm(hi - lo)).all()
