@@ -275,8 +275,13 @@ def affine_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.ndar
         return np.zeros((space.n_basis, 3))
     cu = (w @ uv) / total
     cp = (w @ points) / total
-    sw = np.sqrt(w)[:, None]
-    M, *_ = np.linalg.lstsq(sw * (uv - cu), sw * (points - cp), rcond=None)  # (2, 3)
+    XtWX, XtWP = np.zeros((2, 2)), np.zeros((2, 3))
+    for s in range(0, len(uv), CHUNK):  # 2x2 normal equations, in chunks (1e6 points: no
+        X = uv[s : s + CHUNK] - cu      # 120 MB of temporaries)
+        wX = X * w[s : s + CHUNK, None]
+        XtWX += wX.T @ X
+        XtWP += wX.T @ (points[s : s + CHUNK] - cp)
+    M, *_ = np.linalg.lstsq(XtWX, XtWP, rcond=None)  # (2, 3)
     return cp + (np.asarray(space.greville) - cu) @ M
 
 

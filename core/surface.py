@@ -760,8 +760,11 @@ def _user_path(path) -> Path:
 def data_digest(points: np.ndarray) -> str:
     """A digest (BLAKE2b, 128 bits, hex) of the float64 values of ``points`` in their order:
     ``refine()`` uses it to refuse data other than the data a surface was fitted to."""
-    p = np.ascontiguousarray(points, dtype=np.float64) + 0.0  # -0.0 and 0.0 alike
-    return hashlib.blake2b(p.tobytes() + str(p.shape).encode(), digest_size=16).hexdigest()
+    p = np.asarray(points, dtype=np.float64)
+    h = hashlib.blake2b(str(p.shape).encode(), digest_size=16)
+    for s in range(0, len(p), 65536):  # in chunks: no copy of a large input
+        h.update(np.ascontiguousarray(p[s : s + 65536] + 0.0).data)  # -0.0 and 0.0 alike
+    return h.hexdigest()
 
 
 def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:
