@@ -264,11 +264,12 @@ def fit_control_points(
 
 def affine_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """Control points ``L`` (n_basis, 3) of the weighted least-squares affine map
-    ``(u, v) -> p`` of the data, ``L_I = M^T [xi_I, 1]`` with ``M`` (3, 3) minimizing
-    ``sum_j w_j |[x_j, 1] M - p_j|^2`` and ``xi_I`` the Greville points: the spline with these
-    control points is that affine map where the basis is a partition of unity (linear
-    reproduction, method.md section 2.2). The fairing pulls towards it (module docstring).
-    Computed in coordinates centred on the weighted means, so that it is exact for a plane."""
+    ``(u, v) -> p`` of the data: ``L_I = c_p + (xi_I - c_u) M`` with ``c_u``, ``c_p`` the
+    weighted means, ``M`` (2, 3) minimizing ``sum_j w_j |(x_j - c_u) M - (p_j - c_p)|^2`` (its
+    2x2 normal equations, accumulated in chunks of points) and ``xi_I`` the Greville points.
+    The spline with these control points is that affine map where the basis is a partition of
+    unity (linear reproduction, method.md section 2.2); the fairing pulls towards it (module
+    docstring). Centring makes it exact for a plane."""
     w = np.asarray(weights, dtype=np.float64)
     total = float(w.sum())
     if not total > 0:
@@ -276,8 +277,8 @@ def affine_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.ndar
     cu = (w @ uv) / total
     cp = (w @ points) / total
     XtWX, XtWP = np.zeros((2, 2)), np.zeros((2, 3))
-    for s in range(0, len(uv), CHUNK):  # 2x2 normal equations, in chunks (1e6 points: no
-        X = uv[s : s + CHUNK] - cu      # 120 MB of temporaries)
+    for s in range(0, len(uv), CHUNK):  # chunks: lstsq on all of 1e6 points took 120 MB
+        X = uv[s : s + CHUNK] - cu
         wX = X * w[s : s + CHUNK, None]
         XtWX += wX.T @ X
         XtWP += wX.T @ (points[s : s + CHUNK] - cp)

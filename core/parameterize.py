@@ -56,7 +56,7 @@ _FOLD_RIM_SHARE = 0.6  # steep points count as a fold when this share of them is
 _FOLD_MAX_SAMPLE = 40_000  # larger clouds are checked on a seeded random subset of this size
 _THIN_NEIGHBOURHOOD = 0.25  # lambda_0 / lambda_1 above this: local normal unreliable
 _COLLINEAR_RTOL = 1e-9  # RMS distance from the best line, relative to the scale
-_OUTLIER_NEIGHBOURS = 8  # d_i: distance to the 8th nearest neighbour; groups of <= 8 strays
+_OUTLIER_NEIGHBOURS = 8  # d_i: distance to the 8th nearest distinct neighbour (local spacing)
 _OUTLIER_FACTOR = 10.0  # candidates: d_i above this times the cloud's median d ...
 _OUTLIER_LOCAL = 3.0  # ... and this times its neighbours' lower quartile
 _OUTLIER_ISOLATION = 20.0  # isolated: its nearest non-candidate j is this many d_j away
