@@ -422,31 +422,31 @@ class TCBSurface:
         data, _ = self._data_parameters()
         starts = np.vstack([uv_t, np.clip(data[:: max(1, len(data) // 20_000)], lo, hi)])
         _, nearest = cKDTree(self(starts)).query(p)
-        x = starts[nearest].copy()
-        x, d = self._newton_closest(p, x, self._surface_and_gradient(x), lo, hi, steps)
-        if self._param.kind == "plane" and self._param.origin is not None:
-            # a cloud's own projection is another start; keep the better result (starting from
-            # the better start only was 1.6x faster on the DEM but 2% of the distances came out
-            # larger, by up to 2% of the largest)
-            y = np.clip(self._param.project(p), lo, hi)
-            y, e = self._newton_closest(p, y, self._surface_and_gradient(y), lo, hi, steps)
-            b = e < d
-            x[b], d[b] = y[b], e[b]
+        x, d = self._descend(p, starts[nearest], lo, hi, steps, None)
         # the steps above stay in the domain's box; the few that ended outside the domain (on
-        # the extension over the border rings) continue from the domain's edge, kept in it
-        # (clamping every step to the polygon made points outside a 596-edge mesh 9x slower)
+        # the extension over the border rings) are redone from the same starts with every step
+        # kept in the domain (clamping all points' steps to the polygon made points outside a
+        # 596-edge mesh 9x slower)
         out = np.flatnonzero(~self._in_domain(x))
         if len(out):
-            y = starts[nearest[out]]  # in the domain
-            y, e = self._newton_closest(p[out], y, self._surface_and_gradient(y), lo, hi, steps,
-                                        keep_in=self._into_domain)
-            if self._param.kind == "plane" and self._param.origin is not None:
-                z = self._into_domain(self._param.project(p[out]), lo, hi)
-                z, f = self._newton_closest(p[out], z, self._surface_and_gradient(z), lo, hi,
-                                            steps, keep_in=self._into_domain)
-                b = f < e
-                y[b], e[b] = z[b], f[b]
-            x[out], d[out] = y, e
+            x[out], d[out] = self._descend(p[out], starts[nearest[out]], lo, hi, steps,
+                                           self._into_domain)
+        return x, d
+
+    def _descend(self, p, x, lo, hi, steps, keep_in):
+        """Gauss-Newton (:meth:`_newton_closest`) from the starts ``x`` and, for a cloud, also
+        from the points' projections on its plane; the better result of each point (starting
+        from the better start only was 1.6x faster on the DEM but 2% of the distances came out
+        larger, by up to 2% of the largest)."""
+        keep = np.clip if keep_in is None else keep_in
+        x = keep(np.array(x, dtype=np.float64), lo, hi)
+        x, d = self._newton_closest(p, x, self._surface_and_gradient(x), lo, hi, steps, keep_in)
+        if self._param.kind == "plane" and self._param.origin is not None:
+            y = keep(self._param.project(p), lo, hi)
+            y, e = self._newton_closest(p, y, self._surface_and_gradient(y), lo, hi, steps,
+                                        keep_in)
+            b = e < d
+            x[b], d[b] = y[b], e[b]
         return x, d
 
     def _surface_and_gradient(self, uv):
