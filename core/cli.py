@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InvalidInputError, TCBError
+from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 
 __all__ = ["main"]
@@ -42,9 +43,10 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--max-iterations", type=int, default=20)
     f.add_argument("--degree", type=int, choices=(2, 3), default=2)
     f.add_argument("--mode", choices=("tcb", "dcb"), default="tcb")
-    f.add_argument("--smoothness", type=_smoothness, default=1e-4,
+    f.add_argument("--smoothness", type=_smoothness, default=DEFAULT_SMOOTHNESS,
                    help="fairing weight relative to the data term, or 'auto': chosen by "
-                   "5-fold cross-validation for the final surface (default 1e-4)")
+                   "5-fold cross-validation for the final surface (default 1e-4; on sparse "
+                   "clouds, under 2 points per control point, the default is cross-validated)")
     f.add_argument("--resolution", type=int, default=64,
                    help="tessellation steps across the longer side of the domain (default 64)")
     f.add_argument("--net", help="write the control net (.obj or .ply) here")
@@ -74,7 +76,8 @@ def _smoothness_text(report: dict) -> str:
     sel = report.get("smoothness_selection")
     if sel is not None:
         text += (f" (auto chose {sel['chosen']:.3g}, which misses the tolerance: default kept)"
-                 if "kept" in sel else " (auto)")
+                 if "kept" in sel else " (cross-validated: sparse data)" if "why" in sel
+                 else " (auto)")
     return text
 
 

@@ -44,7 +44,8 @@ from .geometry import column_bounds
 from .simplex import orient2d
 
 __all__ = ["FitResult", "fit_control_points", "fairing_quadrature", "check_smoothness",
-           "affine_reference", "PARTITION_TOL", "AUTO_SMOOTHNESS"]
+           "affine_reference", "PARTITION_TOL", "AUTO_SMOOTHNESS", "SPARSE_SMOOTHNESS",
+           "DEFAULT_SMOOTHNESS"]
 
 PARTITION_TOL = 1e-9
 CHUNK = 200_000
@@ -57,8 +58,29 @@ FIRST_ORDER_SHARE = 0.1
 # fewest points that make a choice (below it: DEFAULT_SMOOTHNESS)
 AUTO_SMOOTHNESS = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
 FOLDS = 5
-MIN_AUTO_POINTS = 100
-DEFAULT_SMOOTHNESS = 1e-4
+MIN_AUTO_POINTS = 10
+# sparse data: fewer scored points than this per basis function that sees data. Between the points only the
+# fairing holds the surface, and the choice also tries these larger weights (the limit of a
+# large weight is the affine fit): on 30-60 random points of Franke's function
+# cross-validation chose 1-100
+SPARSE_POINTS_PER_CONTROL = 2
+SPARSE_SMOOTHNESS = (1e2, 1e1, 1.0, 1e-1)
+
+
+class DefaultSmoothness(float):
+    """The default fairing weight 1e-4 as a float that remembers it was not chosen by the
+    user: on sparse clouds :func:`core.refine.adaptive_fit` then uses the cross-validated
+    weight instead (``smoothness=1e-4`` passed explicitly is used as given). Arithmetic gives
+    plain floats."""
+
+    def __repr__(self) -> str:
+        return "1e-4"
+
+    def __reduce__(self):
+        return (DefaultSmoothness, (float(self),))
+
+
+DEFAULT_SMOOTHNESS = DefaultSmoothness(1e-4)
 
 
 @dataclass
@@ -317,14 +339,20 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
     mesh its vertices, while the points sampled on its faces are fitted and left out like the
     others but not scored). The choice is :func:`_one_standard_error`. Candidates whose system
     is singular are skipped. With fewer than :data:`MIN_AUTO_POINTS` scored points of positive
-    weight there is nothing to cross-validate: :data:`DEFAULT_SMOOTHNESS`.
+    weight there is nothing to cross-validate: :data:`DEFAULT_SMOOTHNESS`. With fewer than
+    :data:`SPARSE_POINTS_PER_CONTROL` scored points per basis function that sees data the
+    candidates :data:`SPARSE_SMOOTHNESS` come first.
 
     Returns the chosen value and ``{candidate: cross-validated RMS}``.
     """
     N = len(uv)
     m = N if scored is None else int(min(max(scored, 0), N))
-    if int((weights[:m] > 0).sum()) < MIN_AUTO_POINTS:
+    scoring = int((weights[:m] > 0).sum())
+    if scoring < MIN_AUTO_POINTS:
         return DEFAULT_SMOOTHNESS, {}
+    candidates = AUTO_SMOOTHNESS
+    if scoring < SPARSE_POINTS_PER_CONTROL * int(np.count_nonzero(AtA.diagonal() > 0)):
+        candidates = SPARSE_SMOOTHNESS + AUTO_SMOOTHNESS
     fold = _folds(uv)
     starts = np.cumsum([0] + [A.shape[0] for A in chunks or []])
 
@@ -336,7 +364,7 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
         parts = [A[fold[starts[i] : starts[i + 1]] == f] for i, A in enumerate(chunks)]
         return rows, sp.vstack(parts).tocsr()
 
-    sq = {s: np.zeros(N) for s in AUTO_SMOOTHNESS}
+    sq = {s: np.zeros(N) for s in candidates}
     failed: set = set()
     data_trace = AtA.diagonal().sum()
     # every system below has (nearly) the pattern of AtA + G: one ordering serves them all
@@ -350,7 +378,7 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
         # G is scaled by the data term (module docstring): here by that of the points kept
         G_fit = (K_fit.diagonal().sum() / data_trace) * G
         GL_fit = G_fit @ affine_reference(space, uv, points, np.where(fold == f, 0.0, weights))
-        for s in AUTO_SMOOTHNESS:
+        for s in candidates:
             if s in failed:
                 continue
             try:

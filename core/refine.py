@@ -25,7 +25,8 @@ from scipy.spatial import ConvexHull, cKDTree
 from .border import border_rings, default_ring_count
 from .configurations import link_triangulation_procedure
 from .errors import BorderError, InvalidInputError
-from .fit import DEFAULT_SMOOTHNESS, FitResult, check_smoothness, fit_control_points
+from .fit import (DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL, DefaultSmoothness, FitResult,
+                  check_smoothness, fit_control_points)
 from .geometry import column_bounds
 from .parallel import pmap, row_blocks
 from .simplex import orient2d
@@ -65,7 +66,7 @@ class RefineOptions:
     criterion: str = "rms"
     max_control_points: int = 2000
     max_iterations: int = 20
-    smoothness: float | str = 1e-4  # or "auto" (core.fit)
+    smoothness: float | str = DEFAULT_SMOOTHNESS  # or "auto" (core.fit)
     initial_knots: int | None = None
     knots_per_iteration: int | None = None
     feature_sensitive: bool = True
@@ -77,6 +78,8 @@ class RefineOptions:
 
         if isinstance(self.smoothness, str):  # " AUTO " -> "auto" (what files store)
             put("smoothness", check_smoothness(self.smoothness))
+        elif isinstance(self.smoothness, DefaultSmoothness):
+            pass  # the default (not chosen by the user): sparse clouds cross-validate it
         elif _number(self.smoothness) is not None:
             put("smoothness", _number(self.smoothness))
         for name in _WHOLE:
@@ -619,6 +622,15 @@ def adaptive_fit(
             f"even the coarsest surface needs {best.n_control} control points, more than "
             f"the maximum of {options.max_control_points}; allow more control points"
         )
+    # sparse data (fewer fitted points than SPARSE_POINTS_PER_CONTROL per control point): only
+    # the fairing holds the surface between the points, and the loop met its tolerance by
+    # interpolating them. The default weight is replaced by the cross-validated one (60 random
+    # points of Franke's function: the surface swung to 2x the data's height range with 1e-4),
+    # and a choice is kept even when it misses the tolerance.
+    fitted = len(full[0]) if full[2] is None else int(np.count_nonzero(full[2] > 0))
+    sparse = fitted < SPARSE_POINTS_PER_CONTROL * best.n_control
+    default_replaced = sparse and not auto and isinstance(options.smoothness, DefaultSmoothness)
+    auto = auto or default_replaced
     # a cancelled run is not refitted with a choice (30 factorizations the user asked to skip)
     auto = auto and reason != "cancelled"
     if sampled or auto:
@@ -635,7 +647,11 @@ def adaptive_fit(
             e = fit.errors[:fm]
             value = (np.sqrt(np.mean(e**2)) if options.criterion == "rms"
                      else e.max(initial=0.0))
-            if reason == "tolerance reached" and value > tol and fit.smoothness != loop_smoothness:
+            if default_replaced:
+                selection["why"] = (f"sparse data: {fitted} points for {best.n_control} control "
+                                    "points (the default 1e-4 is cross-validated)")
+            if (reason == "tolerance reached" and value > tol and fit.smoothness != loop_smoothness
+                    and not sparse):
                 # the smoother choice would break the tolerance the loop reached: keep the
                 # default (the loop's fit, or after sampled iterations its refit on all points)
                 fit = (fit_control_points(best.space, fu, fp, fw, loop_smoothness) if sampled

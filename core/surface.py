@@ -34,6 +34,7 @@ from scipy.spatial import Delaunay, cKDTree
 
 from .configurations import Configurations
 from .errors import FileFormatError, InvalidInputError, TCBError
+from .fit import DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL
 from .geometry import column_bounds
 from .parameterize import (
     Parameterization, _as_points, _check_finite, box_normalization, normalize, parameterize,
@@ -55,8 +56,6 @@ MIN_ASPECT = 1e-3
 # tessellation: rounds of edge splits where the data parameters are denser than on average
 TESSELLATION_SPLITS = 4
 TESSELLATION_REFINE_POINTS = 50_000
-# a cloud with fewer points than this per control point gets a RuntimeWarning (overshoot)
-SPARSE_POINTS_PER_CONTROL = 2
 # tessellation_uv keeps this many of the most recent resolutions (a fine one is megabytes)
 TESSELLATION_CACHE = 4
 # the spline is defined where its basis sums to 1 to within this (TCBSurface.covers)
@@ -881,14 +880,19 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # refine() checks that it is given the same points (values and order)
         "data_digest": data_digest(points),
     }
-    if param.faces is None and SPARSE_POINTS_PER_CONTROL * report["control_points"] > used.sum():
+    if (param.faces is None and best.selection is None
+            and SPARSE_POINTS_PER_CONTROL * report["control_points"] > used.sum()):
         # a mesh is fitted on samples of its faces too; a sparse cloud has nothing between
         # its points but the fairing (60 points of Franke's function: the surface swung to
-        # twice the data's height range, at a relative RMS of 1.8e-3)
+        # twice the data's height range with smoothness 1e-4). The default and "auto" are
+        # cross-validated there (core.refine.adaptive_fit); a number given is used as given.
+        advice = ("the run was cancelled before the smoothness was cross-validated"
+                  if reason == "cancelled" else "leave smoothness at its default or pass "
+                  "smoothness='auto' to have it chosen by cross-validation")
         warnings.warn(
             f"{report['points']} points for {report['control_points']} control points: between "
-            "the points the surface is loosely determined and may overshoot; use fewer control "
-            "points (max_control_points) or more smoothness (e.g. smoothness=1e-2)",
+            f"the points only the smoothness {report['smoothness']:g} holds the surface, and it "
+            f"may overshoot; {advice}",
             RuntimeWarning, stacklevel=3,
         )
     if best.refit is not None:  # iterations on a subset, the chosen space fitted to all points
@@ -908,7 +912,7 @@ def fit_surface(
     relative: bool = True,
     max_control_points: int = 2000,
     max_iterations: int = 20,
-    smoothness: float | str = 1e-4,
+    smoothness: float | str = DEFAULT_SMOOTHNESS,
     callback=None,
     *,
     criterion: str = "rms",
@@ -937,9 +941,13 @@ def fit_surface(
     max_iterations : int
         Fits at most this many times.
     smoothness : float or "auto"
-        Fairing weight relative to the data term (method.md section 5). ``"auto"``: the
+        Fairing weight relative to the data term (method.md section 5); default 1e-4, except
+        on sparse clouds (fewer than 2 points per control point), where the default is
+        replaced by the cross-validated choice (``report["smoothness_selection"]["why"]``
+        says so; pass ``1e-4`` explicitly to keep it). ``"auto"``: the
         iterations use 1e-4 and the surface returned is refitted with the weight chosen by
-        5-fold cross-validation among 1e-2 ... 1e-7 (one-standard-error rule; the value used is
+        5-fold cross-validation among 1e-2 ... 1e-7 (on sparse clouds also 1e-1 ... 100;
+        one-standard-error rule; the value used is
         ``report["smoothness"]``, the scores ``report["smoothness_selection"]``; a mesh is
         scored at its vertices). On dense samples (50 points per control point) it changed the
         held-out error 0.73-1.14x (geometric mean 0.94) in docs/smoothness.md; on sparse ones

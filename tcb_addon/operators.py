@@ -19,7 +19,7 @@ from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
 from . import bridge, live
-from .properties import FIT_KEYS, FitSettings, draw_fit_settings
+from .properties import DEFAULT_SMOOTHNESS, FIT_KEYS, FitSettings, draw_fit_settings
 
 # Custom property of the surface object: TCBSurface.to_bytes() as base64 text. (Raw bytes
 # ID properties lose everything after the first NUL byte when an existing one is reassigned.)
@@ -338,11 +338,13 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         return context.mode == "OBJECT"
 
     def _fit_kwargs(self):
+        smoothness = "auto" if self.auto_smoothness else self.smoothness
+        if smoothness == DEFAULT_SMOOTHNESS:  # left at the default (float32 of 1e-4): the
+            smoothness = _core().fit.DEFAULT_SMOOTHNESS  # core cross-validates it on sparse clouds
         return dict(
             degree=int(self.degree), mode=self.mode.lower(), tolerance=self.tolerance,
             relative=self.relative, max_control_points=self.max_control_points,
-            max_iterations=self.max_iterations,
-            smoothness="auto" if self.auto_smoothness else self.smoothness,
+            max_iterations=self.max_iterations, smoothness=smoothness,
             criterion=self.criterion.lower(), drop_outliers=self.drop_outliers,
         )  # fmt: skip
 

@@ -10,6 +10,8 @@ spline itself is stored as bytes in the custom property ``object["tcb_spline"]``
 ``operators.SPLINE_KEY``), so Refine and re-tessellation work after saving and reopening.
 """
 
+import struct
+
 import bpy
 from bpy.props import (
     BoolProperty,
@@ -20,6 +22,10 @@ from bpy.props import (
     PointerProperty,
     StringProperty,
 )
+
+# the Smoothness default as Blender stores it (a 32-bit float): a property still at this value
+# was left at the default, which the engine cross-validates on sparse clouds
+DEFAULT_SMOOTHNESS = struct.unpack("f", struct.pack("f", 1e-4))[0]
 
 
 class FitSettings:
@@ -75,8 +81,9 @@ class FitSettings:
     smoothness: FloatProperty(
         name="Smoothness",
         description="Weight of the smoothing term of the least-squares fit (0 = none); used "
-        "when Auto Smoothness is off",
-        default=1e-4, min=0.0, soft_max=1.0, precision=6, step=0.001,
+        "when Auto Smoothness is off. Left at the default on a sparse cloud (under 2 points "
+        "per control point), it is chosen by cross-validation",
+        default=DEFAULT_SMOOTHNESS, min=0.0, soft_max=1.0, precision=6, step=0.001,
     )  # fmt: skip
     auto_smoothness: BoolProperty(
         name="Auto Smoothness",

@@ -182,6 +182,23 @@ def test_fit_with_auto_smoothness_stores_the_chosen_value(clean_scene, addon):
     assert "smoothness_selection" in spline_of(addon, surface).report
 
 
+def test_a_sparse_cloud_left_at_the_default_smoothness_gets_it_cross_validated(clean_scene, addon):
+    """60 points, about one per control point: the Smoothness property left at its default
+    is cross-validated by the engine (1e-4 swung the surface far off between the points); a
+    value the user set is used as given."""
+    bpy = clean_scene
+    xy = np.random.default_rng(1).random((60, 2))
+    cloud = add_mesh(bpy, "Spots", np.c_[xy, 0.5 * np.sin(3 * xy[:, 0]) * np.cos(2 * xy[:, 1])])
+    assert fit(bpy, cloud) == {"FINISHED"}
+    surf = spline_of(addon, bpy.context.view_layer.objects.active)
+    assert "sparse data" in surf.report["smoothness_selection"]["why"]
+    assert 2 * surf.report["control_points"] > 60 and surf.report["smoothness"] >= 1e-2
+    with pytest.warns(RuntimeWarning, match="only the smoothness 0.001 holds the surface"):
+        assert fit(bpy, cloud, smoothness=1e-3) == {"FINISHED"}
+    surf = spline_of(addon, bpy.context.view_layer.objects.active)
+    assert surf.report["smoothness"] == pytest.approx(1e-3) and "smoothness_selection" not in surf.report
+
+
 def test_fit_mesh_object_nefertiti(clean_scene, addon):
     bpy = clean_scene
     import importlib

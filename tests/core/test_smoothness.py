@@ -119,8 +119,9 @@ def test_duplicated_points_do_not_fool_the_cross_validation(space):
     """Each point twice: with the twins in different folds each point would be predicted by a
     fit that saw its twin (random folds gave a 3x lower CV error here). With twins in one fold,
     doubling every point is doubling every weight, which the relative fairing cancels: the
-    scores are those of the data given once."""
-    uv, P = _data(300, 0.05)
+    scores are those of the data given once (1000 points: dense given once, so the same
+    candidates are tried)."""
+    uv, P = _data(1000, 0.05)
     once = fit_control_points(space, uv, P, smoothness="auto")
     twice = fit_control_points(space, np.vstack([uv, uv]), np.vstack([P, P]), smoothness="auto")
     assert twice.smoothness == once.smoothness
@@ -129,7 +130,7 @@ def test_duplicated_points_do_not_fool_the_cross_validation(space):
     # near duplicates (1e-9 apart, e.g. badly welded vertices) too
     near = np.vstack([uv, uv + 1e-9])
     fold = fit_module._folds(near)
-    assert (fold[:300] == fold[300:]).mean() >= 0.95
+    assert (fold[:1000] == fold[1000:]).mean() >= 0.95
     close = fit_control_points(space, near, np.vstack([P, P]), smoothness="auto")
     assert close.smoothness == once.smoothness
     for s, v in once.validation.items():  # a leak would make the least smoothing look good
@@ -202,14 +203,26 @@ def test_a_kept_basis_is_reused_bit_for_bit(space):
 
 
 def test_too_few_points_fall_back_to_the_default(space):
-    uv, P = _data(60, 0.0)
-    res = fit_control_points(space, uv, P, smoothness="auto")
-    assert res.smoothness == fit_module.DEFAULT_SMOOTHNESS and res.validation == {}
-    # zero-weight points do not count
     uv, P = _data(400, 0.0)
     w = np.zeros(400)
-    w[:50] = 1.0
-    assert fit_control_points(space, uv, P, w, smoothness="auto").validation == {}
+    w[:9] = 1.0  # zero-weight points do not count: 9 are too few to cross-validate
+    res = fit_control_points(space, uv, P, w, smoothness="auto")
+    assert res.smoothness == fit_module.DEFAULT_SMOOTHNESS and res.validation == {}
+    w[:10] = 1.0
+    assert fit_control_points(space, uv, P, w, smoothness="auto").validation != {}
+
+
+def test_sparse_points_also_try_larger_smoothness(space):
+    """Fewer than 2 points per basis function that sees data: the candidates start at 100
+    (between the points only the fairing holds the surface); dense data keep the usual list."""
+    for n in (150, 3000):
+        uv, P = _data(n, 0.0)
+        seen = np.count_nonzero(space.evaluate(uv).getnnz(axis=0))
+        res = fit_control_points(space, uv, P, smoothness="auto")
+        sparse = n < 2 * seen
+        assert sparse == (n == 150)
+        assert set(res.validation) == set(
+            (fit_module.SPARSE_SMOOTHNESS if sparse else ()) + AUTO_SMOOTHNESS)
 
 
 def _noisy_cloud(n=4000, noise=0.02, seed=1):
