@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InvalidInputError, TCBError
+from .errors import InvalidInputError, OutlierError, TCBError
 from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 
@@ -113,6 +113,7 @@ def _progress(quiet: bool):
 
 
 def _fit(args) -> int:
+    from .parameterize import outlier_error
     from .surface import fit_surface
 
     _check_output(args.output, "surface")
@@ -122,6 +123,7 @@ def _fit(args) -> int:
         raise TCBError(f"--resolution must be at least 2, got {args.resolution}")
     t0 = time.perf_counter()
     points, faces = read_geometry(args.input)
+    given = points
     bad = ~np.isfinite(points).all(axis=1)
     if bad.any() and faces is None:
         if not args.drop_invalid:
@@ -136,13 +138,19 @@ def _fit(args) -> int:
     if not args.quiet:
         kind = f"mesh with {len(faces)} faces" if faces is not None else "point cloud"
         print(f"read {args.input}: {len(points)} points, {kind}", file=sys.stderr)
-    surf = fit_surface(
-        points, faces, degree=args.degree, mode=args.mode, tolerance=args.tolerance,
-        relative=args.relative, max_control_points=args.max_control_points,
-        max_iterations=args.max_iterations, smoothness=args.smoothness,
-        criterion=args.criterion, callback=_progress(args.quiet),
-        drop_outliers=args.drop_outliers,
-    )
+    try:
+        surf = fit_surface(
+            points, faces, degree=args.degree, mode=args.mode, tolerance=args.tolerance,
+            relative=args.relative, max_control_points=args.max_control_points,
+            max_iterations=args.max_iterations, smoothness=args.smoothness,
+            criterion=args.criterion, callback=_progress(args.quiet),
+            drop_outliers=args.drop_outliers,
+        )
+    except OutlierError as exc:
+        if not bad.any():
+            raise
+        # number the outliers as in the file, not among the points left after --drop-invalid
+        raise outlier_error(given, np.flatnonzero(~bad)[exc.indices]) from None
     verts, tris = surf.tessellate(args.resolution)
     write_mesh(args.output, verts, tris)
     if args.net:

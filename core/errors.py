@@ -28,6 +28,16 @@ class ParameterizationError(InvalidInputError):
     """The data cannot be mapped to a plane without folds (e.g. a strongly curved cloud)."""
 
 
+class OutlierError(InvalidInputError):
+    """A cloud with points far from all others. ``indices`` are their rows in the points given
+    (callers that merged or filtered the input re-number them with
+    :func:`core.parameterize.outlier_error`)."""
+
+    def __init__(self, message: str, indices=()):
+        super().__init__(message)
+        self.indices = indices
+
+
 class FileFormatError(InvalidInputError):
     """A file that cannot be read: unknown extension, malformed content, truncated data."""
 

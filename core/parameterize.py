@@ -24,7 +24,9 @@ from scipy.sparse.csgraph import connected_components, depth_first_order
 from scipy.sparse.linalg import splu
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from .errors import InvalidInputError, ParameterizationError, TCBError, TopologyError
+from .errors import (
+    InvalidInputError, OutlierError, ParameterizationError, TCBError, TopologyError,
+)
 from .geometry import column_bounds
 from .parallel import pmap, row_blocks
 from .simplex import orient2d
@@ -34,7 +36,9 @@ __all__ = [
     "Normalization",
     "Parameterization",
     "count_duplicates",
+    "isolated_points",
     "normalize",
+    "outlier_error",
     "parameterize",
     "parameterize_mesh",
     "parameterize_points",
@@ -626,17 +630,25 @@ def isolated_points(
     return np.sort(np.concatenate(out)).astype(np.int64)
 
 
-def _outlier_error(points: np.ndarray, isolated: np.ndarray) -> InvalidInputError:
+def outlier_error(points: np.ndarray, isolated, label=None) -> OutlierError:
+    """The error for the outliers ``isolated`` (indices) among ``points`` (N, 3), naming the
+    first three by ``label(i)`` (default ``#i``, their row) and their coordinates.
+
+    Callers that merged or filtered the user's input build it again with the user's numbering
+    (the command line after ``--drop-invalid``, Blender with object names)."""
+    label = label or (lambda i: f"#{i}")
+    isolated = np.asarray(isolated, dtype=np.int64)
     show = ", ".join(
-        f"#{i} ({', '.join(f'{c:.6g}' for c in points[i])})" for i in isolated[:3]
+        f"{label(int(i))} ({', '.join(f'{c:.6g}' for c in points[i])})" for i in isolated[:3]
     )
     more = f" and {len(isolated) - 3} more" if len(isolated) > 3 else ""
-    return InvalidInputError(
+    return OutlierError(
         f"{len(isolated)} of the {len(points)} points lie far from all others (outliers: "
         f"{show}{more}); they would stretch the surface's domain and pull it away from the "
         "data. Remove them, or let the fit leave them out: fit_surface(..., "
         "drop_outliers=True), on the command line --drop-outliers, in Blender the "
-        "Drop Outliers option"
+        "Drop Outliers option",
+        isolated,
     )
 
 
@@ -681,7 +693,7 @@ def parameterize_points(points: np.ndarray, drop_outliers: bool | None = False) 
     if drop_outliers is not None:
         isolated = isolated_points(q, sample, knn)
         if len(isolated) and not drop_outliers:
-            raise _outlier_error(np.asarray(points, dtype=np.float64), isolated)
+            raise outlier_error(np.asarray(points, dtype=np.float64), isolated)
         if len(isolated):
             kept = np.ones(len(q), dtype=bool)
             kept[isolated] = False

@@ -50,6 +50,16 @@ class InputData:
         names = [o.name for o in self.sources]
         return names[0] if len(names) == 1 else f"{names[0]} +{len(names) - 1}"
 
+    def label(self, i: int) -> str:
+        """Point ``i`` of the merged input as the user knows it: ``'Object' #k``, ``k`` its
+        index in that object's points."""
+        start = 0
+        for name, n in self.counts.items():
+            if i < start + n:
+                return f"'{name}' #{i - start}"
+            start += n
+        return f"#{i}"
+
     def digest(self) -> str:
         """A content hash, so a redo with the same input can reuse the last fit."""
         h = hashlib.blake2b(digest_size=16)

@@ -357,7 +357,14 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         if cached is not None:
             return ("done", cached)
         core = _core()
-        return ("run", core.fit_surface, dict(points=data.points, faces=data.faces, **kwargs))
+
+        def fit(**kw):  # outliers are named by object and index, not by row of the merged input
+            try:
+                return core.fit_surface(**kw)
+            except core.OutlierError as ex:
+                raise core.parameterize.outlier_error(data.points, ex.indices, data.label) from None
+
+        return ("run", fit, dict(points=data.points, faces=data.faces, **kwargs))
 
     def finish(self, context, surf):
         _cache_put(self._key, surf)

@@ -456,7 +456,11 @@ def test_an_outlier_is_refused_by_name_or_dropped_with_the_option(clean_scene, a
     verts[7] = [0.0, 0.0, 25.0]
     cloud = add_point_cloud(bpy, "Spiky", verts)
     before = snapshot(cloud)
-    _expect_error(bpy, [cloud], r"1 of the 400 points lie far from all others.*#7 .*Drop Outliers")
+    _expect_error(bpy, [cloud], r"1 of the 400 points lie far from all others.*'Spiky' #7 .*Drop Outliers")
+    # merged with a second object, the stray is still named by its object and index there
+    other = add_point_cloud(bpy, "Other", grid(20)[0] + [0.0, 2.1, 0.0])
+    _expect_error(bpy, [other, cloud], r"1 of the 800 points .*outliers: 'Spiky' #7 \(0, 0, 25\)")
+    bpy.data.objects.remove(other)
     assert fit(bpy, cloud, drop_outliers=True) == {"FINISHED"}
     surf = spline_of(addon, bpy.context.view_layer.objects.active)
     assert surf.report["outliers"] == 1 and surf.report["points"] == 399

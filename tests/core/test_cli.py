@@ -94,6 +94,10 @@ def test_outliers_name_the_option_that_drops_them(tmp_path):
             "--max-control-points", "100", "--max-iterations", "1")
     assert r.returncode == 0, r.stderr
     assert "599 points, 1 outliers left out" in r.stdout
+    # after --drop-invalid the stray is still named by its row in the file
+    np.savetxt(src, np.insert(pts, [0, 10, 20], np.nan, axis=0))
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--quiet", "--drop-invalid")
+    assert r.returncode == 2 and "outliers: #45 (40, 40, 0)" in r.stderr, r.stderr
 
 
 def test_nan_rows_name_the_option_that_drops_them(tmp_path):
