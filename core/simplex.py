@@ -256,13 +256,76 @@ class SimplexBatch:
         return self.evaluate_many(x, sets, [derivative])[0]
 
     def evaluate_many(self, x: np.ndarray, sets: np.ndarray, derivatives) -> list:
-        """:meth:`evaluate` for several derivative orders at once (one set of side tests)."""
+        """:meth:`evaluate` for several derivative orders at once (one set of side tests).
+
+        Layout: after one row gather per table (``np.take``: 2.5-7x faster than fancy
+        indexing), every per-pair quantity is a contiguous row of length ``P`` (knot
+        coordinates, leaves, barycentric coordinates): numpy's loops on strided columns of
+        ``(P, 3)`` / ``(P, n, 2)`` arrays were the cost (this layout: 0.8x the time of the
+        basis evaluation at 1e5 points). The side tests are :func:`_edge_left`'s formula,
+        ``d x (x - lo)`` with ``d = hi - lo``, bit for bit.
+        """
         x = np.asarray(x, dtype=np.float64)
         sets = np.asarray(sets, dtype=np.int64)
         k = self.degree
         outs = [np.zeros(len(sets)) for _ in derivatives]
         if len(sets) == 0 or all(sum(d) > k for d in derivatives):
             return outs
+        P, n = len(sets), k + 3
+        VT = np.take(self.V, sets, axis=0).reshape(P, 2 * n).T.copy()  # row 2i + c: knot i, coord c
+        xu, xv = x[:, 0].copy(), x[:, 1].copy()
+        du_ = [xu - VT[2 * i] for i in range(n)]  # x - V_i, once per knot
+        dv_ = [xv - VT[2 * i + 1] for i in range(n)]
+        bits = np.zeros(P, dtype=self.leaf_want.dtype)
+        for e, (p, q) in enumerate(self.edges):  # p < q: V_p <lex V_q
+            dx = VT[2 * q] - VT[2 * p]
+            dy = VT[2 * q + 1] - VT[2 * p + 1]
+            f = dx * dv_[p]
+            f -= dy * du_[p]
+            left = f > 0
+            left |= (f == 0) & (dy <= 0)
+            bits |= left.astype(bits.dtype) << e
+        inside = (bits[:, None] & np.take(self.leaf_masks, sets, axis=0)) == np.take(
+            self.leaf_want, sets, axis=0
+        )  # (P, L)
+        anywhere = inside[:, 0].copy()  # column ORs: 4x faster than inside.any(axis=1)
+        for j in range(1, inside.shape[1]):
+            anywhere |= inside[:, j]
+        hit = np.flatnonzero(anywhere)  # pairs inside the support
+        sets = sets[hit]
+        H = len(hit)
+        # the leaves in tree order, one row each (L, H)
+        values0 = (np.take(inside, hit, axis=0) * np.take(self.leaf_value, sets, axis=0)).T.copy()
+        y = np.take(x, hit, axis=0) - np.take(self.center, sets, axis=0)
+        yu, yv = y[:, 0].copy(), y[:, 1].copy()
+        # barycentric coordinates of the value levels, shared by all derivative orders
+        lam_cache: dict = {}
+        for out, (du, dv) in zip(outs, derivatives):
+            if du + dv > k:
+                continue
+            values = values0
+            directions = [0] * du + [1] * dv
+            for depth in range(k - 1, -1, -1):
+                degree = k - depth
+                parent = np.empty((len(self.nodes[depth]), H))
+                for i, (lam, mu) in enumerate(self.nodes[depth]):
+                    if depth < len(directions):
+                        m = np.take(mu[:, :, directions[depth]], sets, axis=0).T  # (3, H)
+                        f = [degree * m[j] for j in range(3)]
+                    else:
+                        f = lam_cache.get((depth, i))
+                        if f is None:
+                            c = np.take(lam, sets, axis=0).reshape(H, 9).T.copy()  # 3 j + coef
+                            f = [c[3 * j] + c[3 * j + 1] * yu + c[3 * j + 2] * yv
+                                 for j in range(3)]
+                            lam_cache[(depth, i)] = f
+                    row = f[0] * values[3 * i]
+                    row += f[1] * values[3 * i + 1]
+                    row += f[2] * values[3 * i + 2]
+                    parent[i] = row
+                values = parent
+            out[hit] = values[0]
+        return outs
         # row gathers with np.take: 2.5-7x faster than fancy indexing for (P, ...) rows
         V = np.take(self.V, sets, axis=0)  # (P, n, 2)
         bits = np.zeros(len(sets), dtype=self.leaf_want.dtype)
