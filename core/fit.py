@@ -59,10 +59,10 @@ FIRST_ORDER_SHARE = 0.1
 AUTO_SMOOTHNESS = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
 FOLDS = 5
 MIN_AUTO_POINTS = 10
-# sparse data: fewer scored points than this per basis function that sees data. Between the points only the
-# fairing holds the surface, and the choice also tries these larger weights (the limit of a
-# large weight is the affine fit): on 30-60 random points of Franke's function
-# cross-validation chose 1-100
+# sparse data: fewer fitted points than this per basis function that sees data. Between the
+# points only the fairing holds the surface, and the choice also tries these larger weights
+# (the limit of a large weight is the affine fit): on 30-60 random points of Franke's
+# function cross-validation chose 1-100
 SPARSE_POINTS_PER_CONTROL = 2
 SPARSE_SMOOTHNESS = (1e2, 1e1, 1.0, 1e-1)
 
@@ -73,11 +73,6 @@ class DefaultSmoothness(float):
     weight instead (``smoothness=1e-4`` passed explicitly is used as given). Arithmetic gives
     plain floats."""
 
-    def __repr__(self) -> str:
-        return "1e-4"
-
-    def __reduce__(self):
-        return (DefaultSmoothness, (float(self),))
 
 
 DEFAULT_SMOOTHNESS = DefaultSmoothness(1e-4)
@@ -340,18 +335,20 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
     others but not scored). The choice is :func:`_one_standard_error`. Candidates whose system
     is singular are skipped. With fewer than :data:`MIN_AUTO_POINTS` scored points of positive
     weight there is nothing to cross-validate: :data:`DEFAULT_SMOOTHNESS`. With fewer than
-    :data:`SPARSE_POINTS_PER_CONTROL` scored points per basis function that sees data the
-    candidates :data:`SPARSE_SMOOTHNESS` come first.
+    :data:`SPARSE_POINTS_PER_CONTROL` fitted points (scored or not) per basis function that
+    sees data the candidates :data:`SPARSE_SMOOTHNESS` come first.
 
     Returns the chosen value and ``{candidate: cross-validated RMS}``.
     """
     N = len(uv)
     m = N if scored is None else int(min(max(scored, 0), N))
-    scoring = int((weights[:m] > 0).sum())
-    if scoring < MIN_AUTO_POINTS:
+    if int((weights[:m] > 0).sum()) < MIN_AUTO_POINTS:
         return DEFAULT_SMOOTHNESS, {}
     candidates = AUTO_SMOOTHNESS
-    if scoring < SPARSE_POINTS_PER_CONTROL * int(np.count_nonzero(AtA.diagonal() > 0)):
+    # sparse: as in core.refine.adaptive_fit, all fitted points count (a mesh's face samples
+    # too: they make it dense), here against the functions that see data
+    if (int((weights > 0).sum())
+            < SPARSE_POINTS_PER_CONTROL * int(np.count_nonzero(AtA.diagonal() > 0))):
         candidates = SPARSE_SMOOTHNESS + AUTO_SMOOTHNESS
     fold = _folds(uv)
     starts = np.cumsum([0] + [A.shape[0] for A in chunks or []])

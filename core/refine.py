@@ -623,10 +623,11 @@ def adaptive_fit(
             f"the maximum of {options.max_control_points}; allow more control points"
         )
     # sparse data (fewer fitted points than SPARSE_POINTS_PER_CONTROL per control point): only
-    # the fairing holds the surface between the points, and the loop met its tolerance by
+    # the fairing holds the surface between the points, and the loop's fits come close to
     # interpolating them. The default weight is replaced by the cross-validated one (60 random
     # points of Franke's function: the surface swung to 2x the data's height range with 1e-4),
-    # and a choice is kept even when it misses the tolerance.
+    # and a choice is kept even when it misses a tolerance the loop reached (the stop reason
+    # then says so).
     fitted = len(full[0]) if full[2] is None else int(np.count_nonzero(full[2] > 0))
     sparse = fitted < SPARSE_POINTS_PER_CONTROL * best.n_control
     default_replaced = sparse and not auto and isinstance(options.smoothness, DefaultSmoothness)
@@ -650,6 +651,9 @@ def adaptive_fit(
             if default_replaced:
                 selection["why"] = (f"sparse data: {fitted} points for {best.n_control} control "
                                     "points (the default 1e-4 is cross-validated)")
+            if reason == "tolerance reached" and value > tol and sparse:
+                reason = ("tolerance reached by the loop; the cross-validated smoothness of "
+                          "sparse data misses it")
             if (reason == "tolerance reached" and value > tol and fit.smoothness != loop_smoothness
                     and not sparse):
                 # the smoother choice would break the tolerance the loop reached: keep the

@@ -34,7 +34,7 @@ from scipy.spatial import Delaunay, cKDTree
 
 from .configurations import Configurations
 from .errors import FileFormatError, InvalidInputError, TCBError
-from .fit import DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL
+from .fit import DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL, DefaultSmoothness
 from .geometry import column_bounds
 from .parameterize import (
     Parameterization, _as_points, _check_finite, box_normalization, normalize, parameterize,
@@ -604,6 +604,10 @@ class TCBSurface:
             "errors": self._errors,
             "report": np.array(json.dumps(self._report)),
             "options": np.array(json.dumps(self._options.__dict__)),
+            # the smoothness was left at the default (cross-validated on sparse clouds): JSON
+            # stores it as the number; readers that do not know this array ignore it
+            "smoothness_is_default": np.array(isinstance(self._options.smoothness,
+                                                         DefaultSmoothness)),
             "param_kind": np.array(self._param.kind),
             "param_scale": np.array(np.nan if self._param.scale is None else self._param.scale),
         }
@@ -656,7 +660,10 @@ class TCBSurface:
                 scale=None if np.isnan(scale) else scale,
                 **{name: arrays.get(f"param_{name}") for name in _PARAM_FIELDS},
             )
-            options = RefineOptions(**json.loads(str(arrays["options"])))
+            fields = json.loads(str(arrays["options"]))
+            if "smoothness_is_default" in arrays and bool(arrays["smoothness_is_default"]):
+                fields["smoothness"] = DEFAULT_SMOOTHNESS
+            options = RefineOptions(**fields)
             report = json.loads(str(arrays["report"]))
             surf = cls(space, arrays["control_points"], param, arrays["errors"], report,
                        int(arrays["n_interior"]), options)
@@ -886,9 +893,10 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # its points but the fairing (60 points of Franke's function: the surface swung to
         # twice the data's height range with smoothness 1e-4). The default and "auto" are
         # cross-validated there (core.refine.adaptive_fit); a number given is used as given.
+        chosen_later = isinstance(options.smoothness, DefaultSmoothness) or options.smoothness == "auto"
         advice = ("the run was cancelled before the smoothness was cross-validated"
-                  if reason == "cancelled" else "leave smoothness at its default or pass "
-                  "smoothness='auto' to have it chosen by cross-validation")
+                  if reason == "cancelled" and chosen_later else "leave the smoothness at its "
+                  "default or make it 'auto' to have it chosen by cross-validation")
         warnings.warn(
             f"{report['points']} points for {report['control_points']} control points: between "
             f"the points only the smoothness {report['smoothness']:g} holds the surface, and it "

@@ -81,8 +81,8 @@ class FitSettings:
     smoothness: FloatProperty(
         name="Smoothness",
         description="Weight of the smoothing term of the least-squares fit (0 = none); used "
-        "when Auto Smoothness is off. Left at the default on a sparse cloud (under 2 points "
-        "per control point), it is chosen by cross-validation",
+        "when Auto Smoothness is off. At its default (0.0001) on a sparse cloud (under 2 "
+        "points per control point) it is chosen by cross-validation",
         default=DEFAULT_SMOOTHNESS, min=0.0, soft_max=1.0, precision=6, step=0.001,
     )  # fmt: skip
     auto_smoothness: BoolProperty(

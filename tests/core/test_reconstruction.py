@@ -278,11 +278,32 @@ def test_a_sparse_cloud_gets_a_cross_validated_smoothness_unless_one_is_given():
     assert given.report["smoothness"] == 1e-4 and "smoothness_selection" not in given.report
     assert worst_error(given) > 1.0
 
+    # a saved surface remembers that its smoothness was the default: refine() chooses again
+    back = TCBSurface.from_bytes(default.to_bytes())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        again = back.refine(P)
+    assert "sparse data" in again.report["smoothness_selection"]["why"]
+    with pytest.warns(RuntimeWarning, match="only the smoothness 0.0001"):
+        assert TCBSurface.from_bytes(given.to_bytes()).refine(P).report["smoothness"] == 1e-4
+
     xy = np.random.default_rng(1).random((3000, 2))
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         dense = fit_surface(np.c_[xy, franke(*xy.T)], max_control_points=400)
     assert dense.report["smoothness"] == 1e-4 and "smoothness_selection" not in dense.report
+
+
+def test_a_tiny_cloud_keeps_the_cross_validated_smoothness_that_misses_the_tolerance():
+    """12 points: the loop reaches the tolerance by (nearly) interpolating them; the smoother
+    cross-validated surface misses it and is kept anyway (dense data would keep the loop's
+    fit), and the stop reason says so."""
+    xy = np.random.default_rng(1).random((12, 2))
+    surf = fit_surface(np.c_[xy, franke(*xy.T)])
+    r = surf.report
+    assert r["smoothness"] == r["smoothness_selection"]["chosen"] >= 1.0
+    assert "kept" not in r["smoothness_selection"] and r["rms_rel"] > 1e-3
+    assert r["stop_reason"].startswith("tolerance reached by the loop") and "misses it" in r["stop_reason"]
 
 
 def test_coarse_32_bit_coordinates_are_named_in_the_error_or_a_warning():
@@ -448,6 +469,11 @@ def test_a_callback_must_return_a_bool_or_none():
         surf = fit_surface(points, max_iterations=3, tolerance=0,
                            callback=lambda report: seen.append(report) or np.bool_(len(seen) == 2))
     assert surf.report["stop_reason"] == "cancelled" and len(seen) == 2
+    # a smoothness given is never cross-validated: the warning does not say it would have been
+    with pytest.warns(RuntimeWarning, match="make it 'auto'") as got:
+        fit_surface(points, max_iterations=3, tolerance=0, smoothness=1e-4,
+                    callback=lambda r: r["iteration"] == 2)
+    assert not any("cancelled before" in str(w.message) for w in got)
 
 
 def test_huge_inputs_are_fitted_on_a_subset_with_a_warning(monkeypatch):
