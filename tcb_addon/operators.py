@@ -150,6 +150,8 @@ def store_stats(tcb, surf, settings: dict) -> None:
             setattr(tcb, key, str(value) if key in {"degree", "mode", "criterion"} else value)
     if "smoothness" in rep:  # the value used: the chosen one with Auto Smoothness
         tcb.smoothness = float(rep["smoothness"])
+    # a sparse cloud's default smoothness is cross-validated by the engine
+    tcb.smoothness_cross_validated = "why" in (rep.get("smoothness_selection") or {})
 
 
 def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = None):

@@ -164,6 +164,8 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     mode: StringProperty()
     smoothness: FloatProperty(precision=6)  # the value used (the chosen one with auto)
     auto_smoothness: BoolProperty()
+    # the value used was cross-validated although Auto Smoothness was off (sparse cloud)
+    smoothness_cross_validated: BoolProperty()
     resolution: IntProperty()
     # deviation map (distance of the surface vertices to the data)
     has_deviation: BoolProperty()

@@ -66,7 +66,9 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
             ("RMS", f"{st.rms:.4g}"),
             ("Max", f"{st.max:.4g}"),
             ("Max (of diagonal)", f"{100 * st.max_rel:.3g} %"),
-            ("Smoothness" + (" (auto)" if st.auto_smoothness else ""), f"{st.smoothness:.3g}"),
+            ("Smoothness" + (" (auto)" if st.auto_smoothness else
+                             " (sparse: chosen)" if st.smoothness_cross_validated else ""),
+             f"{st.smoothness:.3g}"),
             ("Seconds", f"{st.seconds:.2f}"),
         ):
             grid.label(text=label)

@@ -190,13 +190,19 @@ def test_a_sparse_cloud_left_at_the_default_smoothness_gets_it_cross_validated(c
     xy = np.random.default_rng(1).random((60, 2))
     cloud = add_mesh(bpy, "Spots", np.c_[xy, 0.5 * np.sin(3 * xy[:, 0]) * np.cos(2 * xy[:, 1])])
     assert fit(bpy, cloud) == {"FINISHED"}
-    surf = spline_of(addon, bpy.context.view_layer.objects.active)
+    surface = bpy.context.view_layer.objects.active
+    surf = spline_of(addon, surface)
     assert "sparse data" in surf.report["smoothness_selection"]["why"]
     assert 2 * surf.report["control_points"] > 60 and surf.report["smoothness"] >= 1e-2
+    # the panel says the value was chosen (Auto Smoothness was off)
+    assert surface.tcb.smoothness_cross_validated and not surface.tcb.auto_smoothness
+    assert surface.tcb.smoothness == pytest.approx(surf.report["smoothness"])
     with pytest.warns(RuntimeWarning, match="only the smoothness 0.001 holds the surface"):
         assert fit(bpy, cloud, smoothness=1e-3) == {"FINISHED"}
-    surf = spline_of(addon, bpy.context.view_layer.objects.active)
+    surface = bpy.context.view_layer.objects.active
+    surf = spline_of(addon, surface)
     assert surf.report["smoothness"] == pytest.approx(1e-3) and "smoothness_selection" not in surf.report
+    assert not surface.tcb.smoothness_cross_validated
 
 
 def test_fit_mesh_object_nefertiti(clean_scene, addon):
