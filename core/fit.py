@@ -71,8 +71,7 @@ class DefaultSmoothness(float):
     """The default fairing weight 1e-4 as a float that remembers it was not chosen by the
     user: on sparse clouds :func:`core.refine.adaptive_fit` then uses the cross-validated
     weight instead (``smoothness=1e-4`` passed explicitly is used as given). Arithmetic gives
-    plain floats."""
-
+    plain floats; saved surfaces keep the distinction (``smoothness_is_default``)."""
 
 
 DEFAULT_SMOOTHNESS = DefaultSmoothness(1e-4)
