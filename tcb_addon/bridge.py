@@ -44,6 +44,7 @@ class InputData:
     faces: np.ndarray | None  # (f, 3) int64, or None for a point cloud
     sources: list = field(default_factory=list)  # original bpy.types.Object, in selection order
     counts: dict = field(default_factory=dict)  # source name -> number of points read
+    notes: list = field(default_factory=list)  # what the user should know about the input
 
     @property
     def name(self) -> str:
@@ -80,6 +81,9 @@ def selection_problem(context) -> str | None:
     selected = list(getattr(context, "selected_objects", None) or [])
     if not selected:
         return "Select a mesh or point-cloud object"
+    if all(_is_result(o) for o in selected):
+        return f"'{selected[0].name}' is a TCB result: select the scan"
+    selected = [o for o in selected if not _is_result(o)]
     for obj in selected:
         if obj.type not in GEOMETRY_TYPES:
             return f"'{obj.name}' is {_kind(obj)}, not a mesh or point cloud"
@@ -119,8 +123,21 @@ def read_selection(context, objects=None) -> InputData:
     single mesh is the whole input (merged meshes are fitted as a point cloud).
     Raises :class:`SelectionError` with a message for the user.
     """
+    notes = []
     if objects is None:
         objects = list(getattr(context, "selected_objects", None) or [])
+        # the add-on's own results (surface, net, deviation points) are not input: after
+        # Select All they would be fitted together with the scan
+        results = [o for o in objects if o is not None and _is_result(o)]
+        objects = [o for o in objects if o is not None and not _is_result(o)]
+        if results and not objects:
+            raise SelectionError(
+                f"'{results[0].name}' is a TCB result, not input: select the scan to fit (to "
+                "change a surface, use Refine)"
+            )
+        if results:
+            notes.append(f"left out of the input: {', '.join(repr(o.name) for o in results)} "
+                         "(TCB results)")
     objects = [o for o in objects if o is not None]
     if not objects:
         raise SelectionError("Nothing selected: select a mesh or point-cloud object to fit")
@@ -150,6 +167,19 @@ def read_selection(context, objects=None) -> InputData:
             continue
         if len(pts):
             parts[key].append((_world(pts, inst.matrix_world), tris))
+    # hidden objects (H, the viewport toggle, an excluded collection) are not evaluated: read
+    # their own data (the modifiers cannot be applied without showing them)
+    for key, obj in wanted.items():
+        if parts[key] or obj.type not in POINT_TYPES or obj.visible_get():
+            continue
+        data = obj.data
+        pts = read_positions(data)
+        tris = read_triangles(data) if obj.type == "MESH" and len(data.polygons) else None
+        if len(pts):
+            parts[key].append((_world(pts, obj.matrix_world), tris))
+            if any(m.show_viewport for m in getattr(obj, "modifiers", ())):
+                notes.append(f"'{obj.name}' is hidden: read without its modifiers (show it to "
+                             "fit the modified shape)")
 
     points, faces, counts = [], [], {}
     for key, obj in wanted.items():
@@ -172,7 +202,13 @@ def read_selection(context, objects=None) -> InputData:
     pts = np.concatenate(points) if len(points) > 1 else points[0]
     tri = faces[0] if len(faces) == 1 and faces[0] is not None else None
     return InputData(points=pts, faces=None if tri is None else tri.astype(np.int64),
-                     sources=list(wanted.values()), counts=counts)  # fmt: skip
+                     sources=list(wanted.values()), counts=counts, notes=notes)  # fmt: skip
+
+
+def _is_result(obj) -> bool:
+    """A surface, control net, deviation-points or weights object made by the add-on."""
+    tcb = getattr(obj, "tcb", None)
+    return tcb is not None and tcb.role != "NONE"
 
 
 # --- writing -------------------------------------------------------------------------------

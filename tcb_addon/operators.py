@@ -172,12 +172,32 @@ def write_net_mesh(net_obj, surf, name: str | None = None):
 def _summary(surf) -> str:
     rep = dict(getattr(surf, "report", {}) or {})
     n = rep.get("control_points", len(surf.control_points))
+    sel = rep.get("smoothness_selection") or {}
+    how = " (sparse data: cross-validated)" if "why" in sel else " (auto)" if sel else ""
     return (
         f"TCB: {n} control points, RMS {rep.get('rms', float('nan')):.4g}, "
         f"max {rep.get('max', float('nan')):.4g} ({100 * rep.get('max_rel', float('nan')):.3g}% "
-        f"of the diagonal), {rep.get('seconds', 0.0):.2f} s"
+        f"of the diagonal), smoothness {rep.get('smoothness', float('nan')):.3g}{how}, "
+        f"{rep.get('seconds', 0.0):.2f} s"
         + (f", {rep['outliers']} outliers left out" if rep.get("outliers") else "")
     )
+
+
+def report_result(op, surf, notes=()) -> None:
+    """The summary of a fit or refine: INFO, or WARNING when the tolerance was not reached
+    (the budget or the iteration limit stopped the loop first), with what to change."""
+    rep = dict(getattr(surf, "report", {}) or {})
+    reason = str(rep.get("stop_reason", ""))
+    text = _summary(surf) + "".join(f"; {n}" for n in notes)
+    if reason.startswith("tolerance reached") and "misses" not in reason:
+        op.report({"INFO"}, text)
+    elif reason == "cancelled":
+        op.report({"WARNING"}, f"{text}; stopped early (cancelled): the best surface so far")
+    else:
+        advice = {"control-point budget reached": "raise Max Control Points",
+                  "iteration limit": "raise Max Iterations"}.get(reason, "")
+        op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason})"
+                  + (f": {advice} or loosen the tolerance" if advice else ""))
 
 
 # --- the worker-thread job and the modal/execute skeleton --------------------------------------
@@ -403,7 +423,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
             obj.select_set(False)
         surface.select_set(True)
         context.view_layer.objects.active = surface
-        self.report({"INFO"}, _summary(surf))
+        report_result(self, surf, data.notes)
         return {"FINISHED"}
 
     def draw(self, context):
@@ -449,6 +469,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         self._settings = dict(tolerance=tol, relative=rel, max_control_points=budget,
                               max_iterations=self.max_iterations)  # fmt: skip
         data = source_data(context, surface)
+        self._notes = data.notes
         surf = stored_surface(surface)
         return ("run", surf.refine, dict(points=data.points, faces=data.faces, **self._settings))
 
@@ -462,7 +483,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                 live.attach(surface, st.net, surf, st.resolution)
         store_spline(surface, surf)
         store_stats(st, surf, self._settings)
-        self.report({"INFO"}, _summary(surf))
+        report_result(self, surf, getattr(self, "_notes", ()))
         return {"FINISHED"}
 
 

@@ -205,6 +205,57 @@ def test_a_sparse_cloud_left_at_the_default_smoothness_gets_it_cross_validated(c
     assert not surface.tcb.smoothness_cross_validated
 
 
+def test_results_are_not_input_and_a_hidden_source_still_works(clean_scene, addon):
+    """After Select All the add-on's own results are left out of the input (they had been
+    fitted with the scan); a TCB result alone is refused. A hidden scan (H, the viewport
+    toggle, an excluded collection) is still read by Deviation Map and Refine (it had been
+    "has no vertices")."""
+    bpy = clean_scene
+    verts, faces = grid(16)
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    assert fit(bpy, scan) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    assert fit(bpy, surface, net, scan) == {"FINISHED"}
+    again = bpy.context.view_layer.objects.active
+    assert again != surface and [s.object for s in again.tcb.sources] == [scan]
+    assert spline_of(addon, again).report["points"] == len(verts)
+    _expect_error(bpy, [surface], "is a TCB result, not input: select the scan")
+    for hide in ("hide_set", "hide_viewport", "exclude"):
+        if hide == "hide_set":
+            scan.hide_set(True)
+        elif hide == "hide_viewport":
+            scan.hide_viewport = True
+        else:
+            coll = bpy.data.collections.new("Scans")
+            bpy.context.scene.collection.children.link(coll)
+            coll.objects.link(scan)
+            bpy.context.scene.collection.objects.unlink(scan)
+            bpy.context.view_layer.layer_collection.children["Scans"].exclude = True
+        bpy.context.view_layer.update()
+        with bpy.context.temp_override(**select(bpy, surface)):
+            assert bpy.ops.tcb.deviation_map(points_copy=False) == {"FINISHED"}, hide
+            assert bpy.ops.tcb.refine(max_iterations=1) == {"FINISHED"}, hide
+        assert spline_of(addon, surface).report["points"] == len(verts)
+        scan.hide_set(False)
+        scan.hide_viewport = False
+
+
+def test_a_missed_tolerance_is_a_warning_that_says_what_to_change(clean_scene, capfd):
+    bpy = clean_scene
+    verts, faces = grid(16)
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    capfd.readouterr()
+    assert fit(bpy, scan, tolerance=1e-9, max_control_points=60) == {"FINISHED"}
+    out = capfd.readouterr()
+    text = out.out + out.err
+    assert "Warning: TCB:" in text and "smoothness 0.0001" in text, text
+    assert "the tolerance was not reached (control-point budget reached): raise Max Control Points" in text
+    assert fit(bpy, scan, tolerance=0.05) == {"FINISHED"}
+    out = capfd.readouterr()
+    assert "Info: TCB:" in out.out + out.err and "not reached" not in out.out + out.err
+
+
 def test_fit_mesh_object_nefertiti(clean_scene, addon):
     bpy = clean_scene
     import importlib
