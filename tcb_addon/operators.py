@@ -183,14 +183,15 @@ def _summary(surf) -> str:
     )
 
 
-def report_result(op, surf, notes=()) -> None:
+def report_result(op, surf, notes=(), warnings=()) -> None:
     """The summary of a fit or refine: INFO, or WARNING when the tolerance was not reached
-    (the budget or the iteration limit stopped the loop first), with what to change."""
+    (the budget or the iteration limit stopped the loop first), with what to change, or when
+    there are ``warnings``."""
     rep = dict(getattr(surf, "report", {}) or {})
     reason = str(rep.get("stop_reason", ""))
-    text = _summary(surf) + "".join(f"; {n}" for n in notes)
+    text = _summary(surf) + "".join(f"; {n}" for n in list(notes) + list(warnings))
     if reason.startswith("tolerance reached") and "misses" not in reason:
-        op.report({"INFO"}, text)
+        op.report({"WARNING"} if warnings else {"INFO"}, text)
     elif reason == "cancelled":
         op.report({"WARNING"}, f"{text}; stopped early (cancelled): the best surface so far")
     else:
@@ -471,6 +472,11 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         data = source_data(context, surface)
         self._notes = data.notes
         surf = stored_surface(surface)
+        # Refine fits the data again: edits of the net are not kept, and the user is told
+        moved = np.any(surf.control_points != stored_surface(surface, use_net=False).control_points,
+                       axis=1)
+        self._warnings = [f"{int(moved.sum())} edited control points were replaced (Refine fits "
+                          "the data again; Ctrl+Z brings the edits back)"] if moved.any() else []
         return ("run", surf.refine, dict(points=data.points, faces=data.faces, **self._settings))
 
     def finish(self, context, surf):
@@ -483,7 +489,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                 live.attach(surface, st.net, surf, st.resolution)
         store_spline(surface, surf)
         store_stats(st, surf, self._settings)
-        report_result(self, surf, getattr(self, "_notes", ()))
+        report_result(self, surf, getattr(self, "_notes", ()), getattr(self, "_warnings", ()))
         return {"FINISHED"}
 
 

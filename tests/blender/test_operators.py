@@ -256,6 +256,25 @@ def test_a_missed_tolerance_is_a_warning_that_says_what_to_change(clean_scene, c
     assert "Info: TCB:" in out.out + out.err and "not reached" not in out.out + out.err
 
 
+def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
+    bpy = clean_scene
+    verts, faces = grid(16)
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    assert fit(bpy, scan, tolerance=5e-3) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, surface)):
+        capfd.readouterr()
+        assert bpy.ops.tcb.refine(max_iterations=1) == {"FINISHED"}
+        assert "edited control points" not in capfd.readouterr().out
+        mesh = surface.tcb.net.data
+        for i in range(5, 9):
+            mesh.vertices[i].co.z += 3.0
+        mesh.update()
+        assert bpy.ops.tcb.refine(max_iterations=1) == {"FINISHED"}
+        out = capfd.readouterr()
+    assert "Warning: TCB:" in out.out and "4 edited control points were replaced" in out.out, out.out
+
+
 def test_fit_mesh_object_nefertiti(clean_scene, addon):
     bpy = clean_scene
     import importlib
