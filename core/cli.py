@@ -147,10 +147,10 @@ def _fit(args) -> int:
             drop_outliers=args.drop_outliers,
         )
     except OutlierError as exc:
-        if not bad.any():
-            raise
-        # number the outliers as in the file, not among the points left after --drop-invalid
-        raise outlier_error(given, np.flatnonzero(~bad)[exc.indices]) from None
+        # number the outliers as in the file (not among the points left after --drop-invalid),
+        # with this command's option
+        raise outlier_error(given, np.flatnonzero(~bad)[exc.indices],
+                            advice="pass --drop-outliers") from None
     verts, tris = surf.tessellate(args.resolution)
     write_mesh(args.output, verts, tris)
     if args.net:

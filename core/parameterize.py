@@ -630,24 +630,29 @@ def isolated_points(
     return np.sort(np.concatenate(out)).astype(np.int64)
 
 
-def outlier_error(points: np.ndarray, isolated, label=None) -> OutlierError:
+_DROP_ADVICE = ("fit_surface(..., drop_outliers=True), on the command line --drop-outliers, in "
+                "Blender the Drop Outliers option")
+
+
+def outlier_error(points: np.ndarray, isolated, label=None, advice: str = _DROP_ADVICE
+                  ) -> OutlierError:
     """The error for the outliers ``isolated`` (indices) among ``points`` (N, 3), naming the
-    first three by ``label(i)`` (default ``#i``, their row) and their coordinates.
+    first three by ``label(i)`` (default ``#i``, their row) and their coordinates, and how to
+    leave them out (``advice``).
 
     Callers that merged or filtered the user's input build it again with the user's numbering
-    (the command line after ``--drop-invalid``, Blender with object names)."""
+    (the command line after ``--drop-invalid``, Blender with object names and its option)."""
     label = label or (lambda i: f"#{i}")
     isolated = np.asarray(isolated, dtype=np.int64)
     show = ", ".join(
         f"{label(int(i))} ({', '.join(f'{c:.6g}' for c in points[i])})" for i in isolated[:3]
     )
     more = f" and {len(isolated) - 3} more" if len(isolated) > 3 else ""
+    verb = "lies" if len(isolated) == 1 else "lie"
     return OutlierError(
-        f"{len(isolated)} of the {len(points)} points lie far from all others (outliers: "
+        f"{len(isolated)} of the {len(points)} points {verb} far from all others (outliers: "
         f"{show}{more}); they would stretch the surface's domain and pull it away from the "
-        "data. Remove them, or let the fit leave them out: fit_surface(..., "
-        "drop_outliers=True), on the command line --drop-outliers, in Blender the "
-        "Drop Outliers option",
+        f"data. Remove them, or let the fit leave them out: {advice}",
         isolated,
     )
 

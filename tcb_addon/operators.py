@@ -385,7 +385,9 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
             try:
                 return core.fit_surface(**kw)
             except core.OutlierError as ex:
-                raise core.parameterize.outlier_error(data.points, ex.indices, data.label) from None
+                raise core.parameterize.outlier_error(
+                    data.points, ex.indices, data.label,
+                    advice="turn on Drop Outliers in the fit settings") from None
 
         return ("run", fit, dict(points=data.points, faces=data.faces, **kwargs))
 
@@ -472,6 +474,15 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         data = source_data(context, surface)
         self._notes = data.notes
         surf = stored_surface(surface)
+        digest = surf.report.get("data_digest")  # surfaces saved before it have none
+        if len(data.points) != len(surf.parameterization.uv) or (
+                digest is not None and _core().surface.data_digest(data.points) != digest):
+            names = ", ".join(repr(o.name) for o in data.sources)
+            raise bridge.SelectionError(
+                f"{names} changed since '{surface.name}' was fitted ({len(surf.parameterization.uv)}"
+                f" points then, {len(data.points)} now): Refine continues the fit of the same "
+                "data; select the source and use Fit Surface to fit it as it is now"
+            )
         # Refine fits the data again: edits of the net are not kept, and the user is told
         moved = np.any(surf.control_points != stored_surface(surface, use_net=False).control_points,
                        axis=1)

@@ -275,6 +275,22 @@ def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
     assert "Warning: TCB:" in out.out and "4 edited control points were replaced" in out.out, out.out
 
 
+def test_refine_of_a_changed_source_says_to_fit_again(clean_scene):
+    """The scan was edited after the fit: Refine (which continues the fit of the same data)
+    is refused in Blender's terms, not with the engine's 'call fit_surface()'."""
+    bpy = clean_scene
+    verts, faces = grid(16)
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    assert fit(bpy, scan) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    scan.data.vertices[3].co.z += 0.2
+    scan.data.update()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        with pytest.raises(RuntimeError, match=r"'Scan' changed since .* use Fit Surface") as err:
+            bpy.ops.tcb.refine()
+    assert "fit_surface" not in str(err.value)
+
+
 def test_fit_mesh_object_nefertiti(clean_scene, addon):
     bpy = clean_scene
     import importlib
@@ -532,7 +548,7 @@ def test_an_outlier_is_refused_by_name_or_dropped_with_the_option(clean_scene, a
     verts[7] = [0.0, 0.0, 25.0]
     cloud = add_point_cloud(bpy, "Spiky", verts)
     before = snapshot(cloud)
-    _expect_error(bpy, [cloud], r"1 of the 400 points lie far from all others.*'Spiky' #7 .*Drop Outliers")
+    _expect_error(bpy, [cloud], r"1 of the 400 points lies far from all others.*'Spiky' #7 .*turn on Drop Outliers in the fit settings$")
     # merged with a second object, the stray is still named by its object and index there
     other = add_point_cloud(bpy, "Other", grid(20)[0] + [0.0, 2.1, 0.0])
     _expect_error(bpy, [other, cloud], r"1 of the 800 points .*outliers: 'Spiky' #7 \(0, 0, 25\)")

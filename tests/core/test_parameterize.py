@@ -649,7 +649,7 @@ def test_a_stray_among_repeated_points_and_a_repeated_stray_are_found() -> None:
 def test_parameterize_drops_outliers_only_when_asked() -> None:
     pts = _franke_cloud(1000, 6)
     pts[3] = [9.0, 9.0, 9.0]
-    with pytest.raises(InvalidInputError, match=r"1 of the 1000 points lie far .* #3 \(9, 9, 9\)"):
+    with pytest.raises(InvalidInputError, match=r"1 of the 1000 points lies far .* #3 \(9, 9, 9\)"):
         parameterize(pts)
     par = parameterize(pts, drop_outliers=True)
     assert not par.used[3] and par.used.sum() == 999 and np.isnan(par.uv[3]).all()
