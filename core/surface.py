@@ -868,6 +868,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         "points": int(used.sum()),
         # points of a cloud left out as outliers (drop_outliers=True); NaN in ``errors``
         "outliers": int(len(used) - used.sum()) if param.faces is None else 0,
+        # vertices of a mesh that are in no face: a mesh is fitted through its faces
+        "loose_vertices": int(len(used) - used.sum()) if param.faces is not None else 0,
         "knots": int(len(best.knots)),
         "interior_knots": int(best.n_interior),
         "control_points": int(best.n_control),
@@ -887,6 +889,13 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # refine() checks that it is given the same points (values and order)
         "data_digest": data_digest(points),
     }
+    if report["loose_vertices"]:
+        warnings.warn(
+            f"{report['loose_vertices']} of the {len(used)} vertices "
+            f"{'is' if report['loose_vertices'] == 1 else 'are'} in no face and were left "
+            "out: a mesh is fitted through its faces (fit the vertices without faces to use "
+            "them as a point cloud)", RuntimeWarning, stacklevel=3,
+        )
     if (param.faces is None and best.selection is None
             and SPARSE_POINTS_PER_CONTROL * report["control_points"] > used.sum()):
         # a mesh is fitted on samples of its faces too; a sparse cloud has nothing between
@@ -1010,6 +1019,8 @@ def fit_surface(
         points = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):
         raise InvalidInputError("points must be an (N, 3) array of numbers") from None
+    if faces is not None and points.ndim == 2:
+        _few_faced_vertices(points, faces)
     try:
         param = parameterize(points, faces, drop_outliers=drop_outliers)
     except TCBError as exc:
@@ -1019,6 +1030,24 @@ def fit_surface(
     if coarse is not None:
         warnings.warn(coarse, RuntimeWarning, stacklevel=2)
     return _run(points, param, options, callback, checked=faces is None)
+
+
+def _few_faced_vertices(points: np.ndarray, faces) -> None:
+    """Refuse a mesh whose faces hold fewer than MIN_POINTS vertices while it has more: the
+    plain "at least 10 points" error would contradict the vertex count the user sees."""
+    from .parameterize import MIN_POINTS
+
+    try:
+        idx = np.unique(np.asarray(faces, dtype=np.int64))
+    except (TypeError, ValueError):
+        return  # parameterize() names what is wrong with the faces
+    inside = idx[(idx >= 0) & (idx < len(points))]
+    if len(inside) < MIN_POINTS <= len(points):
+        raise InvalidInputError(
+            f"only {len(inside)} of the {len(points)} vertices are in faces, and a mesh is fitted "
+            f"through its faces (at least {MIN_POINTS} vertices are needed); to fit the vertices "
+            "as a point cloud, pass them without faces (in Blender: delete the faces)"
+        )
 
 
 def _float32_rounding(points) -> str | None:

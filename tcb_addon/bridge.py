@@ -161,6 +161,7 @@ def read_selection(context, objects=None) -> InputData:
             mesh = ob.data
             pts = read_positions(mesh)
             tris = read_triangles(mesh) if len(mesh.polygons) else None
+            tris = _faces_or_cloud(owner, pts, tris, notes)
         elif ob.type == "POINTCLOUD":
             pts, tris = read_positions(ob.data), None
         else:
@@ -175,6 +176,7 @@ def read_selection(context, objects=None) -> InputData:
         data = obj.data
         pts = read_positions(data)
         tris = read_triangles(data) if obj.type == "MESH" and len(data.polygons) else None
+        tris = _faces_or_cloud(obj, pts, tris, notes)
         if len(pts):
             parts[key].append((_world(pts, obj.matrix_world), tris))
             if any(m.show_viewport for m in getattr(obj, "modifiers", ())):
@@ -203,6 +205,19 @@ def read_selection(context, objects=None) -> InputData:
     tri = faces[0] if len(faces) == 1 and faces[0] is not None else None
     return InputData(points=pts, faces=None if tri is None else tri.astype(np.int64),
                      sources=list(wanted.values()), counts=counts, notes=notes)  # fmt: skip
+
+
+def _faces_or_cloud(obj, pts, tris, notes):
+    """A mesh whose faces hold fewer than half of its vertices is spot heights with a stray
+    face or two: its vertices are fitted as a point cloud (faces None), and a note says so."""
+    if tris is None or not len(pts):
+        return tris
+    in_faces = int(np.count_nonzero(np.bincount(tris.ravel(), minlength=len(pts))))
+    if in_faces >= 0.5 * len(pts):
+        return tris
+    notes.append(f"'{obj.name}': only {in_faces} of its {len(pts)} vertices are in faces, so its "
+                 "vertices were fitted as a point cloud")
+    return None
 
 
 def _is_result(obj) -> bool:

@@ -180,6 +180,8 @@ def _summary(surf) -> str:
         f"of the diagonal), smoothness {rep.get('smoothness', float('nan')):.3g}{how}, "
         f"{rep.get('seconds', 0.0):.2f} s"
         + (f", {rep['outliers']} outliers left out" if rep.get("outliers") else "")
+        + (f", {rep['loose_vertices']} loose vertices (in no face) left out"
+           if rep.get("loose_vertices") else "")
     )
 
 

@@ -294,6 +294,24 @@ def test_a_sparse_cloud_gets_a_cross_validated_smoothness_unless_one_is_given():
     assert dense.report["smoothness"] == 1e-4 and "smoothness_selection" not in dense.report
 
 
+def test_loose_vertices_of_a_mesh_are_counted_and_few_faced_vertices_refused():
+    """A mesh is fitted through its faces: a loose vertex is left out with a warning and
+    counted in the report; a mesh whose faces hold fewer than 10 of its many vertices gets an
+    error that says so (it had been 'at least 10 points are needed; got 3')."""
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 12), np.linspace(0, 1, 12)), -1).reshape(-1, 2)
+    V = np.c_[g, 0.1 * g[:, 0] ** 2]
+    i = np.arange(144).reshape(12, 12)
+    a, b, c, d = i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()
+    F = np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+    with pytest.warns(RuntimeWarning, match="1 of the 145 vertices is in no face"):
+        surf = fit_surface(np.r_[V, [[0.5, 0.5, 50.0]]], F, max_control_points=100)
+    assert surf.report["loose_vertices"] == 1 and surf.report["points"] == 144
+    # the stray vertex changed nothing: the same surface as the mesh without it
+    assert np.array_equal(surf.control_points, fit_surface(V, F, max_control_points=100).control_points)
+    with pytest.raises(InvalidInputError, match="only 3 of the 144 vertices are in faces"):
+        fit_surface(V, [[0, 1, 13]])
+
+
 def test_a_tiny_cloud_keeps_the_cross_validated_smoothness_that_misses_the_tolerance():
     """12 points: the loop reaches the tolerance by (nearly) interpolating them; the smoother
     cross-validated surface misses it and is kept anyway (dense data would keep the loop's
