@@ -459,7 +459,9 @@ def adaptive_fit(
     tol = options.tolerance * (diagonal if options.relative else 1.0 / unit)
     lo, hi = column_bounds(uv)
     if start_knots is None:
-        # size the start so that the first fit uses about a tenth of the budget
+        # the start: budget / 12 interior knots (TCB), i.e. a first fit with about a quarter of
+        # the budget in control points (the border functions that meet the domain add to the
+        # ~2 per knot: 2000 -> 166 knots -> 470-500 control points, whatever the tolerance);
         # DCB has about 2.4 times as many functions per knot as TCB
         per = 12 if options.mode == "tcb" else 30
         n0 = options.initial_knots or int(np.clip(options.max_control_points / per, 8, 400))
