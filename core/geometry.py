@@ -5,6 +5,8 @@
 ``point_mesh_distance`` picks candidate triangles per point with a KD-tree over triangle
 centres (the ``k`` nearest) and takes the smallest exact distance among them.
 ``column_bounds`` is the per-column minimum and maximum of a long ``(n, d)`` array.
+``distances_at_vertices`` carries the data-to-surface distances of a point cloud to the vertices
+of the surface mesh (the deviation map of a cloud).
 """
 
 from __future__ import annotations
@@ -12,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["closest_point_on_triangles", "column_bounds", "point_mesh_distance"]
+__all__ = ["closest_point_on_triangles", "column_bounds", "distances_at_vertices",
+           "point_mesh_distance"]
 
 
 def column_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -90,3 +93,73 @@ def point_mesh_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndar
         q = closest_point_on_triangles(rep, A[t], B[t], C[t])
         out[s : s + chunk] = np.linalg.norm(q - rep, axis=1).reshape(len(p), k).min(axis=1)
     return out
+
+
+def distances_at_vertices(vertices: np.ndarray, feet: np.ndarray, distances: np.ndarray,
+                          k: int = 8, radius: float | None = None):
+    """The data-to-surface distance near each surface vertex, and where there is data at all.
+
+    ``feet`` (n, 3) are the closest surface points of n data points and ``distances`` (n,) the
+    data points' distances to them. Each vertex (m, 3) gets the inverse-distance-weighted mean
+    (weights ``1 / |vertex - foot|^2``) of the distances of the ``k`` data points whose feet are
+    nearest to it, counting only feet within ``radius``. Feet rather than the data points
+    themselves: a data point's neighbourhood on the surface does not depend on how far off the
+    surface it lies. Vertices with no foot within ``radius`` have no data near them: value 0
+    and False in the returned mask ``(values (m,), has_data (m,))``; so do vertices with NaN
+    coordinates. Data points with NaN feet or distances are left out.
+
+    ``radius`` defaults to the largest of 4 data spacings (median distance from a foot to the
+    nearest other distinct foot: the tessellation's own trim distance for clouds), 2 vertex
+    spacings (likewise among the vertices: a coarse mesh over dense data) and 3 times the
+    median distance from a vertex to its nearest foot (the typical gap: scan lines far apart
+    compared with the spacing along them). So the vertices without data are those of gaps well
+    beyond the sampling's own, at holes and concave edges of the data.
+
+    The distance from a vertex to the nearest data point instead (what the deviation map of a
+    cloud showed before) measures the gaps between the samples: on 20 000 points of a smooth
+    10 m patch it was 0.034 (median) where the surface was 8.7e-5 from the true shape.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    feet = np.asarray(feet, dtype=np.float64).reshape(-1, 3)
+    distances = np.asarray(distances, dtype=np.float64).reshape(-1)
+    ok = np.isfinite(feet).all(axis=1) & np.isfinite(distances)
+    feet, distances = feet[ok], distances[ok]
+    values = np.zeros(len(vertices))
+    has = np.zeros(len(vertices), dtype=bool)
+    if len(vertices) == 0 or len(feet) == 0:
+        return values, has
+    finite = np.flatnonzero(np.isfinite(vertices).all(axis=1))  # others: no data
+    vertices = vertices[finite]
+    if len(vertices) == 0:
+        return values, has
+    tree = cKDTree(feet)
+    if radius is None:
+        gap = float(np.median(tree.query(vertices[:: max(1, len(vertices) // 20_000)])[0]))
+        radius = max(4.0 * _spacing(feet, tree), 2.0 * _spacing(vertices), 3.0 * gap)
+        if not radius > 0:  # all feet and all vertices coincide
+            radius = np.inf
+    k = int(min(max(k, 1), len(feet)))
+    dist, idx = tree.query(vertices, k=k, distance_upper_bound=radius)
+    dist, idx = dist.reshape(len(vertices), k), idx.reshape(len(vertices), k)
+    near = idx < len(feet)  # the k nearest within the radius (missing ones: inf, n)
+    found = near[:, 0]
+    tiny = 1e-12 * (radius if np.isfinite(radius) else 1.0)
+    w = np.where(near, 1.0 / np.maximum(dist, tiny) ** 2, 0.0)[found]
+    d = distances[np.where(near, idx, 0)][found]
+    values[finite[found]] = (w * d).sum(axis=1) / w.sum(axis=1)
+    has[finite[found]] = True
+    return values, has
+
+
+def _spacing(points: np.ndarray, tree=None, sample: int = 20_000) -> float:
+    """Median distance from (up to ``sample`` of) the points to the nearest other point at a
+    positive distance (duplicates skipped); 0 when there is none."""
+    if len(points) < 2:
+        return 0.0
+    tree = cKDTree(points) if tree is None else tree
+    some = points[:: max(1, len(points) // sample)]
+    k = min(8, len(points))
+    dist = tree.query(some, k=k)[0].reshape(len(some), k)
+    dist = np.where(dist > 0, dist, np.inf).min(axis=1)
+    dist = dist[np.isfinite(dist)]
+    return float(np.median(dist)) if len(dist) else 0.0

@@ -544,9 +544,22 @@ class TCB_OT_retessellate(bpy.types.Operator):
         return {"FINISHED"}
 
 
+# Deviation map of a cloud: surface vertices with no data near them (color; count on the object)
+NO_DATA_COLOR = (0.5, 0.5, 0.5)
+NO_DATA_KEY = "tcb_deviation_no_data"
+
+
 class TCB_OT_deviation_map(bpy.types.Operator):
-    """Color the active TCB surface by its distance to the input data, and store the distance of
-    every input point to the surface on a copy of the input points"""
+    """Color the active TCB surface by how far the input data is from it, and store the distance
+    of every input point to the surface on a copy of the input points"""
+
+    # What the surface vertices show: for a mesh, their distance to the mesh's triangles (a
+    # continuous surface: the distance between the two surfaces). For a point cloud, the
+    # distance to the nearest data point would measure the gaps between the samples, so each
+    # vertex takes the data-to-surface distance of the data near it
+    # (core.geometry.distances_at_vertices); vertices with no data near them are grey, value 0.
+    # The color range is that of the data-to-surface distances of the fitted points, shared by
+    # the surface and the point copy.
 
     bl_idname = "tcb.deviation_map"
     bl_label = "Deviation Map"
@@ -568,25 +581,34 @@ class TCB_OT_deviation_map(bpy.types.Operator):
                 raise bridge.SelectionError("Select a TCB surface (or its control net)")
             data = source_data(context, surface)
             surf = stored_surface(surface)
-            data_dist = np.abs(np.asarray(surf.distances(data.points), dtype=np.float64))
+            if data.faces is None:  # a cloud: also the closest surface points (feet)
+                feet = np.asarray(surf(surf.closest_parameters(data.points)), dtype=np.float64)
+                data_dist = np.linalg.norm(feet - data.points, axis=1)
+            else:
+                data_dist = np.abs(np.asarray(surf.distances(data.points), dtype=np.float64))
         except _user_errors() as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
 
         # points the fit left out (Drop Outliers) keep their distance on the point copy but
-        # do not set the statistics or the colour range
+        # do not set the statistics, the colour range or (clouds) the surface's colours
         used = np.asarray(surf.parameterization.used, dtype=bool)
         counted = used if len(used) == len(data_dist) else np.ones(len(data_dist), dtype=bool)
         left_out = int(len(data_dist) - counted.sum())
         fitted_dist = data_dist[counted]
         verts = bridge.read_world_positions(surface, context.evaluated_depsgraph_get())
-        cloud = data.points if data.faces is not None else data.points[counted]
-        surf_dist = bridge.nearest_distances(verts, cloud, data.faces)
+        if data.faces is None:
+            from ..core.geometry import distances_at_vertices
+
+            surf_dist, has_data = distances_at_vertices(verts, feet[counted], fitted_dist)
+        else:
+            surf_dist = bridge.nearest_distances(verts, data.points, data.faces)
+            has_data = np.ones(len(surf_dist), dtype=bool)
         vmax = float(max(surf_dist.max(initial=0.0), fitted_dist.max(initial=0.0)))
+        colors = bridge.ramp_colors(surf_dist, vmax)
+        colors[~has_data, :3] = NO_DATA_COLOR
         bridge.set_float_attribute(surface.data, DEVIATION_ATTR, surf_dist)
-        bridge.set_color_attribute(
-            surface.data, DEVIATION_ATTR + "_color", bridge.ramp_colors(surf_dist, vmax)
-        )
+        bridge.set_color_attribute(surface.data, DEVIATION_ATTR + "_color", colors)
         mat = bridge.deviation_material(attribute=DEVIATION_ATTR + "_color")
         if mat.name not in surface.data.materials:
             surface.data.materials.append(mat)
@@ -624,8 +646,12 @@ class TCB_OT_deviation_map(bpy.types.Operator):
         st.deviation_rms = float(np.sqrt(np.mean(fitted_dist**2))) if len(fitted_dist) else 0.0
         st.rms = st.deviation_rms
         st.max = float(fitted_dist.max(initial=0.0))
+        no_data = int(len(has_data) - has_data.sum())
+        surface[NO_DATA_KEY] = no_data  # the panel's legend shows grey when there are any
         _show_attribute_colors(context)
         note = f" ({left_out} outliers left out of the fit not counted)" if left_out else ""
+        if no_data:
+            note += f"; {no_data} surface vertices with no data near them are grey"
         self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.rms:.4g}, max {st.max:.4g}; "
                               f"color range 0 - {vmax:.4g}{note}")  # fmt: skip
         return {"FINISHED"}

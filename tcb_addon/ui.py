@@ -7,7 +7,7 @@ selected (nothing, a camera, a result object, ...).
 import bpy
 
 from . import bridge
-from .operators import SPLINE_KEY, result_objects
+from .operators import NO_DATA_KEY, SPLINE_KEY, result_objects
 from .properties import FIT_KEYS, draw_fit_settings
 
 
@@ -92,8 +92,20 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
             for i in reversed(range(n)):
                 lo = st.deviation_max * bridge.RAMP_STOPS[i]
                 box.label(text=f"{lo:.4g}" + (" (max)" if i == n - 1 else ""),
-                          icon=bridge.LEGEND_ICONS[i])  # fmt: skip
+                          icon=legend_icon(bridge.LEGEND_ICONS[i]))  # fmt: skip
+            if surface.get(NO_DATA_KEY, 0):  # a cloud's surface vertices far from all data
+                box.label(text="no data nearby", icon=legend_icon("SEQUENCE_COLOR_09"))
         layout.operator("tcb.export_spline", icon="EXPORT")
+
+
+def legend_icon(name: str) -> str:
+    """``name`` if this Blender has that icon, else its newer name: the SEQUENCE_COLOR_* icons
+    of Blender 4.2 are STRIP_COLOR_* in 5.0 (an unknown icon makes the panel fail to draw)."""
+    icons = bpy.types.UILayout.bl_rna.functions["label"].parameters["icon"].enum_items
+    if name in icons:
+        return name
+    new = name.replace("SEQUENCE_COLOR_", "STRIP_COLOR_")
+    return new if new in icons else "NONE"
 
 
 classes = (TCB_PT_fit, TCB_PT_result)

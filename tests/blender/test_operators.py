@@ -591,6 +591,83 @@ def test_an_outlier_is_refused_by_name_or_dropped_with_the_option(clean_scene, a
     assert snapshot(cloud) == before
 
 
+def _deviation_of(obj):
+    """The deviation map's values and RGBA colors on ``obj``'s vertices."""
+    n = len(obj.data.vertices)
+    dev, rgba = np.empty(n, np.float32), np.empty(4 * n, np.float32)
+    obj.data.attributes["tcb_deviation"].data.foreach_get("value", dev)
+    obj.data.color_attributes["tcb_deviation_color"].data.foreach_get("color", rgba)
+    return dev.astype(np.float64), rgba.reshape(n, 4)
+
+
+def _grey(rgba):
+    return np.all(np.abs(rgba[:, :3] - 0.5) < 1e-6, axis=1)
+
+
+def test_deviation_map_of_a_cloud_shows_the_data_to_surface_distances(clean_scene, addon):
+    """A cloud of 4000 points of a known smooth surface, fitted to about 5e-4: the surface's
+    colours are the data-to-surface distances near each vertex (close to the vertices' true
+    error), not the distance to the nearest data point (the sampling gaps, about 0.016 here,
+    30x the error: what the map showed before); the colour range is the data's largest
+    distance, for the surface and for the point copy alike."""
+    bpy = clean_scene
+    f = lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y)  # noqa: E731
+    q = np.random.default_rng(0).uniform(-1, 1, (4000, 2))
+    points = np.c_[q, f(q[:, 0], q[:, 1])]
+    cloud = add_mesh(bpy, "Cloud", points)  # vertices only: a point cloud
+    assert fit(bpy, cloud) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
+    surf = spline_of(addon, surface)
+    data_dist = surf.distances(points)
+    st = surface.tcb
+
+    verts = positions(surface)
+    true = np.abs(verts[:, 2] - f(verts[:, 0], verts[:, 1]))  # each vertex's real error
+    dev, rgba = _deviation_of(surface)
+    assert np.median(true) < 1e-3 and 0.5 < np.median(dev) / np.median(true) < 2.0
+    assert dev.max() <= 2 * true.max() and dev.max() <= st.deviation_max * (1 + 1e-6)
+    assert not _grey(rgba).any() and surface["tcb_deviation_no_data"] == 0
+
+    # the legend: the data's distances, the same range on the point copy (its top is red)
+    assert st.deviation_max == pytest.approx(data_dist.max(), rel=1e-5)
+    assert st.max == pytest.approx(data_dist.max(), rel=1e-5)
+    assert st.deviation_rms == pytest.approx(np.sqrt(np.mean(data_dist**2)), rel=1e-5)
+    pdev, prgba = _deviation_of(st.deviation_points)
+    assert np.allclose(pdev, data_dist, atol=1e-6)
+    top = np.argmax(pdev)
+    assert np.allclose(prgba[top, :3], [0.9, 0.05, 0.05], atol=1e-3)
+
+
+def test_deviation_map_of_a_cloud_greys_surface_without_data(clean_scene, addon):
+    """An L-shaped cloud: the surface vertices in the missing quadrant farther than the
+    radius from all data get no value (0) and grey, and the panel's legend says so; the
+    vertices with data keep the data's colours."""
+    bpy = clean_scene
+    f = lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y)  # noqa: E731
+    q = np.random.default_rng(0).uniform(-1, 1, (4000, 2))
+    q = q[~((q[:, 0] > 0) & (q[:, 1] > 0))]
+    points = np.c_[q, f(q[:, 0], q[:, 1])]
+    cloud = add_mesh(bpy, "L", points)
+    assert fit(bpy, cloud, resolution=48) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
+    dev, rgba = _deviation_of(surface)
+    grey = _grey(rgba)
+    assert grey.any() and surface["tcb_deviation_no_data"] == grey.sum()
+    assert np.all(dev[grey] == 0)
+    verts = positions(surface)
+    from scipy.spatial import cKDTree
+
+    gap = cKDTree(points).query(verts)[0]
+    assert gap[grey].min() > 0.1 and np.all(verts[grey, :2] > 0)  # in the missing quadrant
+    assert np.median(gap[~grey]) < 0.05 and dev[~grey].max() <= surface.tcb.deviation_max
+    log = draw_panels(bpy, [surface])
+    assert ("label", "no data nearby") in log
+
+
 # --- panels -------------------------------------------------------------------------------------
 
 
@@ -618,6 +695,10 @@ class MockLayout:
         return SimpleNamespace()
 
     def label(self, text="", **k):
+        import bpy
+
+        icons = bpy.types.UILayout.bl_rna.functions["label"].parameters["icon"].enum_items
+        assert k.get("icon", "NONE") in icons, k["icon"]  # UILayout refuses unknown icons
         self.log.append(("label", text))
 
     def separator(self, **k):
@@ -666,6 +747,11 @@ def test_panels_draw_for_any_selection(clean_scene):
     ) in log
     log = draw_panels(bpy, [surface.tcb.net])
     assert ("operator", "tcb.refine", True) in log
+    with bpy.context.temp_override(**select(bpy, surface)):  # the legend's icons exist
+        assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
+    log = draw_panels(bpy, [surface])
+    assert sum(e[0] == "label" and e[1].endswith("(max)") for e in log) == 1
+    assert ("label", "no data nearby") not in log
 
 
 # --- live control net -----------------------------------------------------------------------------

@@ -2,7 +2,11 @@
 
 import numpy as np
 
-from core.geometry import closest_point_on_triangles, point_mesh_distance
+from core.geometry import (
+    closest_point_on_triangles,
+    distances_at_vertices,
+    point_mesh_distance,
+)
 from core.meshio import read_geometry
 from pathlib import Path
 
@@ -38,3 +42,26 @@ def test_point_mesh_distance_equals_an_exhaustive_search():
     np.testing.assert_allclose(fast, exhaustive, rtol=0, atol=1e-12)
     # points on the mesh are at distance zero
     assert point_mesh_distance(V, V, F).max() < 1e-12
+
+
+def test_distances_at_vertices_carry_the_data_distances_not_the_gaps():
+    """Feet on the plane z=0 with distance 2x + 1 (data at height 2x + 1): a vertex gets the
+    weighted mean of the nearest feet's distances (linear data: about its own 2x + 1), a vertex
+    on a foot takes that foot's distance, and vertices beyond the radius get 0 / no data."""
+    rng = np.random.default_rng(0)
+    feet = np.c_[rng.random((5000, 2)), np.zeros(5000)]
+    dist = 2 * feet[:, 0] + 1
+    t = np.linspace(0.1, 0.9, 9)
+    grid = np.c_[np.repeat(t, 9), np.tile(t, 9), np.zeros(81)]
+    far = np.array([[0.5, 3.0, 0.0], [np.nan, 0.0, 0.0]])
+    verts = np.vstack([grid, feet[:3], far])
+    values, has = distances_at_vertices(verts, feet, dist)
+    assert has[:84].all() and not has[84:].any() and np.all(values[84:] == 0)
+    assert np.allclose(values[:81], 2 * grid[:, 0] + 1, atol=0.03)  # not the ~0.01 gaps
+    assert np.allclose(values[81:84], dist[:3])
+    # an explicit radius; feet that are NaN (no closest point) are left out
+    feet[0] = np.nan
+    values, has = distances_at_vertices(verts[:81], feet, dist, radius=1e-4)
+    assert not has.any() and np.all(values == 0)
+    values, has = distances_at_vertices(np.zeros((0, 3)), feet, dist)
+    assert values.shape == (0,) and has.shape == (0,)
