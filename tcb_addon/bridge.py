@@ -364,6 +364,7 @@ RAMP_STOPS = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
 RAMP_COLORS = np.array(
     [[0.05, 0.15, 0.9], [0.0, 0.75, 0.9], [0.1, 0.8, 0.1], [0.95, 0.85, 0.05], [0.9, 0.05, 0.05]]
 )
+# Blender 4.2 names; ui.legend_icon maps them to 5.0's STRIP_COLOR_* where those exist
 LEGEND_ICONS = ("SEQUENCE_COLOR_05", "SEQUENCE_COLOR_06", "SEQUENCE_COLOR_04",
                 "SEQUENCE_COLOR_03", "SEQUENCE_COLOR_01")  # fmt: skip
 
@@ -381,7 +382,8 @@ def nearest_distances(query: np.ndarray, data: np.ndarray, faces: np.ndarray | N
     """Distance from each query point to the data: to the data's triangles when ``faces`` are
     given (``core.geometry.point_mesh_distance``, vectorized), else to the nearest data point.
     With sparse meshes (a few hundred vertices) the distance to the vertices alone would mostly
-    measure the sampling gaps, not the deviation."""
+    measure the sampling gaps, not the deviation; for the same reason the Deviation Map colors
+    a point cloud's surface with ``core.geometry.distances_at_vertices`` instead."""
     from ..core.geometry import point_mesh_distance
 
     query = np.asarray(query, dtype=np.float64).reshape(-1, 3)

@@ -649,7 +649,8 @@ class TCB_OT_deviation_map(bpy.types.Operator):
         no_data = int(len(has_data) - has_data.sum())
         surface[NO_DATA_KEY] = no_data  # the panel's legend shows grey when there are any
         _show_attribute_colors(context)
-        note = f" ({left_out} outliers left out of the fit not counted)" if left_out else ""
+        what = "loose vertices (in no face)" if data.faces is not None else "outliers"
+        note = f" ({left_out} {what} left out of the fit not counted)" if left_out else ""
         if no_data:
             note += f"; {no_data} surface vertices with no data near them are grey"
         self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.rms:.4g}, max {st.max:.4g}; "
