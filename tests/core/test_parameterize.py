@@ -533,7 +533,11 @@ def test_fanned_ngons_with_collinear_vertices_lose_their_zero_area_triangles() -
     assert area.min() > 1e-6
     uv = param.uv
     assert np.all(np.cross(uv[f[:, 1]] - uv[f[:, 0]], uv[f[:, 2]] - uv[f[:, 0]]) > 0)
-    a, b = fit_surface(v, quads), fit_surface(v, hexes)
+    a = fit_surface(v, quads)
+    # the hexagon tiling leaves 14 grid vertices out of every face: counted, with a warning
+    with pytest.warns(RuntimeWarning, match="14 of the 196 vertices are in no face"):
+        b = fit_surface(v, hexes)
+    assert b.report["loose_vertices"] == 14
     assert b.report["stop_reason"] == "tolerance reached"
     assert b.report["control_points"] <= 1.2 * a.report["control_points"]
 
