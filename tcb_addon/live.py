@@ -12,6 +12,13 @@ with Sample Index (net position at ``tcb_index``), a scale, an Accumulate Field 
 ``tcb_vertex`` and a second Sample Index at ``r*K``. No Python runs at update time: it works in
 Object Mode and while dragging net vertices in Edit Mode, with undo, animation and rendering, and
 survives saving and reopening the file without the add-on.
+
+When the net or the weights cannot drive the surface (deleted, so their geometry is empty, or
+with other vertex counts) the modifier passes the surface's own mesh through: the stored
+spline's tessellation, never a collapsed surface. Every surface has weights of its own; Shift+D
+copies a surface but not its hidden weights object, so :func:`attach` makes a private one for a
+surface whose weights are shared before writing them, and :func:`own_net` does the same for a
+shared net before Refine rewrites it.
 """
 
 from __future__ import annotations
@@ -22,12 +29,18 @@ import numpy as np
 GROUP_NAME = "TCB Live Surface"
 MODIFIER_NAME = "TCB Live Net"
 INPUTS = ("Net", "Weights", "Terms")
+# Bumped when the node tree changes: an older group in a file is rebuilt in place (same
+# interface, so the modifiers' inputs are kept) the next time a surface is linked.
+# 2: falls back to the surface's own mesh when the net or the weights cannot drive it.
+GROUP_VERSION = 2
 
 
 def node_group() -> bpy.types.NodeTree:
-    """The shared node group (created once per file)."""
+    """The shared node group (created once per file, brought up to date if older)."""
     ng = bpy.data.node_groups.get(GROUP_NAME)
     if ng is not None and ng.bl_idname == "GeometryNodeTree":
+        if ng.get("tcb_version", 1) < GROUP_VERSION and ng.library is None:
+            _build_nodes(ng)
         return ng
     ng = bpy.data.node_groups.new(GROUP_NAME, "GeometryNodeTree")
     iface = ng.interface
@@ -37,8 +50,27 @@ def node_group() -> bpy.types.NodeTree:
     terms = iface.new_socket("Terms", in_out="INPUT", socket_type="NodeSocketInt")
     terms.default_value, terms.min_value = 1, 1
     iface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    _build_nodes(ng)
+    return ng
 
+
+def _socket(sockets, identifier: str):
+    """A node socket by identifier (``inputs[name]`` finds the first of that name)."""
+    return next(s for s in sockets if s.identifier == identifier)
+
+
+def _build_nodes(ng) -> None:
+    """(Re)create the nodes of the group; its interface is :data:`INPUTS` and the geometry.
+
+    The spline evaluation replaces the positions only when the net and the weights fit the
+    surface: the weights hold ``Terms`` points per surface vertex and the net has every control
+    point they index. Otherwise (the net or the weights object was deleted, so its geometry is
+    empty; vertices were added to or deleted from the surface mesh or the net) the surface's own
+    mesh passes through unchanged, the tessellation written by the last fit, refine or
+    re-tessellate, as Blender's deform modifiers leave a mesh when their object is gone.
+    """
     nodes, links = ng.nodes, ng.links
+    nodes.clear()
     gin = nodes.new("NodeGroupInput")
     gout = nodes.new("NodeGroupOutput")
     net_info = nodes.new("GeometryNodeObjectInfo")
@@ -65,7 +97,7 @@ def node_group() -> bpy.types.NodeTree:
     accumulate = nodes.new("GeometryNodeAccumulateField")
     accumulate.data_type, accumulate.domain = "FLOAT_VECTOR", "POINT"
     row = nodes.new("GeometryNodeInputIndex")
-    first = nodes.new("ShaderNodeMath")
+    first = nodes.new("FunctionNodeIntegerMath")  # r * K, exact beyond 2**24 too
     first.operation = "MULTIPLY"
     sample_sum = nodes.new("GeometryNodeSampleIndex")
     sample_sum.data_type, sample_sum.domain = "FLOAT_VECTOR", "POINT"
@@ -87,10 +119,49 @@ def node_group() -> bpy.types.NodeTree:
     links.new(first.outputs["Value"], sample_sum.inputs["Index"])
     links.new(gin.outputs["Geometry"], set_pos.inputs["Geometry"])
     links.new(sample_sum.outputs["Value"], set_pos.inputs["Position"])
-    links.new(set_pos.outputs["Geometry"], gout.inputs["Geometry"])
+
+    # the fallback: weights points == surface points * Terms, and net points > largest index
+    def count(geometry_socket):
+        node = nodes.new("GeometryNodeAttributeDomainSize")
+        node.component = "MESH"
+        links.new(geometry_socket, node.inputs["Geometry"])
+        return node.outputs["Point Count"]
+
+    expected = nodes.new("FunctionNodeIntegerMath")
+    expected.operation = "MULTIPLY"
+    links.new(count(gin.outputs["Geometry"]), expected.inputs[0])
+    links.new(gin.outputs["Terms"], expected.inputs[1])
+    same = nodes.new("FunctionNodeCompare")
+    same.data_type, same.operation = "INT", "EQUAL"
+    links.new(count(w_info.outputs["Geometry"]), _socket(same.inputs, "A_INT"))
+    links.new(expected.outputs["Value"], _socket(same.inputs, "B_INT"))
+    # the largest index: a Field Min & Max read on the weights (Attribute Statistic would
+    # also sort them for the median, 2x the time of the whole evaluation)
+    min_max = nodes.new("GeometryNodeFieldMinAndMax")
+    min_max.data_type, min_max.domain = "INT", "POINT"
+    links.new(index.outputs["Attribute"], min_max.inputs["Value"])
+    largest = nodes.new("GeometryNodeSampleIndex")
+    largest.data_type, largest.domain = "INT", "POINT"
+    links.new(w_info.outputs["Geometry"], largest.inputs["Geometry"])
+    links.new(min_max.outputs["Max"], largest.inputs["Value"])
+    covered = nodes.new("FunctionNodeCompare")
+    covered.data_type, covered.operation = "INT", "GREATER_THAN"
+    links.new(count(net_info.outputs["Geometry"]), _socket(covered.inputs, "A_INT"))
+    links.new(largest.outputs["Value"], _socket(covered.inputs, "B_INT"))
+    valid = nodes.new("FunctionNodeBooleanMath")
+    valid.operation = "AND"
+    links.new(same.outputs["Result"], valid.inputs[0])
+    links.new(covered.outputs["Result"], valid.inputs[1])
+    switch = nodes.new("GeometryNodeSwitch")
+    switch.input_type = "GEOMETRY"
+    switch.name = switch.label = "Net and Weights Fit"
+    links.new(valid.outputs["Boolean"], switch.inputs["Switch"])
+    links.new(gin.outputs["Geometry"], switch.inputs["False"])
+    links.new(set_pos.outputs["Geometry"], switch.inputs["True"])
+    links.new(switch.outputs["Output"], gout.inputs["Geometry"])
     for i, node in enumerate(nodes):
         node.location = (200 * (i % 6), -200 * (i // 6))
-    return ng
+    ng["tcb_version"] = GROUP_VERSION
 
 
 def padded_weights(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
@@ -111,8 +182,169 @@ def padded_weights(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     return index, weight, vertex, k
 
 
+def _input_ids(ng) -> dict:
+    return {
+        item.name: item.identifier
+        for item in ng.interface.items_tree
+        if getattr(item, "in_out", None) == "INPUT"
+    }
+
+
+def _users(obj, pointer: str, socket: str) -> list:
+    """The objects that use ``obj`` as their net or weights: through ``object.tcb.<pointer>``
+    or through the ``socket`` input of a live-net modifier."""
+    ng = bpy.data.node_groups.get(GROUP_NAME)
+    ident = _input_ids(ng).get(socket) if ng is not None else None
+    found = []
+    for ob in bpy.data.objects:
+        if getattr(ob.tcb, pointer) == obj or (
+            ident is not None
+            and any(
+                mod.type == "NODES" and mod.node_group == ng and mod.get(ident) == obj
+                for mod in ob.modifiers
+            )
+        ):
+            found.append(ob)
+    return found
+
+
+def _others(obj, surface_obj, pointer: str, socket: str) -> list:
+    """The surfaces other than ``surface_obj`` that share ``obj`` (a net or weights object,
+    e.g. after Shift+D of a surface), keeping ``obj.tcb.surface`` on one of them."""
+    others = [o for o in _users(obj, pointer, socket) if o != surface_obj]
+    if others and obj.tcb.surface in (None, surface_obj):
+        obj.tcb.surface = others[0]
+    return others
+
+
+def _set_input(ob, socket: str, value) -> None:
+    mod = ob.modifiers.get(MODIFIER_NAME)
+    if mod is not None and mod.node_group is not None:
+        ident = _input_ids(mod.node_group).get(socket)
+        if ident is not None:
+            mod[ident] = value
+            mod.node_group = mod.node_group  # its update rebuilds the depsgraph relations
+
+
+def own_net(surface_obj):
+    """The control net of ``surface_obj``, made its own before it is rewritten (Refine).
+
+    A net shared with other surfaces (Shift+D of a surface without its net) is copied: the
+    net's own surface (``net.tcb.surface``) keeps the net and the others get the copy, so
+    rewriting it leaves the other surfaces as they were. None without a net."""
+    net = surface_obj.tcb.net
+    if net is None:
+        return None
+    owner = net.tcb.surface
+    others = []
+    for ob in _users(net, "net", "Net"):
+        if ob == surface_obj:
+            continue
+        own = ob.tcb.net
+        if own is not None and own != net and own.type == "MESH":
+            _set_input(ob, "Net", own)  # its modifier only strayed to this net: set it back
+        else:
+            others.append(ob)
+    if not others:
+        return net
+    copy = net.copy()
+    copy.data = net.data.copy()
+    for coll in net.users_collection or surface_obj.users_collection:
+        coll.objects.link(copy)
+    try:
+        copy.hide_set(net.hide_get())
+    except RuntimeError:  # not in the current view layer
+        pass
+    moved = others if owner == surface_obj else [surface_obj]
+    copy.tcb.surface = moved[0]
+    if owner not in (surface_obj, *others):
+        net.tcb.surface = others[0]
+    for ob in moved:
+        ob.tcb.net = copy
+        _set_input(ob, "Net", copy)
+    return surface_obj.tcb.net
+
+
+def _remove(obj) -> None:
+    """Remove an object of ours (weights, a deleted net) and its mesh if nothing else uses it."""
+    mesh = obj.data
+    bpy.data.objects.remove(obj)
+    if mesh is not None and mesh.users == 0:
+        bpy.data.meshes.remove(mesh)
+
+
+def detach(surface_obj) -> None:
+    """Remove the live link of ``surface_obj``: its modifier and its weights object (unless
+    another surface uses it). The surface keeps its own mesh."""
+    mod = surface_obj.modifiers.get(MODIFIER_NAME)
+    if mod is not None:
+        surface_obj.modifiers.remove(mod)
+    holder = surface_obj.tcb.weights
+    surface_obj.tcb.weights = None
+    if holder is not None and not _others(holder, surface_obj, "weights", "Weights"):
+        _remove(holder)
+
+
+def relink(surface_obj, surf, resolution: int, report=None, rewrite: bool = True) -> bool:
+    """Bring the live link of ``surface_obj`` up to date after its mesh was rewritten from
+    ``surf`` at ``resolution`` (Refine, Re-tessellate). Surfaces without a live net (fitted
+    without, or the modifier and weights removed) keep none.
+
+    - The net is gone: removed from the file, or deleted with X in the viewport, which only
+      unlinks it from the scene as the surface still refers to it (the hidden net would then
+      go on driving the surface). With ``rewrite`` the net is dropped, the live link removed
+      (:func:`detach`) and ``report`` gets a warning; the surface shows its spline, rewritten
+      by the caller, and True is returned (``surf`` holds the dropped net's edits: the
+      caller may store it). Without ``rewrite`` nothing changes (the modifier already passes
+      the surface's own mesh through, or the hidden net drives it as before).
+    - Otherwise the weights are rewritten (with ``rewrite``; without it, only when the link
+      is broken: weights deleted, modifier inputs not the surface's net and weights, an old
+      node group), in a weights object of the surface's own (see :func:`attach`).
+    """
+    st = surface_obj.tcb
+    mod = surface_obj.modifiers.get(MODIFIER_NAME)
+    net = st.net
+    if net is None or net.type != "MESH" or not net.users_collection:
+        if not rewrite:
+            return False
+        dropped = net is not None
+        if dropped:
+            st.net = None
+            if not net.users_collection and not _others(net, surface_obj, "net", "Net"):
+                _remove(net)  # deleted with X: no scene shows it, nothing else uses it
+        if mod is None and st.weights is None:
+            return dropped  # no live link to remove
+        detach(surface_obj)
+        if report is not None:
+            report(
+                {"WARNING"},
+                f"The control net of '{surface_obj.name}' was deleted: its live link was "
+                "removed, the surface keeps its spline but no net edits update it any more "
+                "(Fit Surface makes a new net)",
+            )
+        return dropped
+    if mod is None and st.weights is None:
+        return False
+    if not rewrite and st.weights is not None and mod is not None and mod.node_group is not None:
+        ng = mod.node_group
+        ids = _input_ids(ng)
+        if (
+            ng.name == GROUP_NAME
+            and ng.get("tcb_version", 1) >= GROUP_VERSION
+            and mod.get(ids.get("Net", "")) == net
+            and mod.get(ids.get("Weights", "")) == st.weights
+        ):
+            return False
+    attach(surface_obj, net, surf, resolution)
+    return False
+
+
 def attach(surface_obj, net_obj, surf, resolution: int) -> bpy.types.Object:
-    """Make ``surface_obj`` follow ``net_obj`` live; returns the (hidden) weights object."""
+    """Make ``surface_obj`` follow ``net_obj`` live; returns the (hidden) weights object.
+
+    The weights are written into the surface's own weights object: a new one if it has none
+    (or it was deleted), or if the one it has is shared with another surface (Shift+D copies
+    the surface but not its hidden weights), so that the other surface keeps its weights."""
     from . import bridge
 
     uv, _ = surf.tessellation_uv(resolution)
@@ -127,6 +359,8 @@ def attach(surface_obj, net_obj, surf, resolution: int) -> bpy.types.Object:
         attr.data.foreach_set("value", values)
 
     holder = surface_obj.tcb.weights
+    if holder is not None and _others(holder, surface_obj, "weights", "Weights"):
+        holder = None  # shared: the other surface keeps it
     if holder is None:
         holder = bpy.data.objects.new(f"{surface_obj.name} Weights", mesh)
         for coll in surface_obj.users_collection:
@@ -142,11 +376,7 @@ def attach(surface_obj, net_obj, surf, resolution: int) -> bpy.types.Object:
     if mod is None:
         mod = surface_obj.modifiers.new(MODIFIER_NAME, "NODES")
     mod.node_group = node_group()
-    ids = {
-        item.name: item.identifier
-        for item in mod.node_group.interface.items_tree
-        if getattr(item, "in_out", None) == "INPUT"
-    }
+    ids = _input_ids(mod.node_group)
     mod[ids["Net"]] = net_obj
     mod[ids["Weights"]] = holder
     mod[ids["Terms"]] = k

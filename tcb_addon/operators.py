@@ -497,9 +497,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         st = surface.tcb
         write_surface_mesh(surface, surf, st.resolution)
         if st.net is not None:
-            write_net_mesh(st.net, surf)
-            if st.weights is not None:
-                live.attach(surface, st.net, surf, st.resolution)
+            write_net_mesh(live.own_net(surface), surf)
+        live.relink(surface, surf, st.resolution, self.report)
         store_spline(surface, surf)
         store_stats(st, surf, self._settings)
         report_result(self, surf, getattr(self, "_notes", ()), getattr(self, "_warnings", ()))
@@ -535,8 +534,8 @@ class TCB_OT_retessellate(bpy.types.Operator):
                 raise bridge.SelectionError("Select a TCB surface (or its control net)")
             surf = stored_surface(surface)
             write_surface_mesh(surface, surf, self.resolution)
-            if surface.tcb.net is not None and surface.tcb.weights is not None:
-                live.attach(surface, surface.tcb.net, surf, self.resolution)
+            if live.relink(surface, surf, self.resolution, self.report):
+                store_spline(surface, surf)  # the net was dropped: its edits are kept
         except _user_errors() as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
@@ -589,6 +588,8 @@ class TCB_OT_deviation_map(bpy.types.Operator):
         except _user_errors() as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
+        # a live net whose weights were deleted is linked again, so the colors show the net
+        live.relink(surface, surf, surface.tcb.resolution, rewrite=False)
 
         # points the fit left out (Drop Outliers) keep their distance on the point copy but
         # do not set the statistics, the colour range or (clouds) the surface's colours

@@ -1,0 +1,266 @@
+"""The live control net when its objects go away or are shared: a deleted net or weights
+object never collapses the surface, the operators repair or remove the live link, and a
+Shift+D copy of a surface gets weights (and, when needed, a net) of its own before an operator
+rewrites them, leaving the original as it was."""
+
+from __future__ import annotations
+
+import base64
+import importlib
+import sys
+
+import numpy as np
+import pytest
+
+ADDON = "bl_ext.user_default.tcb_surface"
+MODIFIER = "TCB Live Net"
+
+
+def grid(n=20, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y)):
+    t = np.linspace(-1.0, 1.0, n)
+    x, y = np.meshgrid(t, t, indexing="ij")
+    verts = np.c_[x.ravel(), y.ravel(), f(x, y).ravel()]
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()
+    return verts, np.r_[np.c_[a, b, c], np.c_[a, c, d]]  # triangles, as the deviation map reads
+
+
+def central(surf, resolution):
+    """The control point with the largest support on the tessellation."""
+    uv, _ = surf.tessellation_uv(resolution)
+    return int(np.argmax(np.diff(surf.evaluation_matrix(uv).tocsc().indptr)))
+
+
+def add_mesh(bpy, name, verts, faces):
+    mesh = bpy.data.meshes.new(name)
+    mesh.from_pydata(verts.tolist(), [], faces.tolist())
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def select(bpy, *objs):
+    """Select ``objs`` in the view layer (first one active), as a user would."""
+    bpy.context.view_layer.update()
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o in objs)
+    bpy.context.view_layer.objects.active = objs[0]
+    return dict(selected_objects=list(objs), active_object=objs[0], object=objs[0])
+
+
+def run(bpy, op, obj, **props):
+    with bpy.context.temp_override(**select(bpy, obj)):
+        return op(**props)
+
+
+def positions(obj) -> np.ndarray:
+    attr = obj.data.attributes["position"]
+    buf = np.empty(len(attr.data) * 3, np.float32)
+    attr.data.foreach_get("vector", buf)
+    return buf.reshape(-1, 3).astype(np.float64)
+
+
+def evaluated(bpy, obj) -> np.ndarray:
+    return positions(obj.evaluated_get(bpy.context.evaluated_depsgraph_get()))
+
+
+def spline_of(surface_obj):
+    core = importlib.import_module(ADDON + ".core")
+    return core.TCBSurface.from_bytes(base64.b64decode(surface_obj["tcb_spline"]))
+
+
+def move_net_vertex(bpy, net, j, offset):
+    p = positions(net)
+    p[j] += offset
+    net.data.attributes["position"].data.foreach_set("vector", p.astype(np.float32).ravel())
+    net.data.update()
+    bpy.context.view_layer.update()
+    return p
+
+
+def fitted(bpy, name="Wave", resolution=20):
+    verts, faces = grid()
+    src = add_mesh(bpy, name, verts, faces)
+    with bpy.context.temp_override(**select(bpy, src)):
+        assert bpy.ops.tcb.fit_surface(tolerance=5e-3, max_control_points=200,
+                                       resolution=resolution) == {"FINISHED"}  # fmt: skip
+    surface = bpy.context.view_layer.objects.active
+    assert surface.tcb.role == "SURFACE" and surface.modifiers.get(MODIFIER) is not None
+    return src, verts, faces, surface
+
+
+def roles(bpy, role):
+    return [o for o in bpy.data.objects if o.tcb.role == role]
+
+
+@pytest.mark.parametrize("how", ["x_key", "removed"])
+def test_a_deleted_net_leaves_the_surface_on_its_spline(clean_scene, addon, capfd, how):
+    """X in the viewport only unlinks the net (the surface still refers to it, so it lives on
+    hidden and still drives the surface, edits included); removing it from the file (the
+    outliner, a script) empties the modifier's Net input: the surface is then its own mesh,
+    the spline's tessellation, and not a single point. Re-tessellate drops the net and the
+    live link with a warning, keeping what the surface showed."""
+    bpy = clean_scene
+    src, verts, faces, surface = fitted(bpy)
+    net = surface.tcb.net
+    source_before = positions(src)
+    surf = spline_of(surface)
+    assert np.allclose(evaluated(bpy, surface), surf.tessellate(20)[0], atol=1e-5)
+    moved = move_net_vertex(bpy, net, central(surf, 20), (0.0, 0.0, 0.2))
+    edited = surf.with_control_points(moved)
+
+    if how == "x_key":
+        with bpy.context.temp_override(**select(bpy, net)):
+            assert bpy.ops.object.delete() == {"FINISHED"}
+        assert surface.tcb.net == net and not net.users_collection
+        shown = edited
+    else:
+        bpy.data.objects.remove(net)
+        assert surface.tcb.net is None
+        shown = surf  # the surface's own mesh: the net's edits went with it
+    expected = shown.tessellate(20)[0]
+    assert np.allclose(evaluated(bpy, surface), expected, atol=1e-5)
+
+    # the deviation map measures that surface
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+    dev = np.empty(len(expected), np.float32)
+    surface.data.attributes["tcb_deviation"].data.foreach_get("value", dev)
+    bridge = sys.modules[ADDON + ".tcb_addon.bridge"]
+    assert np.allclose(dev, bridge.nearest_distances(expected, verts, faces), atol=1e-5)
+    assert surface.tcb.max == pytest.approx(shown.distances(verts).max(), abs=1e-6)
+
+    # re-tessellating removes the dead live link and the net, with a warning
+    capfd.readouterr()
+    assert run(bpy, bpy.ops.tcb.retessellate, surface, resolution=16) == {"FINISHED"}
+    assert "control net of 'Wave TCB Surface' was deleted" in capfd.readouterr().out
+    assert surface.tcb.net is None and surface.tcb.weights is None
+    assert surface.modifiers.get(MODIFIER) is None
+    assert roles(bpy, "WEIGHTS") == roles(bpy, "NET") == []
+    assert np.allclose(evaluated(bpy, surface), shown.tessellate(16)[0], atol=1e-5)
+    assert np.allclose(spline_of(surface).control_points, shown.control_points, atol=1e-6)
+
+    assert run(bpy, bpy.ops.tcb.refine, surface, tolerance=1e-3) == {"FINISHED"}
+    refined = spline_of(surface)
+    assert len(refined.control_points) > len(surf.control_points)
+    assert np.allclose(evaluated(bpy, surface), refined.tessellate(16)[0], atol=1e-5)
+    assert surface.tcb.net is None and surface.modifiers.get(MODIFIER) is None
+    assert np.array_equal(positions(src), source_before)
+
+
+def test_a_deleted_weights_object_is_rebuilt(clean_scene, addon):
+    bpy = clean_scene
+    src, verts, faces, surface = fitted(bpy)
+    net = surface.tcb.net
+    surf = spline_of(surface)
+    expected = surf.tessellate(20)[0]
+
+    bpy.data.objects.remove(surface.tcb.weights)  # e.g. an outliner clean-up
+    assert surface.tcb.weights is None
+    assert np.allclose(evaluated(bpy, surface), expected, atol=1e-5)
+
+    # Re-tessellate links the net again through a new weights object
+    assert run(bpy, bpy.ops.tcb.retessellate, surface, resolution=20) == {"FINISHED"}
+    weights = surface.tcb.weights
+    assert weights is not None and weights.tcb.surface == surface
+    assert roles(bpy, "WEIGHTS") == [weights]
+    moved = move_net_vertex(bpy, net, central(surf, 20), (0.0, 0.0, 0.2))
+    live = surf.with_control_points(moved).tessellate(20)[0]
+    assert np.abs(live - expected).max() > 1e-2
+    assert np.allclose(evaluated(bpy, surface), live, atol=1e-4)
+
+    # so does the deviation map (its colours then show the edited surface)
+    bpy.data.objects.remove(surface.tcb.weights)
+    assert np.allclose(evaluated(bpy, surface), expected, atol=1e-5)  # the mesh, unedited
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+    assert surface.tcb.weights is not None and len(roles(bpy, "WEIGHTS")) == 1
+    assert np.allclose(evaluated(bpy, surface), live, atol=1e-4)
+
+    # and Refine
+    bpy.data.objects.remove(surface.tcb.weights)
+    assert run(bpy, bpy.ops.tcb.refine, surface, tolerance=1e-3) == {"FINISHED"}
+    refined = spline_of(surface)
+    assert surface.tcb.weights is not None and len(roles(bpy, "WEIGHTS")) == 1
+    assert np.allclose(evaluated(bpy, surface), refined.tessellate(20)[0], atol=1e-5)
+    moved = move_net_vertex(bpy, net, central(refined, 20), (0.0, 0.0, 0.1))
+    live = refined.with_control_points(moved).tessellate(20)[0]
+    assert np.allclose(evaluated(bpy, surface), live, atol=1e-4)
+
+
+def test_an_outdated_node_group_is_brought_up_to_date(clean_scene, addon):
+    """A file from before the fallback has the group without it: the deviation map (and
+    Refine, Re-tessellate) rebuilds it in place, and a deleted net then no longer collapses
+    the surface."""
+    bpy = clean_scene
+    _, _, _, surface = fitted(bpy)
+    ng = surface.modifiers[MODIFIER].node_group
+    del ng["tcb_version"]
+    ng.nodes.clear()  # whatever the old group held: now it makes no geometry
+    bpy.context.view_layer.update()
+    assert len(evaluated(bpy, surface)) == 0
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+    assert surface.modifiers[MODIFIER].node_group == ng and ng["tcb_version"] >= 2
+    expected = spline_of(surface).tessellate(20)[0]
+    assert np.allclose(evaluated(bpy, surface), expected, atol=1e-5)
+    bpy.data.objects.remove(surface.tcb.net)
+    assert np.allclose(evaluated(bpy, surface), expected, atol=1e-5)
+
+
+@pytest.mark.parametrize("with_net", [True, False], ids=["surface_and_net", "surface_only"])
+def test_refining_a_shift_d_copy_leaves_the_original_as_it_was(clean_scene, addon, with_net):
+    bpy = clean_scene
+    _, _, _, surface = fitted(bpy, "Face")
+    net, weights = surface.tcb.net, surface.tcb.weights
+    n_net = len(net.data.vertices)
+    before = evaluated(bpy, surface)
+
+    # Shift+D as in the viewport: the view layer's selection, no context override
+    select(bpy, *((surface, net) if with_net else (surface,)))
+    assert bpy.ops.object.duplicate() == {"FINISHED"}
+    copy = bpy.context.view_layer.objects.active
+    assert copy != surface and copy.tcb.role == "SURFACE"
+    assert copy.tcb.weights == weights  # Blender does not copy the hidden weights object
+    assert (copy.tcb.net != net) if with_net else (copy.tcb.net == net)
+
+    assert run(bpy, bpy.ops.tcb.refine, copy, tolerance=1e-3) == {"FINISHED"}
+    refined = spline_of(copy)
+    assert len(refined.control_points) > n_net
+    # the original: the same live surface, its own net and weights, untouched
+    assert np.array_equal(evaluated(bpy, surface), before)
+    assert surface.tcb.net == net and surface.tcb.weights == weights
+    assert weights.tcb.surface == surface and net.tcb.surface == surface
+    assert len(net.data.vertices) == n_net
+    # the copy: weights and net of its own, following its refined spline
+    assert np.allclose(evaluated(bpy, copy), refined.tessellate(20)[0], atol=1e-5)
+    assert copy.tcb.weights not in (None, weights) and copy.tcb.weights.tcb.surface == copy
+    assert copy.tcb.net not in (None, net) and copy.tcb.net.tcb.surface == copy
+    assert len(copy.tcb.net.data.vertices) == len(refined.control_points)
+    assert len(roles(bpy, "WEIGHTS")) == len(roles(bpy, "NET")) == 2
+
+    # each follows its own net
+    copy_before = evaluated(bpy, copy)
+    surf = spline_of(surface)
+    moved = move_net_vertex(bpy, net, central(surf, 20), (0.0, 0.0, 0.2))
+    assert np.allclose(evaluated(bpy, surface), surf.with_control_points(moved).tessellate(20)[0],
+                       atol=1e-4)  # fmt: skip
+    assert np.array_equal(evaluated(bpy, copy), copy_before)
+    # and re-tessellating the original leaves the copy alone
+    assert run(bpy, bpy.ops.tcb.retessellate, surface, resolution=12) == {"FINISHED"}
+    assert np.array_equal(evaluated(bpy, copy), copy_before)
+    assert surface.tcb.weights == weights and len(roles(bpy, "WEIGHTS")) == 2
+
+
+def test_re_tessellating_the_original_of_a_copy_gives_the_original_new_weights(clean_scene, addon):
+    """Shared weights are never rewritten, whichever surface is changed first."""
+    bpy = clean_scene
+    _, _, _, surface = fitted(bpy)
+    net, weights = surface.tcb.net, surface.tcb.weights
+    select(bpy, surface, net)
+    assert bpy.ops.object.duplicate() == {"FINISHED"}
+    copy = bpy.context.view_layer.objects.active
+    copy_before = evaluated(bpy, copy)
+    assert run(bpy, bpy.ops.tcb.retessellate, surface, resolution=12) == {"FINISHED"}
+    assert surface.tcb.weights not in (None, weights)
+    assert copy.tcb.weights == weights and weights.tcb.surface == copy
+    assert np.array_equal(evaluated(bpy, copy), copy_before)
+    assert np.allclose(evaluated(bpy, surface), spline_of(surface).tessellate(12)[0], atol=1e-5)
