@@ -8,9 +8,13 @@ from __future__ import annotations
 import base64
 import importlib
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from netedit import move_net_vertex, positions  # noqa: E402
 
 ADDON = "bl_ext.user_default.tcb_surface"
 MODIFIER = "TCB Live Net"
@@ -54,13 +58,6 @@ def run(bpy, op, obj, **props):
         return op(**props)
 
 
-def positions(obj) -> np.ndarray:
-    attr = obj.data.attributes["position"]
-    buf = np.empty(len(attr.data) * 3, np.float32)
-    attr.data.foreach_get("vector", buf)
-    return buf.reshape(-1, 3).astype(np.float64)
-
-
 def evaluated(bpy, obj) -> np.ndarray:
     return positions(obj.evaluated_get(bpy.context.evaluated_depsgraph_get()))
 
@@ -68,15 +65,6 @@ def evaluated(bpy, obj) -> np.ndarray:
 def spline_of(surface_obj):
     core = importlib.import_module(ADDON + ".core")
     return core.TCBSurface.from_bytes(base64.b64decode(surface_obj["tcb_spline"]))
-
-
-def move_net_vertex(bpy, net, j, offset):
-    p = positions(net)
-    p[j] += offset
-    net.data.attributes["position"].data.foreach_set("vector", p.astype(np.float32).ravel())
-    net.data.update()
-    bpy.context.view_layer.update()
-    return p
 
 
 def fitted(bpy, name="Wave", resolution=20):

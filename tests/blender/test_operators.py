@@ -12,6 +12,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from netedit import move_net_vertex, positions  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[2]
 ADDON = "bl_ext.user_default.tcb_surface"
 
@@ -97,13 +100,6 @@ def fit(bpy, *objs, **props):
     props.setdefault("resolution", 24)
     with bpy.context.temp_override(**select(bpy, *objs)):
         return bpy.ops.tcb.fit_surface(**props)
-
-
-def positions(obj) -> np.ndarray:
-    attr = obj.data.attributes["position"]
-    buf = np.empty(len(attr.data) * 3, np.float32)
-    attr.data.foreach_get("vector", buf)
-    return buf.reshape(-1, 3).astype(np.float64)
 
 
 def core_of(addon):
@@ -760,15 +756,6 @@ def test_panels_draw_for_any_selection(clean_scene):
 def evaluated_positions(bpy, obj):
     depsgraph = bpy.context.evaluated_depsgraph_get()
     return positions(obj.evaluated_get(depsgraph))
-
-
-def move_net_vertex(bpy, net, j, offset):
-    p = positions(net)
-    p[j] += offset
-    net.data.attributes["position"].data.foreach_set("vector", p.astype(np.float32).ravel())
-    net.data.update()
-    bpy.context.view_layer.update()
-    return p
 
 
 def test_live_net_moves_the_surface_locally_and_survives_reopen(clean_scene, addon, tmp_path):
