@@ -132,6 +132,7 @@ def fit_control_points(
     check_partition: bool = True,
     scored: int | None = None,
     basis: list | None = None,
+    sparse: bool | None = None,
 ) -> FitResult:
     """Fit the control points of ``space`` to ``points`` (N, 3) at parameters ``uv`` (N, 2).
 
@@ -155,6 +156,11 @@ def fit_control_points(
         vertices, not the points sampled on its faces; default: all).
     basis : list of CSR, optional
         ``FitResult.basis`` of an earlier fit of this space at these ``uv``: not evaluated again.
+    sparse : bool, optional
+        ``smoothness="auto"``: whether the data are sparse (the larger candidates
+        :data:`SPARSE_SMOOTHNESS` too), as the caller decided it (:func:`core.refine.adaptive_fit`
+        counts control points); None: fewer than :data:`SPARSE_POINTS_PER_CONTROL` fitted points
+        per function that sees data.
 
     Raises
     ------
@@ -230,7 +236,7 @@ def fit_control_points(
     if smoothness == "auto":
         ts = time.perf_counter()
         smoothness, validation = _choose_smoothness(space, uv, points, weights, AtA, AtP, G,
-                                                    chunks if keep else None, scored)
+                                                    chunks if keep else None, scored, sparse)
         t_select = time.perf_counter() - ts
     t2 = time.perf_counter()
     if smoothness > 0:
@@ -317,7 +323,8 @@ def check_smoothness(value):
     return v
 
 
-def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=None):
+def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=None,
+                       sparse=None):
     """Cross-validated choice of the fairing weight (method.md section 5).
 
     The points are dealt into :data:`FOLDS` folds by :func:`_folds` (same input, same choice;
@@ -333,9 +340,8 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
     mesh its vertices, while the points sampled on its faces are fitted and left out like the
     others but not scored). The choice is :func:`_one_standard_error`. Candidates whose system
     is singular are skipped. With fewer than :data:`MIN_AUTO_POINTS` scored points of positive
-    weight there is nothing to cross-validate: :data:`DEFAULT_SMOOTHNESS`. With fewer than
-    :data:`SPARSE_POINTS_PER_CONTROL` fitted points (scored or not) per basis function that
-    sees data the candidates :data:`SPARSE_SMOOTHNESS` come first.
+    weight there is nothing to cross-validate: :data:`DEFAULT_SMOOTHNESS`. On ``sparse`` data
+    (see :func:`fit_control_points`) the candidates :data:`SPARSE_SMOOTHNESS` come first.
 
     Returns the chosen value and ``{candidate: cross-validated RMS}``.
     """
@@ -343,12 +349,10 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
     m = N if scored is None else int(min(max(scored, 0), N))
     if int((weights[:m] > 0).sum()) < MIN_AUTO_POINTS:
         return DEFAULT_SMOOTHNESS, {}
-    candidates = AUTO_SMOOTHNESS
-    # sparse: as in core.refine.adaptive_fit, all fitted points count (a mesh's face samples
-    # too: they make it dense), here against the functions that see data
-    if (int((weights > 0).sum())
-            < SPARSE_POINTS_PER_CONTROL * int(np.count_nonzero(AtA.diagonal() > 0))):
-        candidates = SPARSE_SMOOTHNESS + AUTO_SMOOTHNESS
+    if sparse is None:  # all fitted points count (a mesh's face samples make it dense)
+        sparse = (int((weights > 0).sum())
+                  < SPARSE_POINTS_PER_CONTROL * int(np.count_nonzero(AtA.diagonal() > 0)))
+    candidates = SPARSE_SMOOTHNESS + AUTO_SMOOTHNESS if sparse else AUTO_SMOOTHNESS
     fold = _folds(uv)
     starts = np.cumsum([0] + [A.shape[0] for A in chunks or []])
 

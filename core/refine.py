@@ -640,7 +640,8 @@ def adaptive_fit(
         t0 = time.perf_counter()
         fu, fp, fw, fm = full if sampled else (uv, points, weights, n_measured)
         fit = fit_control_points(best.space, fu, fp, fw, "auto" if auto else loop_smoothness,
-                                 scored=fm, basis=None if sampled else best.fit.basis)
+                                 scored=fm, basis=None if sampled else best.fit.basis,
+                                 sparse=sparse)
         best.fit.basis = None
         selection = None
         if auto:
@@ -656,8 +657,8 @@ def adaptive_fit(
             if reason == "tolerance reached" and value > tol and sparse:
                 reason = ("tolerance reached by the loop; the cross-validated smoothness of "
                           "sparse data misses it")
-            if (reason == "tolerance reached" and value > tol and fit.smoothness != loop_smoothness
-                    and not sparse):
+            elif (reason == "tolerance reached" and value > tol
+                  and fit.smoothness != loop_smoothness):
                 # the smoother choice would break the tolerance the loop reached: keep the
                 # default (the loop's fit, or after sampled iterations its refit on all points)
                 fit = (fit_control_points(best.space, fu, fp, fw, loop_smoothness) if sampled

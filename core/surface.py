@@ -554,6 +554,16 @@ class TCBSurface:
         return self._closest(points)[1]
 
     # ---- refinement --------------------------------------------------------------------
+    def fitted_to(self, points) -> bool:
+        """Whether ``points`` are the data this surface was fitted to: the same count and (for
+        surfaces that keep ``report["data_digest"]``; older files do not) the same values in
+        the same order. :meth:`refine` needs them."""
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or len(points) != len(self._param.uv):
+            return False
+        stored = self._report.get("data_digest")
+        return stored is None or data_digest(points) == stored
+
     def refine(self, points, faces=None, callback=None, **changes) -> "TCBSurface":
         """Continue the adaptive loop from this surface on the same data.
 
@@ -569,8 +579,7 @@ class TCBSurface:
                 "refine() needs the points this surface was fitted to "
                 f"({len(self._param.uv)} points, got {len(points)})"
             )
-        stored = self._report.get("data_digest")  # files written before it have none
-        if stored is not None and data_digest(points) != stored:
+        if not self.fitted_to(points):
             _check_finite(points)  # the more specific message first
             raise InvalidInputError(
                 f"refine() needs the {len(points)} points this surface was fitted to, in the "

@@ -189,6 +189,9 @@ def read_selection(context, objects=None) -> InputData:
         n = sum(len(p) for p, _ in got)
         if n == 0:
             what = "vertices" if obj.type == "MESH" else "points"
+            if not obj.visible_get():  # its geometry may come from modifiers, not evaluated
+                raise SelectionError(f"'{obj.name}' is hidden and has no {what} of its own: show "
+                                     "it (its modifiers make its geometry) and try again")
             raise SelectionError(f"'{obj.name}' has no {what}: nothing to fit")
         bad = sum(int((~np.isfinite(p).all(axis=1)).sum()) for p, _ in got)
         if bad:

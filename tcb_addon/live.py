@@ -235,6 +235,8 @@ def own_net(surface_obj):
     net = surface_obj.tcb.net
     if net is None:
         return None
+    if not net.users_collection:  # deleted with X (only unlinked): relink() drops it, no copy
+        return net
     owner = net.tcb.surface
     others = []
     for ob in _users(net, "net", "Net"):

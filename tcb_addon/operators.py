@@ -194,6 +194,10 @@ def report_result(op, surf, notes=(), warnings=()) -> None:
     text = _summary(surf) + "".join(f"; {n}" for n in list(notes) + list(warnings))
     if reason.startswith("tolerance reached") and "misses" not in reason:
         op.report({"WARNING"} if warnings else {"INFO"}, text)
+    elif "misses" in reason:  # sparse data: the smoother cross-validated surface was kept
+        op.report({"WARNING"}, f"{text}; few points for the control points: the smoother "
+                  "cross-validated surface was kept, which misses the tolerance (a Smoothness "
+                  "value set by hand follows the points more closely)")
     elif reason == "cancelled":
         op.report({"WARNING"}, f"{text}; stopped early (cancelled): the best surface so far")
     else:
@@ -476,14 +480,15 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         data = source_data(context, surface)
         self._notes = data.notes
         surf = stored_surface(surface)
-        digest = surf.report.get("data_digest")  # surfaces saved before it have none
-        if len(data.points) != len(surf.parameterization.uv) or (
-                digest is not None and _core().surface.data_digest(data.points) != digest):
+        if not surf.fitted_to(data.points):
             names = ", ".join(repr(o.name) for o in data.sources)
+            then, now = len(surf.parameterization.uv), len(data.points)
+            what = f"{then} points then, {now} now" if then != now else "other coordinates"
+            hidden = "".join(f"; {n}" for n in data.notes)
             raise bridge.SelectionError(
-                f"{names} changed since '{surface.name}' was fitted ({len(surf.parameterization.uv)}"
-                f" points then, {len(data.points)} now): Refine continues the fit of the same "
-                "data; select the source and use Fit Surface to fit it as it is now"
+                f"{names} changed since '{surface.name}' was fitted ({what}{hidden}): Refine "
+                "continues the fit of the same data; select the source and use Fit Surface to "
+                "fit it as it is now"
             )
         # Refine fits the data again: edits of the net are not kept, and the user is told
         moved = np.any(surf.control_points != stored_surface(surface, use_net=False).control_points,
@@ -654,6 +659,7 @@ class TCB_OT_deviation_map(bpy.types.Operator):
         note = f" ({left_out} {what} left out of the fit not counted)" if left_out else ""
         if no_data:
             note += f"; {no_data} surface vertices with no data near them are grey"
+        note += "".join(f"; {n}" for n in data.notes)  # e.g. a hidden source read without modifiers
         self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.rms:.4g}, max {st.max:.4g}; "
                               f"color range 0 - {vmax:.4g}{note}")  # fmt: skip
         return {"FINISHED"}

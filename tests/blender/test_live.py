@@ -252,3 +252,24 @@ def test_re_tessellating_the_original_of_a_copy_gives_the_original_new_weights(c
     assert copy.tcb.weights == weights and weights.tcb.surface == copy
     assert np.array_equal(evaluated(bpy, copy), copy_before)
     assert np.allclose(evaluated(bpy, surface), spline_of(surface).tessellate(12)[0], atol=1e-5)
+
+
+def test_refine_after_deleting_a_shared_net_brings_no_net_back(clean_scene, addon):
+    """Shift+D of the surface alone shares its net; X on that net only unlinks it. Refining
+    the original then drops the dead live link; it must not copy the deleted net back into the
+    scene (own_net had linked a visible copy)."""
+    bpy = clean_scene
+    _, _, _, surface = fitted(bpy, "Face")
+    net = surface.tcb.net
+    select(bpy, surface)
+    assert bpy.ops.object.duplicate() == {"FINISHED"}
+    copy = bpy.context.view_layer.objects.active
+    assert copy.tcb.net == net
+    with bpy.context.temp_override(**select(bpy, net)):
+        assert bpy.ops.object.delete() == {"FINISHED"}
+    assert not net.users_collection
+    assert run(bpy, bpy.ops.tcb.refine, surface, tolerance=1e-3) == {"FINISHED"}
+    linked = [o for o in bpy.context.scene.objects if o.tcb.role == "NET"]
+    assert linked == [], [o.name for o in linked]
+    refined = spline_of(surface)
+    assert np.allclose(evaluated(bpy, surface), refined.tessellate(20)[0], atol=1e-5)

@@ -307,6 +307,32 @@ def test_loose_vertices_spot_heights_with_a_stray_face_and_a_scan_with_a_stray_v
     assert surf.report["max"] < 0.05  # the stray vertex did not pull the surface
 
 
+def test_a_hidden_modified_source_is_named_as_such(clean_scene, capfd):
+    """A hidden scan is read without its modifiers: Refine's refusal says so (it had said
+    only 'changed since ... was fitted (400 points then, 400 now)'), and so does the
+    Deviation Map's summary. 12 spot heights: the kept smoother surface is a warning that
+    says why, not 'the tolerance was not reached (tolerance reached ...)'."""
+    bpy = clean_scene
+    verts, faces = grid(16)
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    scan.modifiers.new("Lift", "DISPLACE").strength = 0.3
+    assert fit(bpy, scan) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    scan.hide_set(True)
+    with bpy.context.temp_override(**select(bpy, surface)):
+        with pytest.raises(RuntimeError, match=r"other coordinates; 'Scan' is hidden: read without its modifiers"):
+            bpy.ops.tcb.refine()
+        capfd.readouterr()
+        assert bpy.ops.tcb.deviation_map(points_copy=False) == {"FINISHED"}
+        assert "'Scan' is hidden: read without its modifiers" in capfd.readouterr().out
+    xy = np.random.default_rng(1).random((12, 2))
+    spots = add_mesh(bpy, "Spots", np.c_[xy, 0.5 * np.sin(3 * xy[:, 0])])
+    capfd.readouterr()
+    assert fit(bpy, spots) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "the smoother cross-validated surface was kept" in out and "not reached" not in out, out
+
+
 def test_fit_mesh_object_nefertiti(clean_scene, addon):
     bpy = clean_scene
     import importlib

@@ -312,6 +312,18 @@ def test_loose_vertices_of_a_mesh_are_counted_and_few_faced_vertices_refused():
         fit_surface(V, [[0, 1, 13]])
 
 
+def test_the_loop_and_the_choice_agree_on_what_sparse_means():
+    """400 points of two peaks for 201 control points: sparse for the loop (under 2 per control
+    point) though not for a count of the functions that see data; the choice then also tries
+    the larger candidates (it had tried 1e-2 ... 1e-7 only while the report said sparse)."""
+    xy = np.random.default_rng(1).random((400, 2))
+    z = np.exp(-20 * ((xy[:, 0] - 0.3) ** 2 + (xy[:, 1] - 0.3) ** 2)) - 0.5 * np.exp(
+        -10 * ((xy[:, 0] - 0.7) ** 2 + (xy[:, 1] - 0.6) ** 2))
+    sel = fit_surface(np.c_[xy, z]).report["smoothness_selection"]
+    assert "sparse data: 400 points" in sel["why"]
+    assert {"100", "10", "1", "0.1"} <= set(sel["cross_validated_rms"])
+
+
 def test_a_tiny_cloud_keeps_the_cross_validated_smoothness_that_misses_the_tolerance():
     """12 points: the loop reaches the tolerance by (nearly) interpolating them; the smoother
     cross-validated surface misses it and is kept anyway (dense data would keep the loop's
@@ -352,8 +364,10 @@ def test_refine_refuses_other_points_of_the_same_count(tmp_path):
               points + [0.0, 0.0, 1e-9]]
     for s in (surf, loaded):
         for other in others:
+            assert not s.fitted_to(other)
             with pytest.raises(InvalidInputError, match="same order; these differ"):
                 s.refine(other, max_iterations=1)
+        assert s.fitted_to(points.copy()) and not s.fitted_to(points[:-1])
         assert s.refine(points.copy(),
                         max_iterations=1, max_control_points=200).report["iterations"] == 2
 
