@@ -383,6 +383,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         kwargs = self._fit_kwargs()
         self._key = (data.digest(), tuple(sorted(kwargs.items())))
         cached = _cache_get(self._key)
+        self._reused = cached is not None
         if cached is not None:
             return ("done", cached)
         core = _core()
@@ -432,7 +433,9 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
             obj.select_set(False)
         surface.select_set(True)
         context.view_layer.objects.active = surface
-        report_result(self, surf, data.notes)
+        reused = ["the same input and settings as the last fit: its result was reused (the "
+                  "seconds are that fit's)"] if getattr(self, "_reused", False) else []
+        report_result(self, surf, list(data.notes) + reused)
         return {"FINISHED"}
 
     def draw(self, context):

@@ -378,7 +378,7 @@ def test_fit_merges_several_objects(clean_scene, addon):
     check_result(bpy, addon, "Left +1", verts, 2e-3)
 
 
-def test_redo_with_new_resolution_reuses_the_fit(clean_scene, addon, monkeypatch):
+def test_redo_with_new_resolution_reuses_the_fit(clean_scene, addon, monkeypatch, capfd):
     bpy = clean_scene
     core = core_of(addon)
     calls = []
@@ -393,9 +393,11 @@ def test_redo_with_new_resolution_reuses_the_fit(clean_scene, addon, monkeypatch
     obj = add_mesh(bpy, "Patch", verts, faces)
     assert fit(bpy, obj, resolution=10, tolerance=3e-3) == {"FINISHED"}
     first = bpy.context.view_layer.objects.active
+    assert "result was reused" not in capfd.readouterr().out
     assert fit(bpy, obj, resolution=20, tolerance=3e-3) == {"FINISHED"}
     second = bpy.context.view_layer.objects.active
     assert len(calls) == 1  # same input and fit settings: the cached surface is re-tessellated
+    assert "its result was reused (the seconds are that fit's)" in capfd.readouterr().out
     assert len(second.data.vertices) > len(first.data.vertices)
     assert fit(bpy, obj, resolution=20, tolerance=1e-3) == {"FINISHED"}
     assert len(calls) == 2  # a fit setting changed: fitted again
