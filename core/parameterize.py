@@ -981,6 +981,12 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
     tris = tris[np.sort(first)]
 
     used = np.bincount(tris.ravel(), minlength=n) > 0
+    if used.sum() < MIN_POINTS <= n:  # the plain "at least 10 points" would contradict n
+        raise InvalidInputError(
+            f"only {int(used.sum())} of the {n} vertices are in faces, and a mesh is fitted "
+            f"through its faces (at least {MIN_POINTS} vertices are needed); to fit the vertices "
+            "as a point cloud, pass them without faces (in Blender: delete the faces)"
+        )
     _check_finite(p[used], what="referenced vertices")
     tris = _flip_caps(tris, p)
 

@@ -1028,8 +1028,6 @@ def fit_surface(
         points = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):
         raise InvalidInputError("points must be an (N, 3) array of numbers") from None
-    if faces is not None and points.ndim == 2:
-        _few_faced_vertices(points, faces)
     try:
         param = parameterize(points, faces, drop_outliers=drop_outliers)
     except TCBError as exc:
@@ -1039,24 +1037,6 @@ def fit_surface(
     if coarse is not None:
         warnings.warn(coarse, RuntimeWarning, stacklevel=2)
     return _run(points, param, options, callback, checked=faces is None)
-
-
-def _few_faced_vertices(points: np.ndarray, faces) -> None:
-    """Refuse a mesh whose faces hold fewer than MIN_POINTS vertices while it has more: the
-    plain "at least 10 points" error would contradict the vertex count the user sees."""
-    from .parameterize import MIN_POINTS
-
-    try:
-        idx = np.unique(np.asarray(faces, dtype=np.int64))
-    except (TypeError, ValueError):
-        return  # parameterize() names what is wrong with the faces
-    inside = idx[(idx >= 0) & (idx < len(points))]
-    if len(inside) < MIN_POINTS <= len(points):
-        raise InvalidInputError(
-            f"only {len(inside)} of the {len(points)} vertices are in faces, and a mesh is fitted "
-            f"through its faces (at least {MIN_POINTS} vertices are needed); to fit the vertices "
-            "as a point cloud, pass them without faces (in Blender: delete the faces)"
-        )
 
 
 def _float32_rounding(points) -> str | None:

@@ -105,8 +105,13 @@ def stored_surface(surface_obj, use_net: bool = True):
             f"The spline data stored with '{surface_obj.name}' is damaged: fit it again"
         ) from None
     surf = core.TCBSurface.from_bytes(data, what=f"the spline stored with '{surface_obj.name}'")
+    return with_net_edits(surface_obj, surf) if use_net else surf
+
+
+def with_net_edits(surface_obj, surf):
+    """``surf`` (the stored spline) with the control points edited on the net."""
     net = surface_obj.tcb.net
-    if use_net and net is not None and net.type == "MESH":
+    if net is not None and net.type == "MESH":
         ctrl, rounding = bridge.read_world_positions_and_rounding(net)
         # a net saved before control points left out the border rings' functions has a
         # vertex per basis function: its edits are kept and it is rewritten in today's form
@@ -482,7 +487,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                               max_iterations=self.max_iterations)  # fmt: skip
         data = source_data(context, surface)
         self._notes = data.notes
-        surf = stored_surface(surface)
+        stored = stored_surface(surface, use_net=False)
+        surf = with_net_edits(surface, stored)
         if not surf.fitted_to(data.points):
             names = ", ".join(repr(o.name) for o in data.sources)
             then, now = len(surf.parameterization.uv), len(data.points)
@@ -494,8 +500,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                 "fit it as it is now"
             )
         # Refine fits the data again: edits of the net are not kept, and the user is told
-        moved = np.any(surf.control_points != stored_surface(surface, use_net=False).control_points,
-                       axis=1)
+        moved = np.any(surf.control_points != stored.control_points, axis=1)
         self._warnings = [f"{int(moved.sum())} edited control points were replaced (Refine fits "
                           "the data again; Ctrl+Z brings the edits back)"] if moved.any() else []
         return ("run", surf.refine, dict(points=data.points, faces=data.faces, **self._settings))
