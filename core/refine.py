@@ -421,6 +421,47 @@ class IterationState:
 # every iteration and 34-38 s with the subset, at the same accuracy.
 ITERATION_POINTS = 200_000
 
+# sizing the start (adaptive_fit): the probe has 1/PROBE_FRACTION of the start's knots, and at
+# least MIN_PROBE_KNOTS (smaller starts are not probed)
+PROBE_FRACTION = 4
+MIN_PROBE_KNOTS = 8
+
+
+def automatic_start(mode: str, max_control_points: int) -> int:
+    """Interior knots of the automatic start (before sizing, and at most ``n / 8`` for ``n``
+    points): budget / 12 (TCB), i.e. a first fit with about a quarter of the budget in
+    control points (the border functions that meet the domain add to the ~2 per knot: 2000 ->
+    166 knots -> 470-500 control points); DCB has about 2.4 times as many functions per knot."""
+    per = 12 if mode == "tcb" else 30
+    return int(np.clip(max_control_points / per, 8, 400))
+
+
+def next_start(n: int, error: float, tol: float, previous: tuple | None, degree: int,
+               n_start: int) -> int | None:
+    """The knot count of the next fresh start while sizing, or None to go on by insertion.
+
+    Model (an addition to method.md section 6, whose loop starts from a fixed count): the
+    error falls like ``n^-r`` in the number ``n`` of interior knots. ``r = (k + 1) / 2`` on
+    smooth data (``h^(k+1)`` with ``h ~ n^-1/2``); after two sizing fits it is the measured
+    ``log(e_1/e_2) / log(n_2/n_1)``, clipped to ``[0.5, (k + 1) / 2]`` (measured between 20
+    and 166 knots: scans 0.15-1.7, smooth functions 0.9-2.4). The count for the tolerance is
+    ``n (e / tol)^(1/r)``, with 10% to spare. At 0.7 of the start's count or more the start
+    itself is taken (the path without sizing, with one probe fit more); within 15% of ``n``
+    (one insertion step) the loop goes on by insertion. Measured by benchmarks/net_size.py.
+    """
+    rate = (degree + 1) / 2
+    if previous is not None:
+        n1, e1 = previous
+        measured = (np.log(e1 / error) / np.log(n / n1) if n > n1 and e1 > error > 0
+                    else 0.0)
+        rate = float(np.clip(measured, 0.5, rate))
+    want = 1.1 * n * (error / max(tol, 1e-300)) ** (1.0 / rate)
+    if want >= 0.7 * n_start:
+        return n_start
+    if want <= 1.15 * n:
+        return None
+    return int(np.ceil(want))
+
 
 def adaptive_fit(
     uv: np.ndarray,
@@ -458,24 +499,33 @@ def adaptive_fit(
     rng_seed = options.seed
     tol = options.tolerance * (diagonal if options.relative else 1.0 / unit)
     lo, hi = column_bounds(uv)
-    if start_knots is None:
-        # the start: budget / 12 interior knots (TCB), i.e. a first fit with about a quarter of
-        # the budget in control points (the border functions that meet the domain add to the
-        # ~2 per knot: 2000 -> 166 knots -> 470-500 control points, whatever the tolerance);
-        # DCB has about 2.4 times as many functions per knot as TCB
-        per = 12 if options.mode == "tcb" else 30
-        n0 = options.initial_knots or int(np.clip(options.max_control_points / per, 8, 400))
-        n0 = int(min(n0, max(len(uv) // 8, 6)))
-        interior = initial_knots(uv, points, n0, seed=rng_seed)
-    else:
-        interior = np.asarray(start_knots, dtype=np.float64)
-    if ring_knots is None:
-        h = np.sqrt(np.prod(np.maximum(hi - lo, 1e-12)) / max(len(interior), 1))
+    own_rings = ring_knots is None
+
+    def rings_for(n_interior: int) -> np.ndarray:
+        h = np.sqrt(np.prod(np.maximum(hi - lo, 1e-12)) / max(n_interior, 1))
         # thin domains: ring knots at the interior spacing would be countless (1/h each)
         h = max(h, 0.01 * float(np.max(hi - lo)))
         pad = 1e-6 * float(np.max(hi - lo))
-        ring_knots = border_rings(lo - pad, hi + pad, h, rings=default_ring_count(options.degree),
-                                  seed=rng_seed)
+        return border_rings(lo - pad, hi + pad, h, rings=default_ring_count(options.degree),
+                            seed=rng_seed)
+
+    # sizing (next_start; not in method.md section 6): with a tolerance and the automatic
+    # start, the first fit is a probe with a quarter of the start's knots; the following fresh starts
+    # take the knot count the measured convergence predicts for the tolerance (at most the
+    # start's), so the net follows the tolerance instead of the budget (see next_start)
+    sizing = False
+    if start_knots is None:
+        n0 = int(min(options.initial_knots or automatic_start(options.mode,
+                                                              options.max_control_points),
+                     max(len(uv) // 8, 6)))
+        sizing = (options.initial_knots is None and tol > 0 and options.max_iterations > 1
+                  and n0 // PROBE_FRACTION >= MIN_PROBE_KNOTS)
+        interior = initial_knots(uv, points, n0 // PROBE_FRACTION if sizing else n0,
+                                 seed=rng_seed)
+    else:
+        interior = np.asarray(start_knots, dtype=np.float64)
+    if ring_knots is None:
+        ring_knots = rings_for(len(interior))
     if domain is None:
         domain = uv[ConvexHull(uv).vertices]
 
@@ -507,6 +557,8 @@ def adaptive_fit(
     n_before, pending = len(interior), np.zeros((0, 2))
     prev = None  # (interior knots, control points) of the last iteration
     last_round = False
+    fresh = start_knots is None  # knots placed afresh (the start, a sizing restart)
+    sized = None  # (interior knots, error) of the last sizing fit
     reason = "iteration limit"
     t_start = time.perf_counter()
     for it in range(options.max_iterations):
@@ -529,15 +581,14 @@ def adaptive_fit(
                 shrunk_away = len(pending) == 0  # not even one new knot fits
             if shrunk_away:
                 break
-            # the first space too: fewer initial knots (a random subset: still well spread)
-            while (it == 0 and start_knots is None and n_ctrl > options.max_control_points
-                   and len(interior) > 6):
+            # a fresh start too: fewer initial knots (a random subset: still well spread)
+            while fresh and n_ctrl > options.max_control_points and len(interior) > 6:
                 interior = interior[: max(6, len(interior) // 2)]
                 knots = np.vstack([interior, ring_knots])
                 space = make_space(knots, options.degree, options.mode, cost, len(interior))
                 active = control(space)
                 n_ctrl = len(active)
-            if n_ctrl > options.max_control_points and it > 0:
+            if n_ctrl > options.max_control_points and not fresh:
                 break
             t_space = time.perf_counter() - t0
             try:
@@ -548,7 +599,7 @@ def adaptive_fit(
                     raise
                 # safety net (method.md section 3 measured one more ring being needed at times)
                 ring_knots = _add_ring(ring_knots, seed=rng_seed + extra + 1)
-        if (n_ctrl > options.max_control_points and it > 0) or shrunk_away:
+        if (n_ctrl > options.max_control_points and not fresh) or shrunk_away:
             reason = "control-point budget reached"
             break
         state = IterationState(knots, len(interior), space, fit, active=active)
@@ -576,6 +627,7 @@ def adaptive_fit(
             "seconds": time.perf_counter() - t0,
             "elapsed": time.perf_counter() - t_start,
             "phases": {"configurations": t_space, **fit.timings},
+            "knots_placed": "afresh" if fresh else "inserted",
         }
         if sampled:
             report["sampled_points"] = len(uv)
@@ -591,6 +643,17 @@ def adaptive_fit(
         if last_round:
             reason = "control-point budget reached"
             break
+        if sizing:
+            count = next_start(len(interior), value, tol, sized, options.degree, n0)
+            sized = (len(interior), value)
+            sizing = count is not None and count < n0
+            if count is not None:  # a fresh start with the predicted knot count
+                interior = initial_knots(uv, points, count, seed=rng_seed)
+                if own_rings:
+                    ring_knots = rings_for(len(interior))
+                n_before, pending, prev, fresh = len(interior), np.zeros((0, 2)), None, True
+                continue
+        fresh = False
         # how many knots the budget allows: control points grow about linearly with the
         # interior knots, by what the last insertion added per knot (the border functions
         # that meet the domain are a large constant share: n_ctrl / knots would overstate a

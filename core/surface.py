@@ -990,8 +990,13 @@ def fit_surface(
         ``rms``/``max`` are always those of all points.
     criterion : "rms" or "max"; any case
     initial_knots, knots_per_iteration : int >= 1, optional
-        Override the automatic sizes (about 1/12 of the budget to start; 15% more per
-        iteration); None (the default) keeps them automatic.
+        Override the automatic sizes (15% more knots per iteration; the start: about 1/12 of
+        the budget in interior knots, and with a tolerance a probe fit with a quarter of those
+        first, whose error sets the knots of the next start, so that the net follows the
+        tolerance: ``core.refine.next_start``); None (the default) keeps them automatic. An
+        ``initial_knots`` given is the first fit's knot count, with no probe. Each iteration's
+        report says whether its knots were placed ``"afresh"`` or ``"inserted"``
+        (``knots_placed``).
     feature_sensitive : bool
         TCB only: choose ``Gamma_0`` and the link triangulations from the data (default) or use
         Delaunay ones.

@@ -629,7 +629,8 @@ def _grey(rgba):
 
 
 def test_deviation_map_of_a_cloud_shows_the_data_to_surface_distances(clean_scene, addon):
-    """A cloud of 4000 points of a known smooth surface, fitted to about 5e-4: the surface's
+    """A cloud of 4000 points of a known smooth surface, fitted to 2e-4 of the diagonal (RMS
+    about 6e-4; the net follows the tolerance, so it is set, not left at 2e-3): the surface's
     colours are the data-to-surface distances near each vertex (close to the vertices' true
     error), not the distance to the nearest data point (the sampling gaps, about 0.016 here,
     30x the error: what the map showed before); the colour range is the data's largest
@@ -639,7 +640,7 @@ def test_deviation_map_of_a_cloud_shows_the_data_to_surface_distances(clean_scen
     q = np.random.default_rng(0).uniform(-1, 1, (4000, 2))
     points = np.c_[q, f(q[:, 0], q[:, 1])]
     cloud = add_mesh(bpy, "Cloud", points)  # vertices only: a point cloud
-    assert fit(bpy, cloud) == {"FINISHED"}
+    assert fit(bpy, cloud, tolerance=2e-4) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
     with bpy.context.temp_override(**select(bpy, surface)):
         assert bpy.ops.tcb.deviation_map() == {"FINISHED"}

@@ -41,3 +41,19 @@ def test_smoothness_quick(tmp_path):
     assert [r.split("|")[1].strip() for r in rows[1:]] == ["F6-sphere 3000", "crease 3000"]
     # every row has both fits' errors and a chosen value
     assert all(len(r.split("|")) == 14 and "nan" not in r for r in rows)
+
+
+def test_net_size_quick():
+    """``benchmarks/net_size.py --quick`` prints its rows, and in each the sized start gives at
+    most the fixed start's control points, meeting the tolerance wherever the fixed one does."""
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "net_size.py"), "--quick"],
+                         capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = [r.split("|")[1:-1] for r in res.stdout.splitlines()
+            if r.startswith("| ") and not r.startswith("| data")]
+    assert [(r[0].strip(), float(r[1])) for r in rows] == [
+        (name, tol) for name in ("F1-franke scattered", "nefertiti.off") for tol in (3e-3, 1e-3)]
+    for r in rows:
+        fixed_cp, fixed_rms, sized_cp, sized_rms = int(r[2]), r[3], int(r[6]), r[7]
+        assert sized_cp <= fixed_cp, r
+        assert "*" not in sized_rms or "*" in fixed_rms, r

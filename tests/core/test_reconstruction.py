@@ -17,6 +17,7 @@ from core import (
     fit_surface,
 )
 from core.fit import fit_control_points
+from core.refine import automatic_start, next_start
 from core.meshio import read_geometry
 from core.simplex import orient2d
 from knotsets import knot_set
@@ -86,6 +87,42 @@ def test_franke_20000_points_quadratic_within_600_control_points():
     assert surf.report["control_points"] <= 600
     assert surf.report["rms"] <= 1e-3 * np.ptp(z)
     assert np.all(np.isfinite(surf.control_points))
+
+
+def test_the_net_follows_the_tolerance_and_the_start_without_one_is_unchanged():
+    """With a tolerance the loop sizes its start (core.refine.next_start): a probe with a
+    quarter of the automatic start's knots, then the count its error predicts. A loose
+    tolerance gives a smaller net than a tight one, both met, and the tight one a smaller net
+    than the fixed start (benchmarks/net_size.py: 143 / 301 / 467 control points on 20 000
+    points). Without a tolerance the start is the automatic one, as before."""
+    xy = np.random.default_rng(0).random((8000, 2))
+    P = np.c_[xy, franke(*xy.T)]
+    start = automatic_start("tcb", 2000)
+    fixed = fit_surface(P, tolerance=1e-3, initial_knots=start)
+    assert fixed.report["history"][0]["interior_knots"] == start
+    cps = {}
+    for tol in (1e-2, 1e-3):
+        r = fit_surface(P, tolerance=tol).report
+        assert r["stop_reason"] == "tolerance reached" and r["rms_rel"] <= tol
+        assert r["history"][0]["interior_knots"] == start // 4  # the probe
+        assert r["history"][0]["knots_placed"] == "afresh"
+        cps[tol] = r["control_points"]
+    assert cps[1e-2] < cps[1e-3] < fixed.report["control_points"]
+    free = fit_surface(P, tolerance=0, max_iterations=2)
+    same = fit_surface(P, tolerance=0, max_iterations=2, initial_knots=start)
+    np.testing.assert_array_equal(free.control_points, same.control_points)
+    assert [h["knots_placed"] for h in free.report["history"]] == ["afresh", "inserted"]
+
+
+@pytest.mark.parametrize("n, error, previous, expected", [
+    (40, 8e-3, None, 166),  # far: the automatic start itself (1.1 * 40 * 8^(2/3) = 176)
+    (40, 2e-3, None, 70),  # 1.1 * 40 * 2^(2/3) = 69.8, with the smooth rate 3/2
+    (40, 1.05e-3, None, None),  # within one insertion step: go on by insertion
+    (40, 2e-3, (20, 4e-3), 88),  # measured rate 1: 1.1 * 40 * 2
+    (40, 2e-3, (20, 2.1e-3), 166),  # noise-like rate 0.07, clipped to 0.5: 176
+])
+def test_next_start_predicts_the_knots_for_the_tolerance(n, error, previous, expected):
+    assert next_start(n, error, 1e-3, previous, 2, 166) == expected
 
 
 @pytest.mark.parametrize("name", ["ridge", "patch-01"])

@@ -16,6 +16,7 @@ from core import TCBSurface, fit_surface
 from core import fit as fit_module
 from core.errors import InvalidInputError
 from core.fit import AUTO_SMOOTHNESS, FOLDS, check_smoothness, fit_control_points
+from core.refine import automatic_start
 from core.spline_space import build_space
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -253,14 +254,18 @@ def test_fit_surface_auto_reports_its_choice_and_round_trips(tmp_path):
     assert "smoothness_selection" in more.report
 
 
+# the loop's path with the default start (no sizing probe, which a tolerance would add), so a
+# tolerance set to what it reached is reached the same way
+_FIXED_START = dict(max_control_points=400, initial_knots=automatic_start("tcb", 400))
+
+
 def test_auto_never_breaks_a_tolerance_the_loop_reached():
     """A smoother choice has a larger training error: if the loop reached the tolerance with
     the default, that fit is kept."""
     P = _noisy_cloud(noise=0.05)
-    ref = fit_surface(P, tolerance=0.0, max_iterations=2, max_control_points=400)
+    ref = fit_surface(P, tolerance=0.0, max_iterations=2, **_FIXED_START)
     tol = ref.report["rms_rel"] * (1 + 1e-9)
-    surf = fit_surface(P, smoothness="auto", tolerance=tol, max_iterations=6,
-                       max_control_points=400)
+    surf = fit_surface(P, smoothness="auto", tolerance=tol, max_iterations=6, **_FIXED_START)
     sel = surf.report["smoothness_selection"]
     assert surf.report["stop_reason"] == "tolerance reached"
     assert sel["chosen"] > 1e-4  # noisy data: the choice is smoother ...
@@ -275,11 +280,10 @@ def test_sampled_iterations_choose_on_all_points_and_keep_a_reached_tolerance(mo
 
     monkeypatch.setattr(refine, "ITERATION_POINTS", 2000)
     P = _noisy_cloud(n=4000, noise=0.05)
-    ref = fit_surface(P, tolerance=0.0, max_iterations=2, max_control_points=400)
+    ref = fit_surface(P, tolerance=0.0, max_iterations=2, **_FIXED_START)
     assert ref.report["history"][-1]["sampled_points"] == 2000
     tol = ref.report["history"][-1]["rms_rel"] * (1 + 1e-9)
-    surf = fit_surface(P, smoothness="auto", tolerance=tol, max_iterations=6,
-                       max_control_points=400)
+    surf = fit_surface(P, smoothness="auto", tolerance=tol, max_iterations=6, **_FIXED_START)
     r = surf.report
     assert r["stop_reason"] == "tolerance reached" and r["refit"]["points"] == 4000
     sel = r["smoothness_selection"]
