@@ -5,8 +5,6 @@ rewrites them, leaving the original as it was."""
 
 from __future__ import annotations
 
-import base64
-import importlib
 import sys
 from pathlib import Path
 
@@ -14,43 +12,17 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from netedit import move_net_vertex, positions  # noqa: E402
+from scenes import (  # noqa: E402
+    ADDON, add_mesh, grid, move_net_vertex, positions, select, spline_of,
+)
 
-ADDON = "bl_ext.user_default.tcb_surface"
 MODIFIER = "TCB Live Net"
-
-
-def grid(n=20, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y)):
-    t = np.linspace(-1.0, 1.0, n)
-    x, y = np.meshgrid(t, t, indexing="ij")
-    verts = np.c_[x.ravel(), y.ravel(), f(x, y).ravel()]
-    i = np.arange(n * n).reshape(n, n)
-    a, b, c, d = i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()
-    return verts, np.r_[np.c_[a, b, c], np.c_[a, c, d]]  # triangles, as the deviation map reads
 
 
 def central(surf, resolution):
     """The control point with the largest support on the tessellation."""
     uv, _ = surf.tessellation_uv(resolution)
     return int(np.argmax(np.diff(surf.evaluation_matrix(uv).tocsc().indptr)))
-
-
-def add_mesh(bpy, name, verts, faces):
-    mesh = bpy.data.meshes.new(name)
-    mesh.from_pydata(verts.tolist(), [], faces.tolist())
-    mesh.update()
-    obj = bpy.data.objects.new(name, mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    return obj
-
-
-def select(bpy, *objs):
-    """Select ``objs`` in the view layer (first one active), as a user would."""
-    bpy.context.view_layer.update()
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o in objs)
-    bpy.context.view_layer.objects.active = objs[0]
-    return dict(selected_objects=list(objs), active_object=objs[0], object=objs[0])
 
 
 def run(bpy, op, obj, **props):
@@ -62,13 +34,9 @@ def evaluated(bpy, obj) -> np.ndarray:
     return positions(obj.evaluated_get(bpy.context.evaluated_depsgraph_get()))
 
 
-def spline_of(surface_obj):
-    core = importlib.import_module(ADDON + ".core")
-    return core.TCBSurface.from_bytes(base64.b64decode(surface_obj["tcb_spline"]))
-
-
 def fitted(bpy, name="Wave", resolution=20):
-    verts, faces = grid()
+    verts, faces = grid(20, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y),
+                        triangles=True)  # triangles, as the deviation map reads
     src = add_mesh(bpy, name, verts, faces)
     with bpy.context.temp_override(**select(bpy, src)):
         assert bpy.ops.tcb.fit_surface(tolerance=5e-3, max_control_points=200,

@@ -13,44 +13,14 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from netedit import move_net_vertex, positions  # noqa: E402
+from scenes import (  # noqa: E402
+    ADDON, add_mesh, core_module, grid, move_net_vertex, positions, select, spline_of,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
-ADDON = "bl_ext.user_default.tcb_surface"
 
 
 # --- scene helpers ------------------------------------------------------------------------------
-
-
-def grid(n=24, size=1.0, f=lambda x, y: 0.3 * (x * x - 0.5 * y * y)):
-    t = np.linspace(-size, size, n)
-    x, y = np.meshgrid(t, t, indexing="ij")
-    verts = np.c_[x.ravel(), y.ravel(), f(x, y).ravel()]
-    i = np.arange(n * n).reshape(n, n)
-    a, b, c, d = i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()
-    return verts, np.c_[a, b, c, d]
-
-
-def add_mesh(bpy, name, verts, faces=None, location=(0.0, 0.0, 0.0)):
-    mesh = bpy.data.meshes.new(name)
-    mesh.vertices.add(len(verts))
-    if len(verts):
-        mesh.attributes["position"].data.foreach_set(
-            "vector", np.asarray(verts, np.float32).ravel()
-        )
-    if faces is not None and len(faces):
-        faces = np.asarray(faces, np.int32)
-        mesh.loops.add(faces.size)
-        mesh.polygons.add(len(faces))
-        mesh.polygons.foreach_set(
-            "loop_start", np.arange(0, faces.size, faces.shape[1], dtype=np.int32)
-        )
-        mesh.attributes[".corner_vert"].data.foreach_set("value", faces.ravel())
-    mesh.update(calc_edges=True)
-    obj = bpy.data.objects.new(name, mesh)
-    obj.location = location
-    bpy.context.scene.collection.objects.link(obj)
-    return obj
 
 
 def add_point_cloud(bpy, name, verts):
@@ -59,18 +29,6 @@ def add_point_cloud(bpy, name, verts):
         assert bpy.ops.object.convert(target="POINTCLOUD") == {"FINISHED"}
     assert obj.type == "POINTCLOUD" and len(obj.data.points) == len(verts)
     return obj
-
-
-def select(bpy, *objs):
-    """A temp_override context with exactly ``objs`` selected (first one active)."""
-    bpy.context.view_layer.update()
-    for o in bpy.context.scene.objects:
-        o.select_set(False)
-    for o in objs:
-        o.select_set(True)
-    bpy.context.view_layer.objects.active = objs[0] if objs else None
-    return dict(selected_objects=list(objs), active_object=objs[0] if objs else None,
-                object=objs[0] if objs else None)  # fmt: skip
 
 
 def snapshot(obj) -> str:
@@ -102,19 +60,6 @@ def fit(bpy, *objs, **props):
         return bpy.ops.tcb.fit_surface(**props)
 
 
-def core_of(addon):
-    import importlib
-
-    return importlib.import_module(ADDON + ".core")
-
-
-def spline_of(addon, surface_obj):
-    """The spline stored with a result object (base64 text of TCBSurface.to_bytes())."""
-    import base64
-
-    return core_of(addon).TCBSurface.from_bytes(base64.b64decode(surface_obj["tcb_spline"]))
-
-
 def check_result(bpy, addon, source_name, points, tol_rel):
     surface = bpy.context.view_layer.objects.active
     assert surface.tcb.role == "SURFACE"
@@ -122,7 +67,7 @@ def check_result(bpy, addon, source_name, points, tol_rel):
     assert net is not None and net.tcb.role == "NET" and net.tcb.surface == surface
     coll = surface.users_collection[0]
     assert coll.name == f"TCB {source_name}" and net.name in coll.objects
-    surf = spline_of(addon, surface)
+    surf = spline_of(surface)
     # the net: one vertex per basis function, at the control points
     assert len(net.data.vertices) == len(surf.control_points) == surface.tcb.control_points
     assert np.allclose(positions(net), surf.control_points, atol=1e-5)
@@ -167,15 +112,15 @@ def test_fit_with_auto_smoothness_stores_the_chosen_value(clean_scene, addon):
     cloud, _ = noisy_grid_cloud(bpy, "Noisy", 2e-3, 2)
     assert fit(bpy, cloud, tolerance=0.0, max_iterations=3, auto_smoothness=True) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
-    surf = spline_of(addon, surface)
+    surf = spline_of(surface)
     chosen = surf.report["smoothness"]
-    assert chosen in core_of(addon).fit.AUTO_SMOOTHNESS
+    assert chosen in core_module().fit.AUTO_SMOOTHNESS
     assert surf.report["smoothness_selection"]["chosen"] == chosen
     assert surface.tcb.auto_smoothness and surface.tcb.smoothness == pytest.approx(chosen)
     # Refine keeps choosing
     with bpy.context.temp_override(**select(bpy, surface)):
         assert bpy.ops.tcb.refine(max_iterations=1) == {"FINISHED"}
-    assert "smoothness_selection" in spline_of(addon, surface).report
+    assert "smoothness_selection" in spline_of(surface).report
 
 
 def test_a_sparse_cloud_left_at_the_default_smoothness_gets_it_cross_validated(clean_scene, addon):
@@ -187,7 +132,7 @@ def test_a_sparse_cloud_left_at_the_default_smoothness_gets_it_cross_validated(c
     cloud = add_mesh(bpy, "Spots", np.c_[xy, 0.5 * np.sin(3 * xy[:, 0]) * np.cos(2 * xy[:, 1])])
     assert fit(bpy, cloud) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
-    surf = spline_of(addon, surface)
+    surf = spline_of(surface)
     assert "sparse data" in surf.report["smoothness_selection"]["why"]
     assert 2 * surf.report["control_points"] > 60 and surf.report["smoothness"] >= 1e-2
     # the panel says the value was chosen (Auto Smoothness was off)
@@ -196,7 +141,7 @@ def test_a_sparse_cloud_left_at_the_default_smoothness_gets_it_cross_validated(c
     with pytest.warns(RuntimeWarning, match="only the smoothness 0.001 holds the surface"):
         assert fit(bpy, cloud, smoothness=1e-3) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
-    surf = spline_of(addon, surface)
+    surf = spline_of(surface)
     assert surf.report["smoothness"] == pytest.approx(1e-3) and "smoothness_selection" not in surf.report
     assert not surface.tcb.smoothness_cross_validated
 
@@ -215,7 +160,7 @@ def test_results_are_not_input_and_a_hidden_source_still_works(clean_scene, addo
     assert fit(bpy, surface, net, scan) == {"FINISHED"}
     again = bpy.context.view_layer.objects.active
     assert again != surface and [s.object for s in again.tcb.sources] == [scan]
-    assert spline_of(addon, again).report["points"] == len(verts)
+    assert spline_of(again).report["points"] == len(verts)
     _expect_error(bpy, [surface], "is a TCB result, not input: select the scan")
     for hide in ("hide_set", "hide_viewport", "exclude"):
         if hide == "hide_set":
@@ -232,7 +177,7 @@ def test_results_are_not_input_and_a_hidden_source_still_works(clean_scene, addo
         with bpy.context.temp_override(**select(bpy, surface)):
             assert bpy.ops.tcb.deviation_map(points_copy=False) == {"FINISHED"}, hide
             assert bpy.ops.tcb.refine(max_iterations=1) == {"FINISHED"}, hide
-        assert spline_of(addon, surface).report["points"] == len(verts)
+        assert spline_of(surface).report["points"] == len(verts)
         scan.hide_set(False)
         scan.hide_viewport = False
 
@@ -295,14 +240,14 @@ def test_loose_vertices_spot_heights_with_a_stray_face_and_a_scan_with_a_stray_v
     xy = np.random.default_rng(2).random((300, 2))
     spots = add_mesh(bpy, "Spots", np.c_[xy, 0.2 * np.sin(3 * xy[:, 0])], [[0, 1, 2]])
     assert fit(bpy, spots) == {"FINISHED"}
-    surf = spline_of(addon, bpy.context.view_layer.objects.active)
+    surf = spline_of(bpy.context.view_layer.objects.active)
     assert surf.parameterization.faces is None and surf.report["points"] == 300
     verts, faces = grid(12)
     stray = np.r_[verts, [[0.0, 0.0, 40.0]]]
     scan = add_mesh(bpy, "Scan", stray, faces)
     with pytest.warns(RuntimeWarning, match="1 of the 145 vertices is in no face"):
         assert fit(bpy, scan) == {"FINISHED"}
-    surf = spline_of(addon, bpy.context.view_layer.objects.active)
+    surf = spline_of(bpy.context.view_layer.objects.active)
     assert surf.report["loose_vertices"] == 1 and surf.report["points"] == len(verts)
     assert surf.report["max"] < 0.05  # the stray vertex did not pull the surface
 
@@ -380,7 +325,7 @@ def test_fit_merges_several_objects(clean_scene, addon):
 
 def test_redo_with_new_resolution_reuses_the_fit(clean_scene, addon, monkeypatch, capfd):
     bpy = clean_scene
-    core = core_of(addon)
+    core = core_module()
     calls = []
     real = core.fit_surface
 
@@ -417,7 +362,7 @@ def test_background_invoke_runs_synchronously(clean_scene, addon):
 
 def test_worker_job_cancels_and_reports_progress(installed, addon):
     ops = sys.modules[ADDON + ".tcb_addon.operators"]
-    core = core_of(addon)
+    core = core_module()
     verts, _ = grid(16)
     job = ops._Job(core.fit_surface, dict(points=verts, tolerance=1e-9, max_control_points=2000))
     job.cancel = True  # as Esc does: the engine stops at its first callback
@@ -432,7 +377,7 @@ def test_core_error_mid_fit_leaves_the_scene_as_it_was(clean_scene, addon, monke
     """An exception raised by the engine during an iteration: ERROR report, CANCELLED, no new
     objects, the source untouched (issue 6, interruption)."""
     bpy = clean_scene
-    core = core_of(addon)
+    core = core_module()
     real = core.fit_surface
 
     def failing(*args, **kwargs):
@@ -471,7 +416,7 @@ def test_refine_retessellate_deviation_and_reopen(clean_scene, addon, tmp_path):
         assert bpy.ops.tcb.refine(tolerance=2e-3, max_control_points=800) == {"FINISHED"}
     assert surface.tcb.control_points >= n0 and surface.tcb.rms_rel <= rms0
     assert surface.tcb.tolerance == pytest.approx(2e-3)
-    surf = spline_of(addon, surface)
+    surf = spline_of(surface)
     assert len(net.data.vertices) == len(surf.control_points)
 
     with bpy.context.temp_override(**select(bpy, surface)):
@@ -494,13 +439,13 @@ def test_refine_retessellate_deviation_and_reopen(clean_scene, addon, tmp_path):
     bpy.ops.wm.open_mainfile(filepath=str(path))
     surface = bpy.data.objects[name]
     assert surface.tcb.role == "SURFACE" and surface.tcb.net is not None
-    assert spline_of(addon, surface).control_points.shape == surf.control_points.shape
+    assert spline_of(surface).control_points.shape == surf.control_points.shape
     with bpy.context.temp_override(**select(bpy, surface)):
         assert bpy.ops.tcb.retessellate(resolution=16) == {"FINISHED"}
         assert bpy.ops.tcb.refine(tolerance=1e-3, max_control_points=900) == {"FINISHED"}
         out = tmp_path / "spline.npz"
         assert bpy.ops.tcb.export_spline(filepath=str(out)) == {"FINISHED"}
-    assert core_of(addon).TCBSurface.load(out).control_points.shape[1] == 3
+    assert core_module().TCBSurface.load(out).control_points.shape[1] == 3
 
 
 def test_a_net_with_a_vertex_per_basis_function_is_rewritten_keeping_its_edits(clean_scene, addon):
@@ -513,7 +458,7 @@ def test_a_net_with_a_vertex_per_basis_function_is_rewritten_keeping_its_edits(c
     assert fit(bpy, obj, tolerance=2e-2, max_control_points=200) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
     net = surface.tcb.net
-    surf = spline_of(addon, surface)
+    surf = spline_of(surface)
     old = np.array(surf.coefficients)
     assert len(old) > len(surf.control_points)
     old[surf.active[len(surf.active) // 2], 2] += 0.1  # an edit made on the old net
@@ -598,7 +543,7 @@ def test_an_outlier_is_refused_by_name_or_dropped_with_the_option(clean_scene, a
     _expect_error(bpy, [other, cloud], r"1 of the 800 points .*outliers: 'Spiky' #7 \(0, 0, 25\)")
     bpy.data.objects.remove(other)
     assert fit(bpy, cloud, drop_outliers=True) == {"FINISHED"}
-    surf = spline_of(addon, bpy.context.view_layer.objects.active)
+    surf = spline_of(bpy.context.view_layer.objects.active)
     assert surf.report["outliers"] == 1 and surf.report["points"] == 399
     assert np.isnan(surf.errors[7]) and np.isfinite(np.delete(surf.errors, 7)).all()
     assert surf.report["rms_rel"] <= 2e-3
@@ -644,7 +589,7 @@ def test_deviation_map_of_a_cloud_shows_the_data_to_surface_distances(clean_scen
     surface = bpy.context.view_layer.objects.active
     with bpy.context.temp_override(**select(bpy, surface)):
         assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
-    surf = spline_of(addon, surface)
+    surf = spline_of(surface)
     data_dist = surf.distances(points)
     st = surface.tcb
 
@@ -794,7 +739,7 @@ def test_live_net_moves_the_surface_locally_and_survives_reopen(clean_scene, add
     assert fit(bpy, obj, tolerance=3e-3, resolution=20) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
     net, res = surface.tcb.net, surface.tcb.resolution
-    surf = spline_of(addon, surface)
+    surf = spline_of(surface)
     assert surface.modifiers.get("TCB Live Net") is not None
     before = evaluated_positions(bpy, surface)
     assert np.allclose(before, surf.tessellate(res)[0], atol=1e-5)  # unmoved net: same surface
