@@ -19,18 +19,22 @@ def _classes():
 def register():
     import bpy
 
-    from . import properties
+    from . import live, properties
 
     for cls in _classes():
         bpy.utils.register_class(cls)
     properties.register_props()
+    if live.on_load not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(live.on_load)
 
 
 def unregister():
     import bpy
 
-    from . import operators, properties
+    from . import live, operators, properties
 
+    if live.on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(live.on_load)
     operators.clear_cache()
     properties.unregister_props()
     for cls in reversed(_classes()):

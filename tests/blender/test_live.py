@@ -162,6 +162,25 @@ def test_an_outdated_node_group_is_brought_up_to_date(clean_scene, addon):
     assert np.allclose(evaluated(bpy, surface), expected, atol=1e-5)
 
 
+def test_an_old_file_is_brought_up_to_date_when_it_is_opened(clean_scene, addon, tmp_path):
+    """A file saved with the group from before the fallback: opening it rebuilds the group
+    (load_post), so deleting the net before any operator runs keeps the surface."""
+    bpy = clean_scene
+    _, _, _, surface = fitted(bpy)
+    name, expected = surface.name, spline_of(surface).tessellate(20)[0]
+    ng = surface.modifiers[MODIFIER].node_group
+    del ng["tcb_version"]
+    ng.nodes.clear()  # whatever the old group held: now it makes no geometry
+    path = tmp_path / "old.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    surface = bpy.data.objects[name]
+    assert surface.modifiers[MODIFIER].node_group["tcb_version"] >= 2
+    bpy.data.objects.remove(surface.tcb.net)
+    bpy.context.view_layer.update()
+    assert np.allclose(evaluated(bpy, surface), expected, atol=1e-5)
+
+
 @pytest.mark.parametrize("with_net", [True, False], ids=["surface_and_net", "surface_only"])
 def test_refining_a_shift_d_copy_leaves_the_original_as_it_was(clean_scene, addon, with_net):
     bpy = clean_scene
