@@ -391,8 +391,15 @@ class TCBSurface:
         """
         return self._closest(points, iterations)[0]
 
-    def _closest(self, points, iterations: int = 8) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`closest_parameters` and the distances ``|S(x) - p|`` there, (m, 2), (m,)."""
+    def closest_points(self, points, iterations: int = 8) -> np.ndarray:
+        """The surface points (m, 3) closest to ``points`` (m, 3): ``S`` at
+        :meth:`closest_parameters` (the feet of the points on the trimmed surface; their
+        distances are :meth:`distances`)."""
+        return self._closest(points, iterations)[2]
+
+    def _closest(self, points, iterations: int = 8):
+        """:meth:`closest_parameters`, the distances ``|S(x) - p|`` and the surface points ``S(x)``
+        there: (m, 2), (m,), (m, 3)."""
         steps = _whole(iterations)
         if steps is None or steps < 0:
             raise InvalidInputError(
@@ -421,16 +428,16 @@ class TCBSurface:
         data, _ = self._data_parameters()
         starts = np.vstack([uv_t, np.clip(data[:: max(1, len(data) // 20_000)], lo, hi)])
         _, nearest = cKDTree(self(starts)).query(p)
-        x, d = self._descend(p, starts[nearest], lo, hi, steps, None)
+        x, d, S = self._descend(p, starts[nearest], lo, hi, steps, None)
         # the steps above stay in the domain's box; the few that ended outside the domain (on
         # the extension over the border rings) are redone from the same starts with every step
         # kept in the domain (clamping all points' steps to the polygon made points outside a
         # 596-edge mesh 9x slower)
         out = np.flatnonzero(~self._in_domain(x))
         if len(out):
-            x[out], d[out] = self._descend(p[out], starts[nearest[out]], lo, hi, steps,
-                                           self._into_domain)
-        return x, d
+            x[out], d[out], S[out] = self._descend(p[out], starts[nearest[out]], lo, hi, steps,
+                                                   self._into_domain)
+        return x, d, S
 
     def _descend(self, p, x, lo, hi, steps, keep_in):
         """Gauss-Newton (:meth:`_newton_closest`) from the starts ``x`` and, for a cloud, also
@@ -439,14 +446,15 @@ class TCBSurface:
         larger, by up to 2% of the largest)."""
         keep = np.clip if keep_in is None else keep_in
         x = keep(np.array(x, dtype=np.float64), lo, hi)
-        x, d = self._newton_closest(p, x, self._surface_and_gradient(x), lo, hi, steps, keep_in)
+        x, d, S = self._newton_closest(p, x, self._surface_and_gradient(x), lo, hi, steps,
+                                       keep_in)
         if self._param.kind == "plane" and self._param.origin is not None:
             y = keep(self._param.project(p), lo, hi)
-            y, e = self._newton_closest(p, y, self._surface_and_gradient(y), lo, hi, steps,
-                                        keep_in)
+            y, e, T = self._newton_closest(p, y, self._surface_and_gradient(y), lo, hi, steps,
+                                           keep_in)
             b = e < d
-            x[b], d[b] = y[b], e[b]
-        return x, d
+            x[b], d[b], S[b] = y[b], e[b], T[b]
+        return x, d, S
 
     def _surface_and_gradient(self, uv):
         return [M @ self._c for M in self._space.evaluate_many(uv, [(0, 0), (1, 0), (0, 1)])]
@@ -511,7 +519,8 @@ class TCBSurface:
     def _newton_closest(self, p, x, start, lo, hi, iterations, keep_in=None):
         """Gauss-Newton from ``x`` (with the surface and its gradient there, ``start``) inside
         the box ``[lo, hi]``, or where ``keep_in(x, lo, hi)`` puts the steps (the data's
-        domain: :meth:`_into_domain`); returns the parameters and their distances.
+        domain: :meth:`_into_domain`); returns the parameters, their distances and the
+        surface points there.
         Each step evaluates the surface and its first derivatives once, at the trial points
         only. A step that does not bring the point closer is retried at a quarter of its
         length in the next round (at most 3 times in a row: backtracking; before, the point
@@ -547,7 +556,7 @@ class TCBSurface:
             worse = active[~better]
             scale[worse] *= 0.25
             active = np.concatenate([idx, worse[scale[worse] >= 0.25**3]])
-        return x, dist
+        return x, dist, S
 
     def distances(self, points) -> np.ndarray:
         """Distance (m,) of ``points`` (m, 3) to the surface (closest point, see above)."""

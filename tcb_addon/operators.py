@@ -594,7 +594,7 @@ class TCB_OT_deviation_map(bpy.types.Operator):
             data = source_data(context, surface)
             surf = stored_surface(surface)
             if data.faces is None:  # a cloud: also the closest surface points (feet)
-                feet = np.asarray(surf(surf.closest_parameters(data.points)), dtype=np.float64)
+                feet = np.asarray(surf.closest_points(data.points), dtype=np.float64)
                 data_dist = np.linalg.norm(feet - data.points, axis=1)
             else:
                 data_dist = np.abs(np.asarray(surf.distances(data.points), dtype=np.float64))

@@ -718,7 +718,8 @@ def test_closest_points_of_points_off_the_surface_lie_on_the_trimmed_surface(nef
     """Points all around a cloud's and a mesh's surface: their closest parameters are in the
     data's domain (before, 15-20% of them were on the extension over the border rings, at
     distances up to 0.1 of the diagonal below any point of the surface), and no distance is
-    above the nearest vertex of the starting tessellation."""
+    above the nearest vertex of the starting tessellation; ``closest_points`` are the surface
+    there."""
     xy = np.random.default_rng(3).random((1500, 2))
     cloud = fit_surface(np.c_[xy, franke(*xy.T)], max_control_points=200)
     for surf in (cloud, nefertiti[2]):
@@ -733,6 +734,10 @@ def test_closest_points_of_points_off_the_surface_lie_on_the_trimmed_surface(nef
         d = surf.distances(q)
         np.testing.assert_allclose(d, np.linalg.norm(surf(uv) - q, axis=1), rtol=1e-12)
         assert (d <= cKDTree(v).query(q)[0] + 1e-12 * np.linalg.norm(hi - lo)).all()
+        # the feet: the surface at those parameters, at those distances
+        feet = surf.closest_points(q)
+        np.testing.assert_allclose(feet, surf(uv), rtol=0, atol=1e-12 * np.linalg.norm(hi - lo))
+        np.testing.assert_allclose(np.linalg.norm(feet - q, axis=1), d, rtol=1e-12)
 
 
 @pytest.fixture(scope="module")
