@@ -428,26 +428,25 @@ MIN_PROBE_KNOTS = 8
 
 
 def automatic_start(mode: str, max_control_points: int) -> int:
-    """Interior knots of the automatic start (before sizing, and at most ``n / 8`` for ``n``
-    points): budget / 12 (TCB), i.e. a first fit with about a quarter of the budget in
+    """Interior knots of the automatic start (:func:`adaptive_fit` also caps it at ``n / 8`` for
+    ``n`` points, and with a tolerance sizes it: :func:`next_start`): budget / 12 (TCB), i.e. a first fit with about a quarter of the budget in
     control points (the border functions that meet the domain add to the ~2 per knot: 2000 ->
     166 knots -> 470-500 control points); DCB has about 2.4 times as many functions per knot."""
     per = 12 if mode == "tcb" else 30
     return int(np.clip(max_control_points / per, 8, 400))
 
 
-def next_start(n: int, error: float, tol: float, previous: tuple | None, degree: int,
-               n_start: int) -> int | None:
-    """The knot count of the next fresh start while sizing, or None to go on by insertion.
+def predicted_knots(n: int, error: float, tol: float, previous: tuple | None,
+                    degree: int) -> float:
+    """Interior knots that the error-rate model predicts for the tolerance ``tol``, from a fit
+    with ``n`` interior knots and error ``error`` (and ``previous = (n_1, e_1)``, an earlier fit
+    of the same run, or None).
 
-    Model (an addition to method.md section 6, whose loop starts from a fixed count): the
-    error falls like ``n^-r`` in the number ``n`` of interior knots. ``r = (k + 1) / 2`` on
-    smooth data (``h^(k+1)`` with ``h ~ n^-1/2``); after two sizing fits it is the measured
-    ``log(e_1/e_2) / log(n_2/n_1)``, clipped to ``[0.5, (k + 1) / 2]`` (measured between 20
-    and 166 knots: scans 0.15-1.7, smooth functions 0.9-2.4). The count for the tolerance is
-    ``n (e / tol)^(1/r)``, with 10% to spare. At 0.7 of the start's count or more the start
-    itself is taken (the path without sizing, with one probe fit more); within 15% of ``n``
-    (one insertion step) the loop goes on by insertion. Measured by benchmarks/net_size.py.
+    Model (an addition to method.md section 6): the error falls like ``n^-r``. ``r = (k + 1) / 2``
+    on smooth data (``h^(k+1)`` with ``h ~ n^-1/2``); with an earlier fit it is the measured
+    ``log(e_1/e) / log(n/n_1)``, clipped to ``[0.5, (k + 1) / 2]`` (measured between 20 and 166
+    knots: scans 0.15-1.7, smooth functions 0.9-2.4). The count is ``n (e / tol)^(1/r)``, with
+    10% to spare.
     """
     rate = (degree + 1) / 2
     if previous is not None:
@@ -455,7 +454,19 @@ def next_start(n: int, error: float, tol: float, previous: tuple | None, degree:
         measured = (np.log(e1 / error) / np.log(n / n1) if n > n1 and e1 > error > 0
                     else 0.0)
         rate = float(np.clip(measured, 0.5, rate))
-    want = 1.1 * n * (error / max(tol, 1e-300)) ** (1.0 / rate)
+    return 1.1 * n * (error / max(tol, 1e-300)) ** (1.0 / rate)
+
+
+def next_start(n: int, error: float, tol: float, previous: tuple | None, degree: int,
+               n_start: int) -> int | None:
+    """The knot count of the next fresh start while sizing, or None to go on by insertion.
+
+    :func:`predicted_knots` for the tolerance; at 0.7 of the start's count ``n_start`` or more
+    the start itself is taken (the path without sizing, after the sizing fits); at most 15% more
+    than ``n`` (about one insertion step) and the loop goes on by inserting knots. Measured by
+    benchmarks/net_size.py.
+    """
+    want = predicted_knots(n, error, tol, previous, degree)
     if want >= 0.7 * n_start:
         return n_start
     if want <= 1.15 * n:
@@ -492,6 +503,13 @@ def adaptive_fit(
     polygon, default the convex hull of ``uv``): the others only carry the border rings'
     partition of unity and vanish on the domain (:meth:`SplineSpace.meets`); reports give
     both counts (``control_points`` and ``functions``).
+    With a tolerance and the automatic start, the first fits size the start: a probe with a
+    quarter of its knots, then fresh starts with the count :func:`next_start` predicts; they
+    count as iterations. A continued run (``start_knots``) with a tolerance inserts the knots
+    :func:`predicted_knots` says are missing, up to doubling them. Reports say whether an
+    iteration's knots were placed ``"afresh"``, ``"continued"`` or ``"inserted"``
+    (``knots_placed``). The best iteration is the one that meets the tolerance, else the one of
+    lowest RMS within the budget.
     Returns the best iteration, the per-iteration reports and why the loop stopped.
     """
     options.validate()
@@ -500,6 +518,7 @@ def adaptive_fit(
     tol = options.tolerance * (diagonal if options.relative else 1.0 / unit)
     lo, hi = column_bounds(uv)
     own_rings = ring_knots is None
+    data_uv, data_points = uv, points  # all points (the iterations may fit a subset)
 
     def rings_for(n_interior: int) -> np.ndarray:
         h = np.sqrt(np.prod(np.maximum(hi - lo, 1e-12)) / max(n_interior, 1))
@@ -509,10 +528,15 @@ def adaptive_fit(
         return border_rings(lo - pad, hi + pad, h, rings=default_ring_count(options.degree),
                             seed=rng_seed)
 
+    def place(count: int) -> tuple[np.ndarray, np.ndarray]:
+        """Interior knots of a fresh start, placed on all points, and its border rings."""
+        placed = initial_knots(data_uv, data_points, count, seed=rng_seed)
+        return placed, (rings_for(len(placed)) if own_rings else ring_knots)
+
     # sizing (next_start; not in method.md section 6): with a tolerance and the automatic
-    # start, the first fit is a probe with a quarter of the start's knots; the following fresh starts
-    # take the knot count the measured convergence predicts for the tolerance (at most the
-    # start's), so the net follows the tolerance instead of the budget (see next_start)
+    # start, the first fit is a probe with a quarter of the start's knots; the following
+    # fresh starts take the knot count the measured convergence predicts for the tolerance
+    # (at most the start's), so the net follows the tolerance instead of the budget
     sizing = False
     if start_knots is None:
         n0 = int(min(options.initial_knots or automatic_start(options.mode,
@@ -520,12 +544,15 @@ def adaptive_fit(
                      max(len(uv) // 8, 6)))
         sizing = (options.initial_knots is None and tol > 0 and options.max_iterations > 1
                   and n0 // PROBE_FRACTION >= MIN_PROBE_KNOTS)
-        interior = initial_knots(uv, points, n0 // PROBE_FRACTION if sizing else n0,
-                                 seed=rng_seed)
+        interior, ring_knots = place(n0 // PROBE_FRACTION if sizing else n0)
     else:
         interior = np.asarray(start_knots, dtype=np.float64)
-    if ring_knots is None:
-        ring_knots = rings_for(len(interior))
+        if ring_knots is None:
+            ring_knots = rings_for(len(interior))
+    # a continued run (refine) with a tolerance inserts as many knots as the error-rate model
+    # predicts are missing, up to doubling them (not 15%: a net sized for a loose tolerance
+    # would crawl towards a much tighter one)
+    grow = start_knots is not None and tol > 0 and options.knots_per_iteration is None
     if domain is None:
         domain = uv[ConvexHull(uv).vertices]
 
@@ -558,7 +585,7 @@ def adaptive_fit(
     prev = None  # (interior knots, control points) of the last iteration
     last_round = False
     fresh = start_knots is None  # knots placed afresh (the start, a sizing restart)
-    sized = None  # (interior knots, error) of the last sizing fit
+    sized = grown = None  # (interior knots, error) of the last sizing / growing fit
     reason = "iteration limit"
     t_start = time.perf_counter()
     for it in range(options.max_iterations):
@@ -588,7 +615,7 @@ def adaptive_fit(
                 space = make_space(knots, options.degree, options.mode, cost, len(interior))
                 active = control(space)
                 n_ctrl = len(active)
-            if n_ctrl > options.max_control_points and not fresh:
+            if n_ctrl > options.max_control_points and it > 0 and not fresh:
                 break
             t_space = time.perf_counter() - t0
             try:
@@ -599,20 +626,25 @@ def adaptive_fit(
                     raise
                 # safety net (method.md section 3 measured one more ring being needed at times)
                 ring_knots = _add_ring(ring_knots, seed=rng_seed + extra + 1)
-        if (n_ctrl > options.max_control_points and not fresh) or shrunk_away:
+        if (n_ctrl > options.max_control_points and it > 0 and not fresh) or shrunk_away:
             reason = "control-point budget reached"
             break
         state = IterationState(knots, len(interior), space, fit, active=active)
         e = fit.errors[:n_measured]
         rms, emax = float(np.sqrt(np.mean(e**2))), float(e.max(initial=0.0))
-        is_best = best is None or rms < best_rms
+        value = rms if options.criterion == "rms" else emax
+        # the best: the lowest RMS within the budget, or the fit that meets the tolerance (a
+        # fresh start's knots do not contain the earlier ones: with the criterion "max" a fit
+        # of lower RMS may still miss it)
+        within = n_ctrl <= options.max_control_points
+        is_best = best is None or (within and (best.n_control > options.max_control_points
+                                               or rms < best_rms or value <= tol))
         if is_best:
             if best is not None:
                 best.fit.basis = None
             best, best_rms = state, rms
         if not (keep_basis and is_best):  # only the auto refit of the best space reuses it
             fit.basis = None
-        value = rms if options.criterion == "rms" else emax
         report = {
             "iteration": history_offset + it + 1,
             "knots": int(len(knots)),
@@ -627,7 +659,7 @@ def adaptive_fit(
             "seconds": time.perf_counter() - t0,
             "elapsed": time.perf_counter() - t_start,
             "phases": {"configurations": t_space, **fit.timings},
-            "knots_placed": "afresh" if fresh else "inserted",
+            "knots_placed": ("afresh" if fresh else "continued" if it == 0 else "inserted"),
         }
         if sampled:
             report["sampled_points"] = len(uv)
@@ -644,13 +676,11 @@ def adaptive_fit(
             reason = "control-point budget reached"
             break
         if sizing:
-            count = next_start(len(interior), value, tol, sized, options.degree, n0)
+            restart = next_start(len(interior), value, tol, sized, options.degree, n0)
             sized = (len(interior), value)
-            sizing = count is not None and count < n0
-            if count is not None:  # a fresh start with the predicted knot count
-                interior = initial_knots(uv, points, count, seed=rng_seed)
-                if own_rings:
-                    ring_knots = rings_for(len(interior))
+            sizing = restart is not None and restart < n0
+            if restart is not None:  # a fresh start with the predicted knot count
+                interior, ring_knots = place(restart)
                 n_before, pending, prev, fresh = len(interior), np.zeros((0, 2)), None, True
                 continue
         fresh = False
@@ -665,6 +695,10 @@ def adaptive_fit(
         prev = (len(interior), n_ctrl)
         room = int((options.max_control_points - n_ctrl) / max(per_knot, 1e-9))
         want = options.knots_per_iteration or max(10, int(np.ceil(0.15 * len(interior))))
+        if grow:
+            missing = predicted_knots(len(interior), value, tol, grown, options.degree)
+            want = max(want, min(int(np.ceil(missing)) - len(interior), len(interior)))
+            grown = (len(interior), value)
         if marginal:
             count = min(want, room)
         else:  # no measured cost per knot yet: try them all if there is any room at all
@@ -681,11 +715,14 @@ def adaptive_fit(
             break
         n_before, pending = len(interior), new
         interior = np.vstack([interior, new])
-    assert best is not None
-    if best.n_control > options.max_control_points and len(history) == 1:
+    if best is None:  # cannot happen: the first fit of a run is always made
+        raise RuntimeError("the refinement loop made no fit")
+    if best.n_control > options.max_control_points:  # only the first fit was made or kept
+        what = ("even the coarsest surface needs" if start_knots is None
+                else "the surface to refine already has")
         raise InvalidInputError(
-            f"even the coarsest surface needs {best.n_control} control points, more than "
-            f"the maximum of {options.max_control_points}; allow more control points"
+            f"{what} {best.n_control} control points, more than the maximum of "
+            f"{options.max_control_points}; allow more control points"
         )
     # sparse data (fewer fitted points than SPARSE_POINTS_PER_CONTROL per control point): only
     # the fairing holds the surface between the points, and the loop's fits come close to

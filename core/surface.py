@@ -1003,9 +1003,10 @@ def fit_surface(
         the budget in interior knots, and with a tolerance a probe fit with a quarter of those
         first, whose error sets the knots of the next start, so that the net follows the
         tolerance: ``core.refine.next_start``); None (the default) keeps them automatic. An
-        ``initial_knots`` given is the first fit's knot count, with no probe. Each iteration's
-        report says whether its knots were placed ``"afresh"`` or ``"inserted"``
-        (``knots_placed``).
+        ``initial_knots`` given is the first fit's knot count, with no probe. The probe and
+        the fresh starts count towards ``max_iterations``. Each iteration's report says
+        whether its knots were placed ``"afresh"``, ``"continued"`` (the first fit of
+        ``refine()``) or ``"inserted"`` (``knots_placed``).
     feature_sensitive : bool
         TCB only: choose ``Gamma_0`` and the link triangulations from the data (default) or use
         Delaunay ones.

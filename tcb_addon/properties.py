@@ -58,7 +58,8 @@ class FitSettings:
     )  # fmt: skip
     max_iterations: IntProperty(
         name="Max Iterations",
-        description="Largest number of refinement steps",
+        description="Largest number of fits (the first ones of a fit with a tolerance size "
+        "the control net to it)",
         default=20, min=1, soft_max=100,
     )  # fmt: skip
     degree: EnumProperty(

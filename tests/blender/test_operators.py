@@ -216,6 +216,23 @@ def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
     assert "Warning: TCB:" in out.out and "4 edited control points were replaced" in out.out, out.out
 
 
+def test_refine_to_a_budget_below_the_surface_is_an_error_that_changes_nothing(clean_scene):
+    """Refine with Max Control Points below what the surface already has: an ERROR naming both
+    numbers (it was a traceback), and the surface keeps its spline."""
+    bpy = clean_scene
+    verts, faces = grid(16)
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    assert fit(bpy, scan, tolerance=0.0, max_iterations=2) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    before, n = surface["tcb_spline"], surface.tcb.control_points
+    assert n > 20
+    with bpy.context.temp_override(**select(bpy, surface)):
+        with pytest.raises(RuntimeError, match=f"already has {n} control points, more than the "
+                                               "maximum of 20"):
+            bpy.ops.tcb.refine(max_control_points=20)
+    assert surface["tcb_spline"] == before
+
+
 def test_refine_of_a_changed_source_says_to_fit_again(clean_scene):
     """The scan was edited after the fit: Refine (which continues the fit of the same data)
     is refused in Blender's terms, not with the engine's 'call fit_surface()'."""

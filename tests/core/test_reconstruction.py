@@ -114,10 +114,49 @@ def test_the_net_follows_the_tolerance_and_the_start_without_one_is_unchanged():
     assert [h["knots_placed"] for h in free.report["history"]] == ["afresh", "inserted"]
 
 
+def test_refine_below_the_surface_budget_is_refused_and_a_far_tolerance_grows_fast():
+    """refine() with a budget below the surface's control points raises a specific error (it
+    was a bare AssertionError); towards a tolerance 100x tighter the net doubles per iteration
+    (the error-rate model, capped at doubling) instead of growing by 10 knots."""
+    xy = np.random.default_rng(0).random((5000, 2))
+    P = np.c_[xy, franke(*xy.T)]
+    coarse = fit_surface(P, tolerance=1e-2)
+    n = coarse.report["control_points"]
+    with pytest.raises(InvalidInputError, match=f"already has {n} control points"):
+        coarse.refine(P, max_control_points=n - 1)
+    fine = coarse.refine(P, tolerance=1e-4, max_iterations=3)
+    h = fine.report["history"][len(coarse.report["history"]):]
+    assert [x["knots_placed"] for x in h] == ["continued", "inserted", "inserted"]
+    knots = [x["interior_knots"] for x in h]
+    assert knots[0] == coarse.report["history"][-1]["interior_knots"]
+    assert knots[1] >= 1.8 * knots[0] and knots[2] >= 1.8 * knots[1]
+    assert fine.report["rms_rel"] < 0.2 * coarse.report["rms_rel"]
+
+
+def test_sized_restarts_place_knots_on_all_points_and_the_max_criterion_keeps_the_fit_that_met_it(
+        monkeypatch):
+    """Above ITERATION_POINTS the restart at the automatic start is the fixed start's first
+    fit (its knots are placed on all points, not on the iterations' subset); with the
+    criterion "max" the surface returned meets the tolerance the loop reached."""
+    import core.refine as refine
+
+    monkeypatch.setattr(refine, "ITERATION_POINTS", 2000)
+    xy = np.random.default_rng(2).random((6000, 2))
+    P = np.c_[xy, franke(*xy.T)]
+    start = automatic_start("tcb", 2000)
+    sized = fit_surface(P, tolerance=1e-5, max_iterations=2).report["history"]
+    fixed = fit_surface(P, tolerance=1e-5, max_iterations=1, initial_knots=start).report["history"]
+    assert [h["interior_knots"] for h in sized] == [start // 4, start]
+    assert sized[1]["rms"] == pytest.approx(fixed[0]["rms"], rel=1e-12)
+    for tol in (3e-2, 1e-2, 3e-3):  # probe only; probe and a restart; probe and the start
+        r = fit_surface(P[:3000], criterion="max", tolerance=tol).report
+        assert r["stop_reason"] == "tolerance reached" and r["max_rel"] <= tol
+
+
 @pytest.mark.parametrize("n, error, previous, expected", [
     (40, 8e-3, None, 166),  # far: the automatic start itself (1.1 * 40 * 8^(2/3) = 176)
     (40, 2e-3, None, 70),  # 1.1 * 40 * 2^(2/3) = 69.8, with the smooth rate 3/2
-    (40, 1.05e-3, None, None),  # within one insertion step: go on by insertion
+    (40, 1.05e-3, None, None),  # at most 15% more: go on by insertion
     (40, 2e-3, (20, 4e-3), 88),  # measured rate 1: 1.1 * 40 * 2
     (40, 2e-3, (20, 2.1e-3), 166),  # noise-like rate 0.07, clipped to 0.5: 176
 ])
