@@ -428,10 +428,11 @@ MIN_PROBE_KNOTS = 8
 
 
 def automatic_start(mode: str, max_control_points: int) -> int:
-    """Interior knots of the automatic start (:func:`adaptive_fit` also caps it at ``n / 8`` for
-    ``n`` points, and with a tolerance sizes it: :func:`next_start`): budget / 12 (TCB), i.e. a first fit with about a quarter of the budget in
-    control points (the border functions that meet the domain add to the ~2 per knot: 2000 ->
-    166 knots -> 470-500 control points); DCB has about 2.4 times as many functions per knot."""
+    """Interior knots of the automatic start: budget / 12 (TCB), i.e. a fit with about a
+    quarter of the budget in control points (the border functions that meet the domain add to
+    the ~2 per knot: 2000 -> 166 knots -> 470-500 control points); DCB has about 2.4 times as
+    many functions per knot. :func:`adaptive_fit` caps it at ``n / 8`` for ``n`` points and,
+    with a tolerance, sizes it (:func:`next_start`)."""
     per = 12 if mode == "tcb" else 30
     return int(np.clip(max_control_points / per, 8, 400))
 
