@@ -262,7 +262,15 @@ class TCBSurface:
         gu = np.arange(lo[0] + d / 2, hi[0], d)
         gv = np.arange(lo[1] + d / 2, hi[1], d)
         grid = np.stack(np.meshgrid(gu, gv), -1).reshape(-1, 2)
-        inside = self._param.contains(grid) & (_distance_to_polygon(grid, poly) > 0.3 * d)
+        inside = self._param.contains(grid)
+        # away from the boundary: more than 0.3 d from it. The boundary samples are at most d
+        # apart, so a point whose nearest sample is farther than 0.8 d is more than 0.3 d from
+        # the polygon; only the others need the distance to the edges (points near the
+        # boundary: O(resolution) of them, not the whole grid times every edge)
+        idx = np.flatnonzero(inside)
+        near = cKDTree(boundary).query(grid[idx], distance_upper_bound=0.8 * d)[0] <= 0.8 * d
+        idx = idx[near]
+        inside[idx] = _distance_to_polygon(grid[idx], poly) > 0.3 * d
         uv = np.vstack([boundary, grid[inside]])
         data, ok = self._data_parameters()
         full = cKDTree(data)
@@ -792,14 +800,20 @@ def data_digest(points: np.ndarray) -> str:
 
 
 def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Distance (m,) from points to the boundary of a polygon (vectorized over edges)."""
+    """Distance (m,) from points to the boundary of a polygon (vectorized over edges, in
+    chunks of points so that memory stays bounded)."""
     a = poly
     b = np.roll(poly, -1, axis=0)
     ab = b - a
-    t = ((x[:, None, :] - a[None]) * ab[None]).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-300)
-    t = np.clip(t, 0.0, 1.0)
-    proj = a[None] + t[..., None] * ab[None]
-    return np.sqrt(((x[:, None, :] - proj) ** 2).sum(-1)).min(axis=1)
+    ab2 = np.maximum((ab * ab).sum(-1), 1e-300)
+    out = np.empty(len(x))
+    step = max(1, 2_000_000 // max(len(a), 1))
+    for s in range(0, len(x), step):
+        xs = x[s : s + step, None, :]
+        t = np.clip(((xs - a[None]) * ab[None]).sum(-1) / ab2, 0.0, 1.0)
+        proj = a[None] + t[..., None] * ab[None]
+        out[s : s + step] = np.sqrt(((xs - proj) ** 2).sum(-1)).min(axis=1)
+    return out
 
 
 def mesh_samples(points, uv, faces, count: int, seed: int = 0):

@@ -26,6 +26,15 @@ def register():
     properties.register_props()
     if live.on_load not in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.append(live.on_load)
+    # enabled with a file open: its groups are brought up to date once the data is accessible
+    bpy.app.timers.register(_upgrade_open_file, first_interval=0.0)
+
+
+def _upgrade_open_file():
+    from . import live
+
+    live.upgrade_groups()
+    return None  # once
 
 
 def unregister():

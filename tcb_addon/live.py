@@ -30,34 +30,42 @@ GROUP_NAME = "TCB Live Surface"
 MODIFIER_NAME = "TCB Live Net"
 INPUTS = ("Net", "Weights", "Terms")
 # Bumped when the node tree changes: an older group in a file is rebuilt in place (same
-# interface, so the modifiers' inputs are kept) when a file is loaded (on_load) and the next
-# time a surface is linked.
+# interface, so the modifiers' inputs are kept) when a file is loaded or the add-on enabled
+# (upgrade_groups) and the next time a surface is linked.
 # 2: falls back to the surface's own mesh when the net or the weights cannot drive it.
 GROUP_VERSION = 2
 
 
-def upgrade_group() -> bpy.types.NodeTree | None:
-    """The file's node group, rebuilt in place if it is older than :data:`GROUP_VERSION`
-    (runs when a file is loaded, so that an old file's surfaces get the fallback before any
-    operator touches them); None if the file has none."""
-    ng = bpy.data.node_groups.get(GROUP_NAME)
-    if ng is None or ng.bl_idname != "GeometryNodeTree":
-        return None
-    if ng.get("tcb_version", 1) < GROUP_VERSION and ng.library is None:
-        _build_nodes(ng)
-    return ng
+def _is_ours(ng) -> bool:
+    """A node group made by this add-on: named ``GROUP_NAME`` (``.001`` etc. after an Append
+    into a file that has one) with its inputs."""
+    base, _, suffix = ng.name.rpartition(".")
+    name = base if suffix.isdigit() and len(suffix) == 3 else ng.name
+    return (name == GROUP_NAME and ng.bl_idname == "GeometryNodeTree"
+            and set(INPUTS) <= set(_input_ids(ng)))
+
+
+def upgrade_groups() -> None:
+    """Rebuild in place the add-on's node groups older than :data:`GROUP_VERSION` (the one of
+    the file and any appended with a surface), so that old surfaces get the fallback before
+    any operator touches them."""
+    for ng in bpy.data.node_groups:
+        if ng.library is None and ng.get("tcb_version", 1) < GROUP_VERSION and _is_ours(ng):
+            _build_nodes(ng)
 
 
 @bpy.app.handlers.persistent
 def on_load(_file) -> None:
-    """``load_post`` handler: bring an older node group of the loaded file up to date."""
-    upgrade_group()
+    """``load_post`` handler: bring older node groups of the loaded file up to date."""
+    upgrade_groups()
 
 
 def node_group() -> bpy.types.NodeTree:
     """The shared node group (created once per file, brought up to date if older)."""
-    ng = upgrade_group()
-    if ng is not None:
+    ng = bpy.data.node_groups.get(GROUP_NAME)
+    if ng is not None and ng.bl_idname == "GeometryNodeTree":
+        if ng.get("tcb_version", 1) < GROUP_VERSION and ng.library is None:
+            _build_nodes(ng)
         return ng
     ng = bpy.data.node_groups.new(GROUP_NAME, "GeometryNodeTree")
     iface = ng.interface

@@ -69,8 +69,8 @@ def progress_text(report: dict | None, what: str = "Fitting") -> str:
     parts = [f"TCB: {what}", f"iteration {report.get('iteration', '?')}"]
     if "control_points" in report:
         parts.append(f"{report['control_points']} control points")
-    if "max_rel" in report:
-        parts.append(f"max {report['max_rel']:.3g} of diagonal")
+    if "rms_rel" in report and "max_rel" in report:
+        parts.append(f"RMS {report['rms_rel']:.3g}, max {report['max_rel']:.3g} of diagonal")
     return ", ".join(parts) + " (Esc to cancel)"
 
 
@@ -129,6 +129,21 @@ def with_net_edits(surface_obj, surf):
     return surf
 
 
+def net_vertex_problem(surface_obj) -> str | None:
+    """Why the edits of the surface's control net are ignored, or None: a vertex was added to
+    or deleted from the net, so its vertices no longer match the control points one to one
+    (:func:`with_net_edits` and the live surface then use the stored spline)."""
+    net = surface_obj.tcb.net
+    if net is None or net.type != "MESH":
+        return None
+    n, m = len(net.data.vertices), surface_obj.tcb.control_points
+    if m == 0 or n == m:
+        return None
+    return (f"the control net '{net.name}' has {n} vertices for {m} control points (a vertex "
+            "was added or deleted): its edits are ignored; Ctrl+Z restores the net, Refine or "
+            "Fit Surface makes a new one")
+
+
 def store_spline(surface_obj, surf) -> None:
     surface_obj[SPLINE_KEY] = base64.b64encode(surf.to_bytes()).decode("ascii")
 
@@ -148,6 +163,7 @@ def store_stats(tcb, surf, settings: dict) -> None:
     tcb.knots = int(rep.get("knots", 0))
     tcb.control_points = int(rep.get("control_points", len(surf.control_points)))
     tcb.iterations = int(rep.get("iterations", 0))
+    tcb.stop_reason = str(rep.get("stop_reason", ""))
     for key in ("rms", "max", "rms_rel", "max_rel", "seconds"):
         setattr(tcb, key, float(rep.get(key, 0.0)))
     for key, value in settings.items():
@@ -205,6 +221,11 @@ def report_result(op, surf, notes=(), warnings=()) -> None:
                   "value set by hand follows the points more closely)")
     elif reason == "cancelled":
         op.report({"WARNING"}, f"{text}; stopped early (cancelled): the best surface so far")
+    elif reason == "the error stopped falling":
+        op.report({"WARNING"}, f"{text}; the tolerance was not reached: {reason} with more "
+                  f"control points, so the data look noisy at about RMS {rep.get('rms', 0):.4g} "
+                  "(more control points would fit the noise): set the tolerance above that, or "
+                  "turn on Auto Smoothness")
     else:
         advice = {"control-point budget reached": "raise Max Control Points",
                   "iteration limit": "raise Max Iterations"}.get(reason, "")
@@ -245,8 +266,8 @@ class _Job:
         return not self.thread.is_alive()
 
 
-def _print_progress(report):
-    print(progress_text(report).replace(" (Esc to cancel)", ""), flush=True)
+def _print_progress(report, what: str = "Fitting"):
+    print(progress_text(report, what).replace(" (Esc to cancel)", ""), flush=True)
 
 
 class _EngineOperator:
@@ -267,7 +288,7 @@ class _EngineOperator:
                 surf = task[1]
             else:
                 _, fn, kwargs = task
-                cb = _print_progress if bpy.app.background else None
+                cb = (lambda r: _print_progress(r, self._what)) if bpy.app.background else None
                 surf = fn(**kwargs, callback=cb)
             return self.finish(context, surf)
         except errors as ex:
@@ -308,7 +329,8 @@ class _EngineOperator:
         if not job.done:
             if not job.cancel:
                 self._status(context, progress_text(job.progress, self._what))
-            it = (job.progress or {}).get("iteration", 0)
+            # this run's iterations (Refine's reports go on from the fit's numbers)
+            it = (job.progress or {}).get("iteration", 0) - getattr(self, "_iteration_offset", 0)
             maxit = max(1, getattr(self, "max_iterations", 20))
             context.window_manager.progress_update(min(99, int(100 * it / maxit)))
             return {"RUNNING_MODAL"}
@@ -459,16 +481,22 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
     _what = "Refining"
 
     tolerance: FloatProperty(
-        name="Tolerance", description="New tolerance (0: half of the previous one)",
+        name="Tolerance",
+        description="New tolerance (0: half of the current error, or of the previous tolerance "
+        "if that is smaller)",
         default=0.0, min=0.0, precision=6, step=0.01,
     )  # fmt: skip
     relative: BoolProperty(name="Relative", default=True,
                            description="Tolerance is a fraction of the bounding-box diagonal")  # fmt: skip
     max_control_points: IntProperty(
         name="Max Control Points", default=0, min=0,
-        description="New budget (0: twice the current number of control points)",
+        description="New budget (0: the fit's budget, or twice the current number of control "
+        "points if that is more)",
     )  # fmt: skip
-    max_iterations: IntProperty(name="Max Iterations", default=20, min=1)
+    max_iterations: IntProperty(
+        name="Max Iterations", default=20, min=1,
+        description="Largest number of fits (the first one refits the current control net)",
+    )  # fmt: skip
 
     @classmethod
     def poll(cls, context):
@@ -480,14 +508,21 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             raise bridge.SelectionError("Select a TCB surface (or its control net) to refine")
         st = surface.tcb
         self._surface = surface
-        tol = self.tolerance if self.tolerance > 0 else 0.5 * st.tolerance
+        stored = stored_surface(surface, use_net=False)
         rel = self.relative if self.properties.is_property_set("relative") else st.relative
+        rep = dict(stored.report or {})
+        self._iteration_offset = int(rep.get("iterations", 0))
+        # the default: half of the current error (a fit often beats a loose tolerance by far:
+        # half the tolerance would then change nothing), or of the tolerance if smaller
+        key = ("rms" if st.criterion != "max" else "max") + ("_rel" if rel else "")
+        current = float(rep.get(key, 0.0))
+        tol = self.tolerance or 0.5 * (min(st.tolerance, current) if current > 0 else st.tolerance)
         budget = self.max_control_points or max(st.max_control_points, 2 * st.control_points)
         self._settings = dict(tolerance=tol, relative=rel, max_control_points=budget,
                               max_iterations=self.max_iterations)  # fmt: skip
+        self._before = (current, int(len(stored.control_points)))
         data = source_data(context, surface)
         self._notes = data.notes
-        stored = stored_surface(surface, use_net=False)
         surf = with_net_edits(surface, stored)
         if not surf.fitted_to(data.points):
             names = ", ".join(repr(o.name) for o in data.sources)
@@ -514,7 +549,16 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         live.relink(surface, surf, st.resolution, self.report)
         store_spline(surface, surf)
         store_stats(st, surf, self._settings)
-        report_result(self, surf, getattr(self, "_notes", ()), getattr(self, "_warnings", ()))
+        warnings = list(getattr(self, "_warnings", ()))
+        rep = dict(surf.report or {})
+        if (len(surf.control_points) == self._before[1]
+                and str(rep.get("stop_reason", "")).startswith("tolerance reached")):
+            what = "RMS" if st.criterion != "max" else "max"
+            unit = " of the diagonal" if self._settings["relative"] else ""
+            warnings.append(f"nothing was refined: the surface already meets the tolerance "
+                            f"{self._settings['tolerance']:.4g}{unit} ({what} "
+                            f"{self._before[0]:.4g}); set a smaller Tolerance")
+        report_result(self, surf, getattr(self, "_notes", ()), warnings)
         return {"FINISHED"}
 
 
@@ -553,6 +597,9 @@ class TCB_OT_retessellate(bpy.types.Operator):
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
         surface.tcb.resolution = self.resolution
+        problem = net_vertex_problem(surface)
+        if problem:
+            self.report({"WARNING"}, f"TCB: {problem}")
         return {"FINISHED"}
 
 
@@ -660,6 +707,9 @@ class TCB_OT_deviation_map(bpy.types.Operator):
         st.deviation_rms = float(np.sqrt(np.mean(fitted_dist**2))) if len(fitted_dist) else 0.0
         st.rms = st.deviation_rms
         st.max = float(fitted_dist.max(initial=0.0))
+        # relative to the data's bounding-box diagonal, as the fit's numbers are
+        diagonal = float(np.linalg.norm(np.ptp(data.points[counted], axis=0))) if counted.any() else 0.0
+        st.rms_rel, st.max_rel = (st.rms / diagonal, st.max / diagonal) if diagonal > 0 else (0.0, 0.0)
         no_data = int(len(has_data) - has_data.sum())
         surface[NO_DATA_KEY] = no_data  # the panel's legend shows grey when there are any
         _show_attribute_colors(context)
@@ -726,7 +776,9 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
         except (*_user_errors(), OSError) as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
-        self.report({"INFO"}, f"TCB: saved {self.filepath}")
+        problem = net_vertex_problem(surface)
+        self.report({"WARNING"} if problem else {"INFO"},
+                    f"TCB: saved {self.filepath}" + (f"; {problem}" if problem else ""))
         return {"FINISHED"}
 
 

@@ -155,6 +155,7 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     rms_rel: FloatProperty(name="RMS (relative)", precision=6)
     max_rel: FloatProperty(name="Max (relative)", precision=6)
     seconds: FloatProperty(name="Seconds", precision=2)
+    stop_reason: StringProperty(name="Stopped")  # why the adaptive loop stopped
     # settings of the last fit / refine
     tolerance: FloatProperty(precision=6)
     relative: BoolProperty()

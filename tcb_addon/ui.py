@@ -7,7 +7,7 @@ selected (nothing, a camera, a result object, ...).
 import bpy
 
 from . import bridge
-from .operators import NO_DATA_KEY, SPLINE_KEY, result_objects
+from .operators import NO_DATA_KEY, SPLINE_KEY, net_vertex_problem, result_objects
 from .properties import FIT_KEYS, draw_fit_settings
 
 
@@ -65,7 +65,10 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
             ("Iterations", f"{st.iterations}"),
             ("RMS", f"{st.rms:.4g}"),
             ("Max", f"{st.max:.4g}"),
+            ("RMS (of diagonal)", f"{100 * st.rms_rel:.3g} %"),
             ("Max (of diagonal)", f"{100 * st.max_rel:.3g} %"),
+            ("Tolerance (" + ("max" if st.criterion == "max" else "RMS") + ")",
+             f"{100 * st.tolerance:.3g} %" if st.relative else f"{st.tolerance:.4g}"),
             ("Smoothness" + (" (auto)" if st.auto_smoothness else
                              " (sparse: chosen)" if st.smoothness_cross_validated else ""),
              f"{st.smoothness:.3g}"),
@@ -73,8 +76,13 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
         ):
             grid.label(text=label)
             grid.label(text=value)
+        if st.stop_reason:
+            col.label(text=f"Stopped: {st.stop_reason}")
         if SPLINE_KEY not in surface:
             col.label(text="No spline stored: refit from the source", icon="ERROR")
+        problem = net_vertex_problem(surface)
+        if problem:
+            col.label(text=problem[0].upper() + problem[1:], icon="ERROR")
 
         layout.separator()
         row = layout.row(align=True)

@@ -163,8 +163,9 @@ def test_an_outdated_node_group_is_brought_up_to_date(clean_scene, addon):
 
 
 def test_an_old_file_is_brought_up_to_date_when_it_is_opened(clean_scene, addon, tmp_path):
-    """A file saved with the group from before the fallback: opening it rebuilds the group
-    (load_post), so deleting the net before any operator runs keeps the surface."""
+    """A file saved with the group from before the fallback, under the name an Append gives
+    it: opening it rebuilds the group (load_post), so deleting the net before any operator
+    runs keeps the surface."""
     bpy = clean_scene
     _, _, _, surface = fitted(bpy)
     name, expected = surface.name, spline_of(surface).tessellate(20)[0]
@@ -172,9 +173,11 @@ def test_an_old_file_is_brought_up_to_date_when_it_is_opened(clean_scene, addon,
     del ng["tcb_version"]
     ng.nodes.clear()  # whatever the old group held: now it makes no geometry
     path = tmp_path / "old.blend"
+    ng.name = "TCB Live Surface.001"  # as after an Append into a file that has the group
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
     surface = bpy.data.objects[name]
+    assert surface.modifiers[MODIFIER].node_group.name == "TCB Live Surface.001"
     assert surface.modifiers[MODIFIER].node_group["tcb_version"] >= 2
     bpy.data.objects.remove(surface.tcb.net)
     bpy.context.view_layer.update()

@@ -197,6 +197,22 @@ def test_a_missed_tolerance_is_a_warning_that_says_what_to_change(clean_scene, c
     assert "Info: TCB:" in out.out + out.err and "not reached" not in out.out + out.err
 
 
+def test_a_tolerance_below_the_noise_says_the_data_look_noisy(clean_scene, capfd):
+    """A noisy scan fitted to a tolerance below its noise: the warning says that the error
+    stopped falling and the data look noisy, not "raise Max Control Points"."""
+    bpy = clean_scene
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-1, 1, (6000, 2))
+    z = 0.3 * np.exp(-4 * (xy**2).sum(axis=1)) + 0.01 * rng.standard_normal(len(xy))
+    cloud = add_mesh(bpy, "Noisy", np.c_[xy, z])
+    capfd.readouterr()
+    assert fit(bpy, cloud, tolerance=1e-4, max_control_points=2000) == {"FINISHED"}
+    text = capfd.readouterr().out
+    assert "Warning: TCB:" in text and "the error stopped falling" in text, text
+    assert "look noisy at about RMS" in text and "Max Control Points" not in text
+    assert bpy.context.view_layer.objects.active.tcb.control_points < 1000
+
+
 def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
     bpy = clean_scene
     verts, faces = grid(16)
@@ -231,6 +247,70 @@ def test_refine_to_a_budget_below_the_surface_is_an_error_that_changes_nothing(c
                                                "maximum of 20"):
             bpy.ops.tcb.refine(max_control_points=20)
     assert surface["tcb_spline"] == before
+
+
+def test_refine_after_a_loose_fit_grows_the_net_and_says_when_nothing_was_refined(
+        clean_scene, capfd):
+    """A loose tolerance gives a small net that beats it by far: Refine's default (half the
+    current error, not half the tolerance) grows the net at the first click; a tolerance the
+    surface already meets is a WARNING that nothing was refined. The panel shows the relative
+    RMS, the tolerance and why the loop stopped; progress lines name the RMS."""
+    bpy = clean_scene
+    f = lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y)  # noqa: E731
+    verts, faces = grid(40, f=f)
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    assert fit(bpy, scan, tolerance=1e-2, max_control_points=2000) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    st = surface.tcb
+    n0, rms0 = st.control_points, st.rms_rel
+    assert rms0 < 0.5 * 1e-2  # the sized net beats the loose tolerance by far
+    with bpy.context.temp_override(**select(bpy, surface)):
+        capfd.readouterr()
+        assert bpy.ops.tcb.refine() == {"FINISHED"}
+        out = capfd.readouterr().out
+    assert st.tolerance == pytest.approx(0.5 * rms0, rel=1e-5)
+    assert st.control_points > n0 and st.rms_rel <= st.tolerance
+    assert "TCB: Refining, iteration" in out and "RMS" in out
+    assert st.stop_reason == "tolerance reached"
+    log = draw_panels(bpy, [surface])
+    labels = [e[1] for e in log if e[0] == "label"]
+    assert "RMS (of diagonal)" in labels and "Tolerance (RMS)" in labels
+    assert "Stopped: tolerance reached" in labels
+    n1 = st.control_points
+    with bpy.context.temp_override(**select(bpy, surface)):
+        capfd.readouterr()
+        assert bpy.ops.tcb.refine(tolerance=0.1) == {"FINISHED"}
+        out = capfd.readouterr().out
+    assert st.control_points == n1
+    assert "Warning: TCB:" in out and "nothing was refined" in out and "set a smaller" in out
+
+
+def test_a_net_with_a_deleted_vertex_is_named_when_its_edits_are_ignored(clean_scene, capfd):
+    """Deleting a net vertex breaks the one-to-one match with the control points: the live
+    surface falls back to the spline, and Re-tessellate, Export Spline and the panel say that
+    the net's edits are ignored (they were dropped silently)."""
+    bpy = clean_scene
+    verts, faces = grid(16)
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    assert fit(bpy, scan, tolerance=5e-3) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    n = surface.tcb.control_points
+    import bmesh
+
+    bm = bmesh.new()
+    bm.from_mesh(net.data)
+    bm.verts.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[bm.verts[0]], context="VERTS")
+    bm.to_mesh(net.data)
+    bm.free()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        capfd.readouterr()
+        assert bpy.ops.tcb.retessellate() == {"FINISHED"}
+        out = capfd.readouterr().out
+    assert f"has {n - 1} vertices for {n} control points" in out and "edits are ignored" in out
+    log = draw_panels(bpy, [surface])
+    assert any(e[0] == "label" and "edits are ignored" in e[1] for e in log)
 
 
 def test_refine_of_a_changed_source_says_to_fit_again(clean_scene):
@@ -621,6 +701,9 @@ def test_deviation_map_of_a_cloud_shows_the_data_to_surface_distances(clean_scen
     assert st.deviation_max == pytest.approx(data_dist.max(), rel=1e-5)
     assert st.max == pytest.approx(data_dist.max(), rel=1e-5)
     assert st.deviation_rms == pytest.approx(np.sqrt(np.mean(data_dist**2)), rel=1e-5)
+    diagonal = np.linalg.norm(np.ptp(points, axis=0))  # the panel's relative numbers follow
+    assert st.max_rel == pytest.approx(st.max / diagonal, rel=1e-5)
+    assert st.rms_rel == pytest.approx(st.rms / diagonal, rel=1e-5)
     pdev, prgba = _deviation_of(st.deviation_points)
     assert np.allclose(pdev, data_dist, atol=1e-6)
     top = np.argmax(pdev)

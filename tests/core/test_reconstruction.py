@@ -153,6 +153,24 @@ def test_sized_restarts_place_knots_on_all_points_and_the_max_criterion_keeps_th
         assert r["stop_reason"] == "tolerance reached" and r["max_rel"] <= tol
 
 
+def test_a_tolerance_below_the_noise_stops_when_the_error_stops_falling():
+    """Gaussian noise of 0.01 on a smooth height field and a tolerance far below it: the RMS
+    stays at the noise level however many knots are inserted, so the loop stops with "the
+    error stopped falling" instead of spending the budget on fitting the noise (it used 1988
+    control points, 14 fits, and moved farther from the true shape). Clean data with the same
+    tolerance refine on."""
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-1, 1, (10000, 2))
+    shape = lambda x, y: 0.3 * np.exp(-4 * (x * x + y * y)) + 0.1 * np.sin(3 * x) * np.cos(2 * y)  # noqa: E731
+    noisy = np.c_[xy, shape(*xy.T) + 0.01 * rng.standard_normal(len(xy))]
+    r = fit_surface(noisy, tolerance=1e-4).report
+    assert r["stop_reason"] == "the error stopped falling"
+    assert r["control_points"] < 1000 and len(r["history"]) <= 6
+    assert 0.008 < r["rms"] < 0.0105  # the noise level
+    clean = fit_surface(np.c_[xy, shape(*xy.T)], tolerance=1e-5, max_control_points=600).report
+    assert clean["stop_reason"] == "control-point budget reached"
+
+
 @pytest.mark.parametrize("n, error, previous, expected", [
     (40, 8e-3, None, 166),  # far: the automatic start itself (1.1 * 40 * 8^(2/3) = 176)
     (40, 2e-3, None, 70),  # 1.1 * 40 * 2^(2/3) = 69.8, with the smooth rate 3/2
