@@ -32,13 +32,15 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("input", help="points or mesh: .ply .obj .off .xyz .txt .csv .npy .npz")
     f.add_argument("-o", "--output", required=True, help="tessellated surface: .obj or .ply")
     f.add_argument("--tolerance", type=float, default=1e-3,
-                   help="stop when the RMS error is at most this (default 1e-3)")
+                   help="stop when the error (RMS, or max with --criterion max) is at most "
+                   "this (default 1e-3); the control net is sized to it")
     rel = f.add_mutually_exclusive_group()
     rel.add_argument("--relative", dest="relative", action="store_true", default=True,
                      help="tolerance relative to the bounding-box diagonal (default)")
     rel.add_argument("--absolute", dest="relative", action="store_false",
                      help="tolerance in the data's units")
-    f.add_argument("--criterion", choices=("rms", "max"), default="rms")
+    f.add_argument("--criterion", choices=("rms", "max"), default="rms",
+                   help="which error the tolerance bounds (default rms)")
     f.add_argument("--max-control-points", type=int, default=2000)
     f.add_argument("--max-iterations", type=int, default=20)
     f.add_argument("--degree", type=int, choices=(2, 3), default=2)

@@ -395,7 +395,9 @@ class TCBSurface:
         projection on the best-fit plane), take Gauss-Newton steps on ``|S(x) - p|^2`` (2x2
         normal equations per point, vectorized; a step that does not improve is retried
         shorter), kept in the data's domain (the trimmed surface: a point beyond its edge gets
-        a closest point on the edge); the better result is returned.
+        a closest point on the edge; a cloud's domain is its convex hull, so in a concave
+        cloud's notch, which :meth:`tessellate` leaves out, there is surface too); the better
+        result is returned.
         """
         return self._closest(points, iterations)[0]
 

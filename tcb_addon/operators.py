@@ -228,7 +228,9 @@ def report_result(op, surf, notes=(), warnings=()) -> None:
                   "turn on Auto Smoothness")
     else:
         advice = {"control-point budget reached": "raise Max Control Points",
-                  "iteration limit": "raise Max Iterations"}.get(reason, "")
+                  "iteration limit": "raise Max Iterations",
+                  "no triangle has enough data to refine": "add points where the error is "
+                  "largest (too few there for more knots)"}.get(reason, "")
         op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason})"
                   + (f": {advice} or loosen the tolerance" if advice else ""))
 
@@ -501,6 +503,12 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         return context.mode == "OBJECT" and active_surface(context) is not None
+
+    def invoke(self, context, event):
+        surface = active_surface(context)
+        if surface is not None and not self.properties.is_property_set("relative"):
+            self.relative = surface.tcb.relative  # the box shows what an untouched one means
+        return super().invoke(context, event)
 
     def prepare(self, context):
         surface = active_surface(context)
