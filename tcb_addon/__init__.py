@@ -44,6 +44,8 @@ def unregister():
 
     if live.on_load in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.remove(live.on_load)
+    if bpy.app.timers.is_registered(_upgrade_open_file):
+        bpy.app.timers.unregister(_upgrade_open_file)
     operators.clear_cache()
     properties.unregister_props()
     for cls in reversed(_classes()):

@@ -41,17 +41,26 @@ def _is_ours(ng) -> bool:
     into a file that has one) with its inputs."""
     base, _, suffix = ng.name.rpartition(".")
     name = base if suffix.isdigit() and len(suffix) == 3 else ng.name
-    return (name == GROUP_NAME and ng.bl_idname == "GeometryNodeTree"
-            and set(INPUTS) <= set(_input_ids(ng)))
+    if name != GROUP_NAME or ng.bl_idname != "GeometryNodeTree":
+        return False
+    items = [(i.in_out, i.name, getattr(i, "socket_type", "")) for i in ng.interface.items_tree
+             if getattr(i, "in_out", None) in {"INPUT", "OUTPUT"}]
+    return sorted(items) == sorted([
+        ("INPUT", "Geometry", "NodeSocketGeometry"), ("INPUT", "Net", "NodeSocketObject"),
+        ("INPUT", "Weights", "NodeSocketObject"), ("INPUT", "Terms", "NodeSocketInt"),
+        ("OUTPUT", "Geometry", "NodeSocketGeometry")])
 
 
 def upgrade_groups() -> None:
     """Rebuild in place the add-on's node groups older than :data:`GROUP_VERSION` (the one of
     the file and any appended with a surface), so that old surfaces get the fallback before
     any operator touches them."""
-    for ng in bpy.data.node_groups:
-        if ng.library is None and ng.get("tcb_version", 1) < GROUP_VERSION and _is_ours(ng):
-            _build_nodes(ng)
+    for ng in list(bpy.data.node_groups):
+        try:
+            if ng.library is None and ng.get("tcb_version", 1) < GROUP_VERSION and _is_ours(ng):
+                _build_nodes(ng)
+        except Exception as ex:  # noqa: BLE001 (a handler must not stop the file loading)
+            print(f"TCB: could not update the node group '{ng.name}': {ex}")
 
 
 @bpy.app.handlers.persistent

@@ -129,6 +129,12 @@ def with_net_edits(surface_obj, surf):
     return surf
 
 
+def is_max(tcb) -> bool:
+    """The tolerance of a result bounds the max error (its stored criterion is the settings'
+    enum, "MAX"), not the RMS."""
+    return str(tcb.criterion).lower() == "max"
+
+
 def net_vertex_problem(surface_obj) -> str | None:
     """Why the edits of the surface's control net are ignored, or None: a vertex was added to
     or deleted from the net, so its vertices no longer match the control points one to one
@@ -221,11 +227,15 @@ def report_result(op, surf, notes=(), warnings=()) -> None:
                   "value set by hand follows the points more closely)")
     elif reason == "cancelled":
         op.report({"WARNING"}, f"{text}; stopped early (cancelled): the best surface so far")
-    elif reason == "the error stopped falling":
+    elif reason == _core().refine.STALLED:
+        opts = surf.options  # the settings of this fit
+        what = "max" if str(opts.criterion).lower() == "max" else "RMS"
+        level = (f"{100 * rep.get(what.lower() + '_rel', 0):.3g}% of the diagonal"
+                 if opts.relative else f"{rep.get(what.lower(), 0):.4g}")
         op.report({"WARNING"}, f"{text}; the tolerance was not reached: {reason} with more "
-                  f"control points, so the data look noisy at about RMS {rep.get('rms', 0):.4g} "
-                  "(more control points would fit the noise): set the tolerance above that, or "
-                  "turn on Auto Smoothness")
+                  f"control points (noise in the data, or detail the knots cannot resolve: more "
+                  f"control points would fit the noise): set the tolerance above the {what} "
+                  f"reached ({level}), or turn on Auto Smoothness")
     else:
         advice = {"control-point budget reached": "raise Max Control Points",
                   "iteration limit": "raise Max Iterations",
@@ -519,12 +529,14 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         stored = stored_surface(surface, use_net=False)
         rel = self.relative if self.properties.is_property_set("relative") else st.relative
         rep = dict(stored.report or {})
-        self._iteration_offset = int(rep.get("iterations", 0))
+        self._iteration_offset = len(rep.get("history", ()))  # the engine numbers on from it
         # the default: half of the current error (a fit often beats a loose tolerance by far:
-        # half the tolerance would then change nothing), or of the tolerance if smaller
-        key = ("rms" if st.criterion != "max" else "max") + ("_rel" if rel else "")
+        # half the tolerance would then change nothing), or of the tolerance if smaller (only
+        # when it is in the same units)
+        key = ("max" if is_max(st) else "rms") + ("_rel" if rel else "")
         current = float(rep.get(key, 0.0))
-        tol = self.tolerance or 0.5 * (min(st.tolerance, current) if current > 0 else st.tolerance)
+        previous = st.tolerance if rel == st.relative else np.inf
+        tol = self.tolerance or 0.5 * (min(previous, current) if current > 0 else st.tolerance)
         budget = self.max_control_points or max(st.max_control_points, 2 * st.control_points)
         self._settings = dict(tolerance=tol, relative=rel, max_control_points=budget,
                               max_iterations=self.max_iterations)  # fmt: skip
@@ -561,7 +573,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         rep = dict(surf.report or {})
         if (len(surf.control_points) == self._before[1]
                 and str(rep.get("stop_reason", "")).startswith("tolerance reached")):
-            what = "RMS" if st.criterion != "max" else "max"
+            what = "max" if is_max(st) else "RMS"
             unit = " of the diagonal" if self._settings["relative"] else ""
             warnings.append(f"nothing was refined: the surface already meets the tolerance "
                             f"{self._settings['tolerance']:.4g}{unit} ({what} "

@@ -7,7 +7,7 @@ selected (nothing, a camera, a result object, ...).
 import bpy
 
 from . import bridge
-from .operators import NO_DATA_KEY, SPLINE_KEY, net_vertex_problem, result_objects
+from .operators import NO_DATA_KEY, SPLINE_KEY, is_max, net_vertex_problem, result_objects
 from .properties import FIT_KEYS, draw_fit_settings
 
 
@@ -67,7 +67,7 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
             ("Max", f"{st.max:.4g}"),
             ("RMS (of diagonal)", f"{100 * st.rms_rel:.3g} %"),
             ("Max (of diagonal)", f"{100 * st.max_rel:.3g} %"),
-            ("Tolerance (" + ("max" if st.criterion == "max" else "RMS") + ")",
+            ("Tolerance (" + ("max" if is_max(st) else "RMS") + ")",
              f"{100 * st.tolerance:.3g} %" if st.relative else f"{st.tolerance:.4g}"),
             ("Smoothness" + (" (auto)" if st.auto_smoothness else
                              " (sparse: chosen)" if st.smoothness_cross_validated else ""),

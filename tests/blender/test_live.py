@@ -184,6 +184,21 @@ def test_an_old_file_is_brought_up_to_date_when_it_is_opened(clean_scene, addon,
     assert np.allclose(evaluated(bpy, surface), expected, atol=1e-5)
 
 
+def test_a_users_group_with_a_similar_name_is_left_alone(clean_scene, addon):
+    """A node group of the user's named like an appended copy of ours, with the same object
+    inputs but not our interface: the file-load upgrade leaves it as it is (it cleared it and
+    then failed)."""
+    bpy = clean_scene
+    live = sys.modules[ADDON + ".tcb_addon.live"]
+    ng = bpy.data.node_groups.new("TCB Live Surface.001", "GeometryNodeTree")
+    for name, kind in (("Net", "NodeSocketObject"), ("Weights", "NodeSocketObject"),
+                       ("Terms", "NodeSocketInt")):
+        ng.interface.new_socket(name, in_out="INPUT", socket_type=kind)
+    ng.nodes.new("NodeGroupInput")
+    live.upgrade_groups()
+    assert len(ng.nodes) == 1 and "tcb_version" not in ng
+
+
 @pytest.mark.parametrize("with_net", [True, False], ids=["surface_and_net", "surface_only"])
 def test_refining_a_shift_d_copy_leaves_the_original_as_it_was(clean_scene, addon, with_net):
     bpy = clean_scene

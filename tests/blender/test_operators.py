@@ -199,7 +199,8 @@ def test_a_missed_tolerance_is_a_warning_that_says_what_to_change(clean_scene, c
 
 def test_a_tolerance_below_the_noise_says_the_data_look_noisy(clean_scene, capfd):
     """A noisy scan fitted to a tolerance below its noise: the warning says that the error
-    stopped falling and the data look noisy, not "raise Max Control Points"."""
+    stopped falling, names noise and the RMS reached in the tolerance's units, not "raise Max
+    Control Points"."""
     bpy = clean_scene
     rng = np.random.default_rng(0)
     xy = rng.uniform(-1, 1, (6000, 2))
@@ -209,7 +210,8 @@ def test_a_tolerance_below_the_noise_says_the_data_look_noisy(clean_scene, capfd
     assert fit(bpy, cloud, tolerance=1e-4, max_control_points=2000) == {"FINISHED"}
     text = capfd.readouterr().out
     assert "Warning: TCB:" in text and "the error stopped falling" in text, text
-    assert "look noisy at about RMS" in text and "Max Control Points" not in text
+    assert "noise in the data" in text and "RMS reached (" in text and "% of the diagonal" in text
+    assert "Max Control Points" not in text
     assert bpy.context.view_layer.objects.active.tcb.control_points < 1000
 
 
@@ -283,6 +285,25 @@ def test_refine_after_a_loose_fit_grows_the_net_and_says_when_nothing_was_refine
         out = capfd.readouterr().out
     assert st.control_points == n1
     assert "Warning: TCB:" in out and "nothing was refined" in out and "set a smaller" in out
+
+
+def test_refine_of_a_max_criterion_fit_halves_the_max(clean_scene):
+    """The stored criterion is the settings' enum ("MAX"): Refine's default halves the max
+    error (it halved the RMS, 15x too tight) and the panel says the tolerance bounds the max."""
+    bpy = clean_scene
+    verts, faces = grid(30, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y))
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    assert fit(bpy, scan, tolerance=2e-2, criterion="MAX", max_control_points=2000) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    st = surface.tcb
+    max0 = st.max_rel
+    assert max0 <= 2e-2 and st.rms_rel < 0.5 * max0
+    labels = [e[1] for e in draw_panels(bpy, [surface]) if e[0] == "label"]
+    assert "Tolerance (max)" in labels
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.refine() == {"FINISHED"}
+    assert st.tolerance == pytest.approx(0.5 * max0, rel=1e-5)
+    assert st.max_rel <= st.tolerance * (1 + 1e-6)
 
 
 def test_a_net_with_a_deleted_vertex_is_named_when_its_edits_are_ignored(clean_scene, capfd):
