@@ -542,7 +542,8 @@ def adaptive_fit(
     :func:`predicted_knots` says are missing, up to doubling them. Reports say whether an
     iteration's knots were placed ``"afresh"``, ``"continued"`` or ``"inserted"``
     (``knots_placed``). The best iteration is the one that meets the tolerance, else the one of
-    lowest RMS within the budget.
+    lowest RMS within the budget. A run with a tolerance also stops when the error has stopped
+    falling (:func:`_stalled`: noise below the tolerance; reason :data:`STALLED`).
     Returns the best iteration, the per-iteration reports and why the loop stopped.
     """
     options.validate()
