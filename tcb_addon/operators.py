@@ -728,8 +728,10 @@ class TCB_OT_deviation_map(bpy.types.Operator):
         st.rms = st.deviation_rms
         st.max = float(fitted_dist.max(initial=0.0))
         # relative to the data's bounding-box diagonal, as the fit's numbers are
-        diagonal = float(np.linalg.norm(np.ptp(data.points[counted], axis=0))) if counted.any() else 0.0
-        st.rms_rel, st.max_rel = (st.rms / diagonal, st.max / diagonal) if diagonal > 0 else (0.0, 0.0)
+        fitted_points = data.points[counted]
+        diagonal = float(np.linalg.norm(np.ptp(fitted_points, axis=0))) if len(fitted_points) else 0.0
+        scale = 1.0 / diagonal if diagonal > 0 else 0.0
+        st.rms_rel, st.max_rel = st.rms * scale, st.max * scale
         no_data = int(len(has_data) - has_data.sum())
         surface[NO_DATA_KEY] = no_data  # the panel's legend shows grey when there are any
         _show_attribute_colors(context)
