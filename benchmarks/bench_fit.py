@@ -58,6 +58,7 @@ def one(name: str, n: int, kind: str) -> dict:
     # initial knot placement and knot insertion are not in the per-iteration report: time them
     extra = {"knots": 0.0, "insertion": 0.0}
     time_calls(refine, "initial_knots", "knots", extra)
+    time_calls(refine, "feature_measure", "knots", extra)  # computed once, before the knots
     time_calls(refine, "insertion_points", "insertion", extra)
     t0 = time.perf_counter()
     if kind == "single":

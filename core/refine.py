@@ -180,7 +180,7 @@ def feature_measure(uv: np.ndarray, points: np.ndarray, k: int = 12, max_points:
 
 
 def initial_knots(uv: np.ndarray, points: np.ndarray, count: int, seed: int = 0,
-                  iterations: int = 8) -> np.ndarray:
+                  iterations: int = 8, measure: tuple | None = None) -> np.ndarray:
     """``count`` interior knots in general position, well spread, denser where the data bends.
 
     A weighted centroidal Voronoi tessellation of the data parameters (Lloyd's iterations,
@@ -190,10 +190,11 @@ def initial_knots(uv: np.ndarray, points: np.ndarray, count: int, seed: int = 0,
     function this placement measured 2.4x lower RMS than sampling the data at random. The
     centres are then jittered by 0.1 of their spacing and kept clear of the lines through
     nearby knots, so lattice data and the near-hexagonal CVT give neither co-circular nor
-    collinear knots (method.md sections 2.4 and 6).
+    collinear knots (method.md sections 2.4 and 6). ``measure``: :func:`feature_measure` of
+    the same data and seed when already computed (the sizing restarts of one run).
     """
     rng = np.random.default_rng(seed)
-    sample, f = feature_measure(uv, points, seed=seed)
+    sample, f = measure if measure is not None else feature_measure(uv, points, seed=seed)
     w = np.sqrt(1.0 + 4.0 * f / max(f.mean(), 1e-300))
     X = uv[sample]
     count = int(min(count, len(X)))
@@ -562,9 +563,13 @@ def adaptive_fit(
         return border_rings(lo - pad, hi + pad, h, rings=default_ring_count(options.degree),
                             seed=rng_seed)
 
+    measure: list = []  # feature_measure of all points, computed by the first start
+
     def place(count: int) -> tuple[np.ndarray, np.ndarray]:
         """Interior knots of a fresh start, placed on all points, and its border rings."""
-        placed = initial_knots(data_uv, data_points, count, seed=rng_seed)
+        if not measure:
+            measure.append(feature_measure(data_uv, data_points, seed=rng_seed))
+        placed = initial_knots(data_uv, data_points, count, seed=rng_seed, measure=measure[0])
         return placed, (rings_for(len(placed)) if own_rings else ring_knots)
 
     # sizing (next_start; not in method.md section 6): with a tolerance and the automatic
