@@ -333,33 +333,67 @@ class Parameterization:
 def _points_in_polygon(x: np.ndarray, poly: np.ndarray, tol: float) -> np.ndarray:
     """Even-odd point-in-polygon test with an on-edge tolerance; see Parameterization.contains.
 
-    Vectorized over points and edges, in chunks of points so memory stays bounded.
+    Vectorized over (point, edge) pairs; only the pairs that can matter are formed: with the
+    points sorted by ``v``, an edge is straddled exactly by the points with ``v`` in
+    ``[min(a_v, b_v), max(a_v, b_v))``, one contiguous run of the sorted points (a
+    ``searchsorted`` each), and only points of a run widened by the tolerance can lie within
+    it of the edge. So the work is the number of crossings (a few per point on a simple
+    polygon), not points times edges, and the result is that of the crossing-number formula
+    evaluated on every pair.
     """
-    a = np.asarray(poly, dtype=np.float64)
+    x = np.asarray(x, dtype=np.float64)
+    a = np.asarray(poly, dtype=np.float64).reshape(-1, 2)
+    out = np.zeros(len(x), dtype=bool)
+    if not len(a) or not len(x):
+        return out
     b = np.roll(a, -1, axis=0)
     e = b - a
     ee = np.einsum("ij,ij->i", e, e)
     ee_safe = np.where(ee > 0.0, ee, 1.0)
-    size = float(np.ptp(a, axis=0).max()) if len(a) else 0.0
+    size = float(np.ptp(a, axis=0).max())
     atol = tol * max(size, np.finfo(float).tiny)
-    out = np.empty(len(x), dtype=bool)
-    chunk = max(1, 4_000_000 // max(len(a), 1))
-    for s in range(0, len(x), chunk):
-        xs = x[s : s + chunk, None, :]  # (m, 1, 2)
-        au, av = a[:, 0], a[:, 1]
-        straddle = (av > xs[..., 1]) != (b[:, 1] > xs[..., 1])
-        dv = np.where(straddle, b[:, 1] - av, 1.0)
-        u_cross = au + (xs[..., 1] - av) * (b[:, 0] - au) / dv
-        inside = np.count_nonzero(straddle & (xs[..., 0] < u_cross), axis=1) % 2 == 1
-        # points outside by parity may still lie on an edge (within atol): segment distance
-        out_idx = np.flatnonzero(~inside)
-        if len(out_idx):
-            xo = xs[out_idx]
-            t = np.clip(np.einsum("mbk,bk->mb", xo - a, e) / ee_safe, 0.0, 1.0)
-            d2 = np.sum((xo - (a + t[..., None] * e)) ** 2, axis=-1).min(axis=1)
-            inside[out_idx] = d2 <= atol * atol
-        out[s : s + chunk] = inside
+    order = np.argsort(x[:, 1], kind="stable")
+    ys = x[order, 1]
+    lo, hi = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
+    # crossings: a horizontal ray from x crosses edge a -> b when (a_v > x_v) != (b_v > x_v),
+    # i.e. lo <= x_v < hi, and x_u < a_u + (x_v - a_v)(b_u - a_u)/(b_v - a_v)
+    crossings = np.zeros(len(x), dtype=np.int64)
+    for edge, pt in _runs(order, np.searchsorted(ys, lo), np.searchsorted(ys, hi)):
+        xe = x[pt]
+        u_cross = a[edge, 0] + (xe[:, 1] - a[edge, 1]) * e[edge, 0] / e[edge, 1]
+        crossings += np.bincount(pt[xe[:, 0] < u_cross], minlength=len(x))
+    out = crossings % 2 == 1
+    # points outside by parity may still lie on an edge (within atol): segment distance, for
+    # the points whose v is within atol of the edge's v-range (the others are farther)
+    outside = np.flatnonzero(~out)
+    if len(outside):
+        order = outside[np.argsort(x[outside, 1], kind="stable")]
+        ys = x[order, 1]
+        near = np.zeros(len(x), dtype=bool)
+        for edge, pt in _runs(order, np.searchsorted(ys, lo - atol),
+                              np.searchsorted(ys, hi + atol, side="right")):
+            xe, ae, ed = x[pt], a[edge], e[edge]
+            t = np.clip(np.einsum("mk,mk->m", xe - ae, ed) / ee_safe[edge], 0.0, 1.0)
+            d2 = np.sum((xe - (ae + t[:, None] * ed)) ** 2, axis=1)
+            near[pt[d2 <= atol * atol]] = True
+        out |= near
     return out
+
+
+def _runs(order: np.ndarray, start: np.ndarray, stop: np.ndarray, pairs: int = 4_000_000):
+    """Yield ``(edge, point)`` index pairs, edge ``i`` paired with ``order[start[i]:stop[i]]``,
+    in batches of about ``pairs`` pairs (memory stays bounded)."""
+    count = np.maximum(stop - start, 0)
+    ends = np.cumsum(count)
+    first = 0
+    while first < len(count):
+        base = ends[first - 1] if first else 0
+        last = max(int(np.searchsorted(ends, base + pairs, side="right")), first + 1)
+        c = count[first:last]
+        edge = np.repeat(np.arange(first, last), c)
+        offset = np.arange(len(edge)) - np.repeat(np.cumsum(c) - c, c)
+        yield edge, order[np.repeat(start[first:last], c) + offset]
+        first = last
 
 
 # --------------------------------------------------------------------------------------------

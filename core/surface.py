@@ -268,17 +268,25 @@ class TCBSurface:
         # the polygon; only the others need the distance to the edges (points near the
         # boundary: O(resolution) of them, not the whole grid times every edge)
         idx = np.flatnonzero(inside)
-        near = cKDTree(boundary).query(grid[idx], distance_upper_bound=0.8 * d)[0] <= 0.8 * d
-        idx = idx[near]
-        inside[idx] = _distance_to_polygon(grid[idx], poly) > 0.3 * d
+        gap = cKDTree(boundary).query(grid[idx], distance_upper_bound=2.5 * d)[0]
+        near = idx[gap <= 0.8 * d]
+        inside[near] = _distance_to_polygon(grid[near], poly) > 0.3 * d
+        # deep: more than 2 d from the polygon (nearest boundary sample beyond 2.5 d)
+        deep = np.zeros(len(grid), dtype=bool)
+        deep[idx[gap > 2.5 * d]] = True
         uv = np.vstack([boundary, grid[inside]])
+        number = np.full(len(grid), -1)
+        number[inside] = len(boundary) + np.arange(np.count_nonzero(inside))
+        lattice = _lattice(deep.reshape(len(gv), len(gu)), number.reshape(len(gv), len(gu)),
+                           np.array([gu[0], gv[0]]) if len(gu) and len(gv) else None, d)
+        lattice = (lattice[0], np.concatenate([np.arange(len(boundary)), lattice[1]]), lattice[2])
         data, ok = self._data_parameters()
         full = cKDTree(data)
         trim = None
         if self._param.kind == "plane":
             spacing = float(np.median(full.query(data[:: max(1, len(data) // 5000)], k=2)[0][:, 1]))
             trim = max(4 * spacing, 1.5 * d)
-        tri = self._domain_triangles(uv, d, full, trim)
+        tri = self._domain_triangles(uv, d, full, trim, lattice)
         stretch = self._local_stretch(data, full, np.asarray(self._param.stretch)[ok]
                                       if self._param.stretch is not None else None)
         # each round triangulates again: above TESSELLATION_REFINE_POINTS (resolution ~250 on a
@@ -333,20 +341,31 @@ class TCBSurface:
         typical = float(np.median(sample.query(data, k=k + 1)[0][:, k]))
         return lambda x: typical / np.maximum(sample.query(x, k=k)[0][:, k - 1], 1e-300)
 
-    def _domain_triangles(self, uv, d, tree, trim) -> np.ndarray:
+    def _domain_triangles(self, uv, d, tree, trim, lattice=None) -> np.ndarray:
         """CCW Delaunay triangles of ``uv`` inside the domain (and, for clouds, within ``trim``
-        of the data parameters in ``tree``), without zero-area ones."""
-        tri = Delaunay(uv).simplices
+        of the data parameters in ``tree``), without zero-area ones.
+
+        ``lattice``: ``(cells, rest, in_cells)`` from :func:`_lattice`: the triangles of the
+        grid cells deep inside the domain are given, only the points ``rest`` (the boundary
+        strip) are Delaunay-triangulated, and the strip triangles that ``in_cells`` puts in
+        those cells are dropped (the cells' outline edges are Delaunay edges of the strip, so
+        no strip triangle crosses it)."""
+        cells, rest, in_cells = lattice if lattice is not None else (
+            np.zeros((0, 3), dtype=np.intp), np.arange(len(uv)), None)
+        tri = rest[Delaunay(uv[rest]).simplices]
         cen = uv[tri].mean(axis=1)
         keep = self._param.contains(cen)
-        if trim is not None:
-            keep &= tree.query(cen)[0] <= trim
+        if in_cells is not None:
+            keep &= ~in_cells(cen)
         a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
         det = orient2d(a, b, c)
         # Delaunay joins collinear points of a straight boundary stretch into zero-area
         # triangles: they cover nothing and have no normal, drop them
         keep &= np.abs(det) > 1e-9 * d * d
-        return np.where((det < 0)[:, None], tri[:, [0, 2, 1]], tri)[keep]
+        tri = np.vstack([cells, np.where((det < 0)[:, None], tri[:, [0, 2, 1]], tri)[keep]])
+        if trim is not None:
+            tri = tri[tree.query(uv[tri].mean(axis=1))[0] <= trim]
+        return tri
 
     def tessellate(self, resolution: int = 64) -> tuple[np.ndarray, np.ndarray]:
         """Vertices (V, 3) and triangles (F, 3) of the surface over the data's domain."""
@@ -799,6 +818,42 @@ def data_digest(points: np.ndarray) -> str:
     for s in range(0, len(p), 65536):  # in chunks: no copy of a large input
         h.update(np.ascontiguousarray(p[s : s + 65536] + 0.0).data)  # -0.0 and 0.0 alike
     return h.hexdigest()
+
+
+def _lattice(deep: np.ndarray, number: np.ndarray, origin, d: float):
+    """The structured part of a tessellation grid: ``(cells, rest, in_cells)``.
+
+    ``deep`` (rows, cols) flags grid points more than ``2 d`` inside the domain, ``number`` is
+    their vertex index (-1 if not a vertex), ``origin`` the parameters of grid point (0, 0) and
+    ``d`` the grid step. A cell whose four corners are deep is split into two CCW triangles
+    (``cells``, (2 c, 3)) instead of being Delaunay-triangulated: qhull's Delaunay of a lattice
+    costs seconds at resolution 500 (co-circular points), this costs milliseconds. ``rest``
+    are the vertex numbers of the other grid points (a corner of some other cell), and
+    ``in_cells(x)`` flags parameters inside the split cells. The split cells' outline edges
+    are Gabriel edges of ``rest`` plus the boundary samples (their diametral disks hold no
+    other grid point, and boundary samples are over 1.5 d away), hence Delaunay edges."""
+    rows, cols = deep.shape
+    whole = np.zeros((max(rows - 1, 0), max(cols - 1, 0)), dtype=bool)
+    if rows > 1 and cols > 1:
+        whole = deep[:-1, :-1] & deep[:-1, 1:] & deep[1:, :-1] & deep[1:, 1:]
+    j, i = np.nonzero(whole)
+    a, b = number[j, i], number[j, i + 1]
+    c, e = number[j + 1, i + 1], number[j + 1, i]
+    cells = np.stack([np.c_[a, b, c], np.c_[a, c, e]], axis=1).reshape(-1, 3)
+    # grid points all of whose cells are split are interior to the split region
+    pad = np.zeros((rows + 1, cols + 1), dtype=bool)
+    pad[1:-1, 1:-1] = whole
+    interior = pad[:-1, :-1] & pad[:-1, 1:] & pad[1:, :-1] & pad[1:, 1:]
+    rest = number[(number >= 0) & ~interior]
+
+    def in_cells(x):
+        k = np.floor((x - origin) / d).astype(np.int64)
+        ok = (k[:, 0] >= 0) & (k[:, 0] < cols - 1) & (k[:, 1] >= 0) & (k[:, 1] < rows - 1)
+        out = np.zeros(len(x), dtype=bool)
+        out[ok] = whole[k[ok, 1], k[ok, 0]]
+        return out
+
+    return cells.astype(np.intp), rest.astype(np.intp), in_cells if len(cells) else None
 
 
 def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:

@@ -15,6 +15,7 @@ from scipy.spatial import ConvexHull, Delaunay
 from core.errors import InvalidInputError, ParameterizationError, TopologyError
 from core.meshio import read_geometry
 from core.parameterize import (
+    _points_in_polygon,
     Normalization,
     Parameterization,
     _distance_to_hull,
@@ -660,3 +661,40 @@ def test_parameterize_drops_outliers_only_when_asked() -> None:
     ref = parameterize(np.delete(pts, 3, axis=0))
     np.testing.assert_array_equal(par.uv[par.used], ref.uv)
     np.testing.assert_array_equal(par.domain_polygon, ref.domain_polygon)
+
+
+def _crossing_number_reference(x, poly, tol):
+    """Points x inside polygon poly by the formula of Parameterization.contains, evaluated on
+    every (point, edge) pair: an odd number of crossings, or within tol * size of an edge."""
+    a, b = poly, np.roll(poly, -1, axis=0)
+    xs = x[:, None, :]
+    straddle = (a[:, 1] > xs[..., 1]) != (b[:, 1] > xs[..., 1])
+    dv = np.where(straddle, b[:, 1] - a[:, 1], 1.0)
+    u_cross = a[:, 0] + (xs[..., 1] - a[:, 1]) * (b[:, 0] - a[:, 0]) / dv
+    inside = np.count_nonzero(straddle & (xs[..., 0] < u_cross), axis=1) % 2 == 1
+    e = b - a
+    t = np.clip(np.einsum("mbk,bk->mb", xs - a, e) / np.maximum((e * e).sum(1), 1e-300), 0, 1)
+    d2 = np.sum((xs - (a + t[..., None] * e)) ** 2, axis=-1).min(axis=1)
+    atol = tol * float(np.ptp(poly, axis=0).max())
+    return inside | (d2 <= atol * atol)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_point_in_polygon_matches_the_crossing_number_on_every_pair(seed):
+    """``_points_in_polygon`` only forms the (point, edge) pairs whose v-ranges meet; its answer
+    must be the formula's on all pairs, also for points on edges and vertices, on horizontal
+    edges and repeated vertices (polygons snapped to a coarse grid), for every tolerance."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 80))
+    ang = np.sort(rng.random(n)) * 2 * np.pi
+    r = 0.3 + rng.random(n)  # star-shaped, often non-convex
+    poly = np.c_[r * np.cos(ang), r * np.sin(ang)]
+    if seed % 2:
+        poly = np.round(poly * 4) / 4
+    x = rng.random((3000, 2)) * 3 - 1.5
+    x = np.vstack([x, poly, 0.5 * (poly + np.roll(poly, -1, axis=0)), poly + 1e-13,
+                   np.round(x[:500] * 4) / 4])
+    for tol in (0.0, 1e-12, 1e-3):
+        want = _crossing_number_reference(x, poly, tol)
+        np.testing.assert_array_equal(_points_in_polygon(x, poly, tol), want)
+    assert 0 < want.sum() < len(x)

@@ -20,6 +20,7 @@ from core.fit import fit_control_points
 from core.refine import automatic_start, next_start
 from core.meshio import read_geometry
 from core.simplex import orient2d
+from core.surface import TESSELLATION_REFINE_POINTS
 from knotsets import knot_set
 
 DATA = __import__("pathlib").Path(__file__).resolve().parents[2] / "data"
@@ -227,6 +228,35 @@ def test_disk_mesh_reconstructs_without_fold_overs(nefertiti):
     poly = surf.parameterization.domain_polygon
     poly_area = 0.5 * np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
     assert area == pytest.approx(poly_area, rel=1e-9)
+
+
+def _edge_uses(tri):
+    e = np.sort(tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    return np.unique(e, axis=0, return_counts=True)[1]
+
+
+def test_fine_tessellation_is_a_lattice_inside_and_covers_the_disk_exactly(nefertiti):
+    """Above TESSELLATION_REFINE_POINTS grid points the tessellation splits the grid cells deep
+    inside the domain into two triangles each and Delaunay-triangulates only the boundary
+    strip (``core.surface._lattice``). The pieces must join into one triangulated disk: the
+    polygon's area exactly, every triangle CCW, each edge in one or two triangles, Euler
+    characteristic 1 (a strip triangle across a lattice cell would overlap it)."""
+    _, _, surf = nefertiti
+    uv, tri = surf.tessellation_uv(400)
+    assert len(uv) > TESSELLATION_REFINE_POINTS  # no edge-split rounds: the lattice is all
+    a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
+    doubled = orient2d(a, b, c)
+    assert np.all(doubled > 0)
+    poly = surf.parameterization.domain_polygon
+    poly_area = 0.5 * np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
+    assert 0.5 * doubled.sum() == pytest.approx(poly_area, rel=1e-9)
+    uses = _edge_uses(tri)
+    assert uses.max() == 2
+    assert len(np.unique(tri)) == len(uv)
+    assert len(uv) - len(uses) + len(tri) == 1
+    # most triangles are half-cells of the lattice (legs of one grid step along u and v)
+    d = float(np.ptp(poly, axis=0).max()) / 400
+    assert np.mean(np.isclose(doubled, d * d, rtol=1e-6)) > 0.9
 
 
 def test_moving_one_control_point_changes_the_surface_only_on_its_support(nefertiti):

@@ -1,0 +1,89 @@
+"""Tessellation benchmark: seconds and peak memory of ``TCBSurface.tessellation_uv`` by resolution.
+
+    .venv/bin/python benchmarks/bench_tessellate.py [--resolutions 64 128 256 512 1024]
+
+For two disk meshes and the DEM cloud (fitted once, tolerance 3e-3, budget 500), per resolution:
+vertices and triangles, the seconds of ``tessellation_uv`` (cache cleared before each call,
+best of 2, not traced), the peak memory it allocates (tracemalloc, a separate call), and the
+seconds to evaluate the surface at those vertices (``surf(uv)``: what a Blender
+re-tessellation costs on top).
+
+Peer in the same run: the same method with every triangle from qhull's Delaunay (the lattice
+of grid cells deep inside the domain switched off, as before it existed). Both must give the
+same vertices (as a set) and the same covered area; the ratio column is peer / lattice seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import datasets as D  # noqa: E402
+import core.surface as S  # noqa: E402
+from core import fit_surface  # noqa: E402
+from core.simplex import orient2d  # noqa: E402
+
+
+def no_lattice(deep, number, origin, d):
+    """``core.surface._lattice`` with no cell split directly: every point goes to Delaunay."""
+    return np.zeros((0, 3), dtype=np.intp), number[number >= 0].astype(np.intp), None
+
+
+def timed(surf, resolution: int, repeats: int = 2):
+    """(uv, triangles, best seconds of ``repeats`` untraced calls, peak MiB of a traced one)."""
+    surf._tess_cache.clear()
+    tracemalloc.start()
+    surf.tessellation_uv(resolution)
+    peak = tracemalloc.get_traced_memory()[1] / 2**20
+    tracemalloc.stop()
+    best = np.inf
+    for _ in range(repeats):
+        surf._tess_cache.clear()
+        t0 = time.perf_counter()
+        uv, tri = surf.tessellation_uv(resolution)
+        best = min(best, time.perf_counter() - t0)
+    return uv, tri, best, peak
+
+
+def area(uv, tri) -> float:
+    return 0.5 * float(orient2d(uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]).sum())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--resolutions", type=int, nargs="+", default=[64, 128, 256, 512, 1024])
+    args = ap.parse_args()
+    sets = [D.mesh("nefertiti"), D.mesh("patch-01"), D.dem(3)]
+    print("| data | resolution | vertices | triangles | tessellation_uv s | peak MiB "
+          "| Delaunay-only s | peak MiB | ratio | evaluate s |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for d in sets:
+        surf = fit_surface(d["points"], d["faces"], tolerance=3e-3, max_control_points=500)
+        for r in args.resolutions:
+            uv, tri, t_new, m_new = timed(surf, r)
+            with mock.patch.object(S, "_lattice", no_lattice):
+                uv0, tri0, t_old, m_old = timed(surf, r, repeats=1 if r > 512 else 2)
+            surf._tess_cache.clear()
+            # the same vertices (edge splits may add them in another order) and the same area
+            assert np.array_equal(uv[np.lexsort(uv.T)], uv0[np.lexsort(uv0.T)])
+            assert len(tri) == len(tri0)
+            assert abs(area(uv, tri) - area(uv0, tri0)) <= 1e-9 * abs(area(uv0, tri0))
+            t0 = time.perf_counter()
+            surf(uv)
+            t_eval = time.perf_counter() - t0
+            print(f"| {d['name']} | {r} | {len(uv)} | {len(tri)} | {t_new:.2f} | {m_new:.0f} "
+                  f"| {t_old:.2f} | {m_old:.0f} | {t_old / t_new:.1f}x | {t_eval:.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
