@@ -72,13 +72,18 @@ def _smoothness(text: str):
             f"expected a nonnegative number or 'auto', got {text!r}") from None
 
 
+def _why(selection: dict) -> str:
+    """Why the engine cross-validated the default smoothness, in two words."""
+    return "noise" if "noise" in str(selection.get("why", "")) else "sparse data"
+
+
 def _smoothness_text(report: dict) -> str:
     """The fairing weight used, and how it was chosen."""
     text = f"{report['smoothness']:.3g}"
     sel = report.get("smoothness_selection")
     if sel is not None:
         text += (f" (auto chose {sel['chosen']:.3g}, which misses the tolerance: default kept)"
-                 if "kept" in sel else " (cross-validated: sparse data)" if "why" in sel
+                 if "kept" in sel else f" (cross-validated: {_why(sel)})" if "why" in sel
                  else " (auto)")
     return text
 

@@ -177,7 +177,7 @@ def store_stats(tcb, surf, settings: dict) -> None:
             setattr(tcb, key, str(value) if key in {"degree", "mode", "criterion"} else value)
     if "smoothness" in rep:  # the value used: the chosen one with Auto Smoothness
         tcb.smoothness = float(rep["smoothness"])
-    # a sparse cloud's default smoothness is cross-validated by the engine
+    # the default smoothness of a sparse cloud or a noise-stopped run is cross-validated
     tcb.smoothness_cross_validated = "why" in (rep.get("smoothness_selection") or {})
 
 
@@ -200,7 +200,8 @@ def _summary(surf) -> str:
     rep = dict(getattr(surf, "report", {}) or {})
     n = rep.get("control_points", len(surf.control_points))
     sel = rep.get("smoothness_selection") or {}
-    how = " (sparse data: cross-validated)" if "why" in sel else " (auto)" if sel else ""
+    why = "noise" if "noise" in str(sel.get("why", "")) else "sparse data"
+    how = f" ({why}: cross-validated)" if "why" in sel else " (auto)" if sel else ""
     return (
         f"TCB: {n} control points, RMS {rep.get('rms', float('nan')):.4g}, "
         f"max {rep.get('max', float('nan')):.4g} ({100 * rep.get('max_rel', float('nan')):.3g}% "
@@ -232,10 +233,12 @@ def report_result(op, surf, notes=(), warnings=()) -> None:
         what = "max" if str(opts.criterion).lower() == "max" else "RMS"
         level = (f"{100 * rep.get(what.lower() + '_rel', 0):.3g}% of the diagonal"
                  if opts.relative else f"{rep.get(what.lower(), 0):.4g}")
+        chosen = "noise" in str((rep.get("smoothness_selection") or {}).get("why", ""))
         op.report({"WARNING"}, f"{text}; the tolerance was not reached: {reason} with more "
                   f"control points (noise in the data, or detail the knots cannot resolve: more "
                   f"control points would fit the noise): set the tolerance above the {what} "
-                  f"reached ({level}), or turn on Auto Smoothness")
+                  f"reached ({level})" + (", the smoothness was cross-validated for the noise"
+                                          if chosen else ", or turn on Auto Smoothness"))
     else:
         advice = {"control-point budget reached": "raise Max Control Points",
                   "iteration limit": "raise Max Iterations",

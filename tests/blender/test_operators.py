@@ -212,7 +212,12 @@ def test_a_tolerance_below_the_noise_says_the_data_look_noisy(clean_scene, capfd
     assert "Warning: TCB:" in text and "the error stopped falling" in text, text
     assert "noise in the data" in text and "RMS reached (" in text and "% of the diagonal" in text
     assert "Max Control Points" not in text
-    assert bpy.context.view_layer.objects.active.tcb.control_points < 1000
+    # the engine cross-validated the default smoothness for the noise; the panel says so
+    assert "the smoothness was cross-validated for the noise" in text
+    assert "(noise: cross-validated)" in text
+    state = bpy.context.view_layer.objects.active.tcb
+    assert state.control_points < 1000 and state.smoothness_cross_validated
+    assert state.smoothness > 1e-4
 
 
 def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):

@@ -178,6 +178,29 @@ def test_a_tolerance_below_the_noise_stops_when_the_error_stops_falling():
     assert r["stop_reason"] == "tolerance reached"
 
 
+def test_few_noisy_points_per_control_point_stop_and_cross_validate_the_smoothness():
+    """4000 points with noise 0.01, a tolerance far below it. With 2-6 points per control point
+    the training RMS keeps falling as the net fits the noise (knots^-0.13 to -0.38: the run
+    took the whole budget, 1980 control points, and ended 0.013 off the true shape), so the
+    stall rule compares estimates of the error at new points, ``rms sqrt((1 + p/n) / (1 -
+    p/n))``. After the stall the default smoothness is cross-validated: 0.0028 off the true
+    shape (0.0047 with 1e-4 on the same net). A smoothness given explicitly is kept."""
+    rng = np.random.default_rng(4000)
+    xy = rng.uniform(-1, 1, (4000, 2))
+    shape = lambda x, y: 0.3 * np.exp(-4 * (x * x + y * y)) + 0.1 * np.sin(3 * x) * np.cos(2 * y)  # noqa: E731
+    noisy = np.c_[xy, shape(*xy.T) + 0.01 * rng.standard_normal(len(xy))]
+    surf = fit_surface(noisy, tolerance=1e-4)
+    r = surf.report
+    assert r["stop_reason"] == "the error stopped falling" and r["control_points"] < 1000
+    assert "noise" in r["smoothness_selection"]["why"] and r["smoothness"] > 1e-4
+    g = np.linspace(-0.95, 0.95, 60)
+    grid = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    uv = surf.parameterization.project(np.c_[grid, shape(*grid.T)])
+    assert np.sqrt(np.mean((surf(uv)[:, 2] - shape(*grid.T)) ** 2)) < 0.0035
+    kept = fit_surface(noisy, tolerance=1e-4, smoothness=1e-4).report
+    assert kept["smoothness"] == 1e-4 and "smoothness_selection" not in kept
+
+
 @pytest.mark.parametrize("n, error, previous, expected", [
     (40, 8e-3, None, 166),  # far: the automatic start itself (1.1 * 40 * 8^(2/3) = 176)
     (40, 2e-3, None, 70),  # 1.1 * 40 * 2^(2/3) = 69.8, with the smooth rate 3/2
