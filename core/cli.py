@@ -72,6 +72,13 @@ def _smoothness(text: str):
             f"expected a nonnegative number or 'auto', got {text!r}") from None
 
 
+def _returned(report: dict) -> str:
+    """Which iteration's fit was returned, when it is not the last one."""
+    k = report.get("returned_iteration", report["iterations"])
+    return (f"; the surface is iteration {k}'s, of lowest estimated error"
+            if 0 < k < report["iterations"] else "")
+
+
 def _why(selection: dict) -> str:
     """Why the engine cross-validated the default smoothness, in two words."""
     return "noise" if "noise" in str(selection.get("why", "")) else "sparse data"
@@ -172,7 +179,7 @@ def _fit(args) -> int:
         ("mode / degree", f"{r['mode']} / {r['degree']}"),
         ("knots (interior)", f"{r['knots']} ({r['interior_knots']})"),
         ("control points", f"{r['control_points']}"),
-        ("iterations", f"{r['iterations']} ({r['stop_reason']})"),
+        ("iterations", f"{r['iterations']} ({r['stop_reason']})" + _returned(r)),
         ("smoothness", _smoothness_text(r)),
     ]
     if "refit" in r:

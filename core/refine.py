@@ -409,6 +409,7 @@ class IterationState:
     refit: dict | None = None  # the final fit on all points after sampled iterations
     active: np.ndarray | None = None  # the functions that meet the domain (the control points)
     selection: dict | None = None  # smoothness="auto": the cross-validated choice
+    iteration: int = 0  # its number in the reports (history[i]["iteration"])
 
     @property
     def n_control(self) -> int:  # what the budget counts
@@ -697,7 +698,8 @@ def adaptive_fit(
         if (n_ctrl > options.max_control_points and it > 0 and not fresh) or shrunk_away:
             reason = "control-point budget reached"
             break
-        state = IterationState(knots, len(interior), space, fit, active=active)
+        state = IterationState(knots, len(interior), space, fit, active=active,
+                               iteration=history_offset + it + 1)
         e = fit.errors[:n_measured]
         rms, emax = float(np.sqrt(np.mean(e**2))), float(e.max(initial=0.0))
         value = rms if options.criterion == "rms" else emax
@@ -853,7 +855,7 @@ def adaptive_fit(
         refit = ({"points": len(fu), "seconds": time.perf_counter() - t0,
                   "phases": dict(fit.timings)} if sampled else best.refit)
         best = IterationState(best.knots, best.n_interior, best.space, fit, refit, best.active,
-                              selection)
+                              selection, best.iteration)
     best.fit.basis = None
     return best, history, reason
 

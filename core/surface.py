@@ -965,6 +965,9 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         "functions": int(best.space.n_basis),
         "smoothness": float(best.fit.smoothness),  # the value used (chosen, for "auto")
         "iterations": len(history) + len(hist),
+        # the iteration returned: the one that met the tolerance, else the lowest (estimated)
+        # error within the budget; not always the last (history[i]["iteration"])
+        "returned_iteration": int(best.iteration),
         # errors at the user's points (for meshes the fit also used samples on the faces)
         "rms": float(np.sqrt(np.mean(errors[used] ** 2))),
         "max": float(errors[used].max()),

@@ -210,6 +210,9 @@ def _summary(surf) -> str:
         + (f", {rep['outliers']} outliers left out" if rep.get("outliers") else "")
         + (f", {rep['loose_vertices']} loose vertices (in no face) left out"
            if rep.get("loose_vertices") else "")
+        + (f", the surface of iteration {rep['returned_iteration']} of {rep['iterations']} "
+           "(lowest estimated error)"
+           if 0 < rep.get("returned_iteration", 0) < rep.get("iterations", 0) else "")
     )
 
 

@@ -5,6 +5,7 @@ save/reopen, panels."""
 from __future__ import annotations
 
 import hashlib
+import re
 import sys
 from pathlib import Path
 from types import SimpleNamespace
@@ -215,6 +216,8 @@ def test_a_tolerance_below_the_noise_says_the_data_look_noisy(clean_scene, capfd
     # the engine cross-validated the default smoothness for the noise; the panel says so
     assert "the smoothness was cross-validated for the noise" in text
     assert "(noise: cross-validated)" in text
+    # the surface is an earlier, smaller fit than the last one in the progress: it says which
+    assert re.search(r"the surface of iteration \d+ of \d+ \(lowest estimated error\)", text), text
     state = bpy.context.view_layer.objects.active.tcb
     assert state.control_points < 1000 and state.smoothness_cross_validated
     assert state.smoothness > 1e-4

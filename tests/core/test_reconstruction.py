@@ -193,6 +193,9 @@ def test_few_noisy_points_per_control_point_stop_and_cross_validate_the_smoothne
     r = surf.report
     assert r["stop_reason"] == "the error stopped falling" and r["control_points"] < 1000
     assert "noise" in r["smoothness_selection"]["why"] and r["smoothness"] > 1e-4
+    # the fit returned is the one of lowest estimated error at new points, not the last one
+    back = r["history"][r["returned_iteration"] - 1]
+    assert back["control_points"] == r["control_points"] < r["history"][-1]["control_points"]
     g = np.linspace(-0.95, 0.95, 60)
     grid = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
     uv = surf.parameterization.project(np.c_[grid, shape(*grid.T)])
