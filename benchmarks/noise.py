@@ -14,8 +14,15 @@ Variants, in the same process:
 * ``before``: the stall rule on the RMS of the data, the lowest-RMS fit returned, the default
   smoothness kept (``core.refine`` switches ``STALL_DOF``, ``BEST_BY_NEW_POINTS`` and
   ``CROSS_VALIDATE_STALLED`` off);
-* ``now``: the defaults: both on the estimate of the error at new points, and the smoothness of
-  a stalled run cross-validated.
+* ``now``: the defaults: the stall test on the estimate of the error at new points, a stalled
+  run returns the fit of the lowest estimate, and its default smoothness is cross-validated.
+
+The window that insertions doubling the knots fill, and the stall test's baseline at the start
+of the insertion chain, are the same in both variants.
+
+A second table: clean test functions (``benchmarks/datasets.py``) on 1500-3000 points with a
+tolerance they cannot reach, where the run stops with few points per control point; the true
+error is against the function on a 120 x 120 grid of [0.02, 0.98]^2.
 """
 
 from __future__ import annotations
@@ -29,11 +36,15 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import core.refine as R  # noqa: E402
+import datasets as D  # noqa: E402
 from core import fit_surface  # noqa: E402
 
 SWITCHES = ("STALL_DOF", "BEST_BY_NEW_POINTS", "CROSS_VALIDATE_STALLED")
+CLEAN = [("F6-sphere", 3000, 1e-7), ("F10-cospeak", 1500, 1e-5), ("F10-cospeak", 3000, 1e-5),
+         ("crease", 3000, 1e-5), ("F2-cliff", 3000, 1e-6), ("F1-franke", 3000, 1e-5)]
 CASES = [(1000, 0.01), (2000, 0.01), (4000, 0.01), (10000, 0.01), (40000, 0.01),
          (4000, 0.003), (20000, 0.001), (100000, 0.003)]
 
@@ -81,6 +92,21 @@ def main() -> None:
             totals[variant][1] += t2 - t1
             print(f"| {n} | {sigma} | {variant} | " + " | ".join(map(str, cells)) + " |",
                   flush=True)
+    print("\n| function | points | tolerance | variant | cp | fits | RMS/diag | true | smoothness "
+          "| stop |")
+    print("|---|---:|---:|---|---:|---:|---:|---:|---:|---|")
+    g = np.linspace(0.02, 0.98, 120)
+    grid = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    for name, n, tol in CLEAN[:2] if args.quick else CLEAN:
+        points = D.height_field(name, n)["points"]
+        clean_truth = np.c_[grid, D.FUNCTIONS[name](*grid.T)]
+        for variant in ("before", "now"):
+            for switch in SWITCHES:
+                setattr(R, switch, variant == "now")
+            r = (surf := fit_surface(points, tolerance=tol)).report
+            print(f"| {name} | {n} | {tol:g} | {variant} | {r['control_points']} | "
+                  f"{r['iterations']} | {r['rms_rel']:.2e} | {true_error(surf, clean_truth):.2e} | "
+                  f"{r['smoothness']:.3g} | {r['stop_reason']} |", flush=True)
     for name in SWITCHES:
         setattr(R, name, True)
     print(f"\ntotal seconds: fit {totals['before'][0]:.1f} before, {totals['now'][0]:.1f} now; "

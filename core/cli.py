@@ -48,7 +48,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--smoothness", type=_smoothness, default=DEFAULT_SMOOTHNESS,
                    help="fairing weight relative to the data term, or 'auto': chosen by "
                    "5-fold cross-validation for the final surface (default 1e-4; on sparse "
-                   "clouds, under 2 points per control point, the default is cross-validated)")
+                   "clouds, under 2 points per control point, and when the error stopped "
+                   "falling above the tolerance, the default is cross-validated)")
     f.add_argument("--resolution", type=int, default=64,
                    help="tessellation steps across the longer side of the domain (default 64)")
     f.add_argument("--net", help="write the control net (.obj or .ply) here")
@@ -75,13 +76,15 @@ def _smoothness(text: str):
 def _returned(report: dict) -> str:
     """Which iteration's fit was returned, when it is not the last one."""
     k = report.get("returned_iteration", report["iterations"])
-    return (f"; the surface is iteration {k}'s, of lowest estimated error"
-            if 0 < k < report["iterations"] else "")
+    how = ("lowest estimated error" if report["stop_reason"] == "the error stopped falling"
+           else "lowest RMS")
+    return f"; the surface is iteration {k}'s, of {how}" if 0 < k < report["iterations"] else ""
 
 
 def _why(selection: dict) -> str:
-    """Why the engine cross-validated the default smoothness, in two words."""
-    return "noise" if "noise" in str(selection.get("why", "")) else "sparse data"
+    """Why the engine cross-validated the default smoothness, in a few words."""
+    why = str(selection.get("why", ""))
+    return "sparse data" if why.startswith("sparse") else "the error stopped falling"
 
 
 def _smoothness_text(report: dict) -> str:

@@ -370,8 +370,9 @@ def _points_in_polygon(x: np.ndarray, poly: np.ndarray, tol: float) -> np.ndarra
         order = outside[np.argsort(x[outside, 1], kind="stable")]
         ys = x[order, 1]
         near = np.zeros(len(x), dtype=bool)
-        for edge, pt in _runs(order, np.searchsorted(ys, lo - atol),
-                              np.searchsorted(ys, hi + atol, side="right")):
+        # (widened by 2 atol: lo - atol itself is rounded; the distance test decides)
+        for edge, pt in _runs(order, np.searchsorted(ys, lo - 2 * atol),
+                              np.searchsorted(ys, hi + 2 * atol, side="right")):
             xe, ae, ed = x[pt], a[edge], e[edge]
             t = np.clip(np.einsum("mk,mk->m", xe - ae, ed) / ee_safe[edge], 0.0, 1.0)
             d2 = np.sum((xe - (ae + t[:, None] * ed)) ** 2, axis=1)

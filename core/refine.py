@@ -435,11 +435,12 @@ MIN_PROBE_KNOTS = 8
 STALL_WINDOW = 3
 STALL_RATE = 0.07
 # ... on estimates of the error at new points (see _stalled; 4000 noisy points: 0.13-0.38
-# before, the rule now fires), and the default smoothness of a stalled run is cross-validated
-# (adaptive_fit). Switches for benchmarks/noise.py's peers, not options.
+# before, the rule now fires); a stalled run returns the fit of the lowest such estimate, and
+# its default smoothness is cross-validated (adaptive_fit). Switches for benchmarks/noise.py's
+# peers, not options.
 STALL_DOF = True
-CROSS_VALIDATE_STALLED = True
 BEST_BY_NEW_POINTS = True
+CROSS_VALIDATE_STALLED = True
 STALLED = "the error stopped falling"
 
 
@@ -514,7 +515,11 @@ def _stalled(history: list[dict], n_points: int | None = None) -> bool:
     points, so ``rms * sqrt((1 + p/n) / (1 - p/n))`` with ``p`` the control points (an upper
     bound: the fairing holds some of them) and ``p/n`` at most 0.9. Where noise dominates, the
     training RMS keeps falling as the net fits the noise (by ``p/n``: with few points per
-    control point, fast enough to pass the rate test), while the estimate rises."""
+    control point, fast enough to pass the rate test), while the estimate rises.
+
+    Both ends are the best since the chain's first fit (its fresh start, or the refit of a
+    continued net), not since the run's start: a small probe has the smallest ``p/n`` and
+    would make any chain look stalled on clean data."""
     n = history[-1]["interior_knots"]
     chain = 0  # fits of the current insertion chain, the last one included
     while chain < len(history) and history[-1 - chain]["knots_placed"] == "inserted":
@@ -524,13 +529,14 @@ def _stalled(history: list[dict], n_points: int | None = None) -> bool:
     rms = np.array([h["rms"] for h in history])
     if n_points and STALL_DOF:
         rms = rms * new_point_factor(np.array([h["control_points"] for h in history]), n_points)
-    best_now = float(rms.min())
+    start = max(len(history) - 1 - chain, 0)  # the chain's first fit (not an insertion)
+    best_now = float(rms[start:].min())
     for j in range(len(history) - 2, len(history) - 2 - chain, -1):
         n1 = history[j]["interior_knots"]
-        # a window of STALL_WINDOW insertions and 1.5x the knots, or of one insertion that
-        # doubled them (refine() grows a net by up to that per step)
+        # a window of STALL_WINDOW insertions and 1.5x the knots, or of insertions that at
+        # least doubled them (refine() grows a net by up to that per step)
         if n1 <= n / 2 or (n1 <= n / 1.5 and j <= len(history) - 1 - STALL_WINDOW):
-            best_then = float(rms[: j + 1].min())
+            best_then = float(rms[start : j + 1].min())
             return bool(np.log(max(best_then, 1e-300) / max(best_now, 1e-300))
                         < STALL_RATE * np.log(n / n1))
     return False
@@ -571,10 +577,10 @@ def adaptive_fit(
     :func:`predicted_knots` says are missing, up to doubling them. Reports say whether an
     iteration's knots were placed ``"afresh"``, ``"continued"`` or ``"inserted"``
     (``knots_placed``). The best iteration is the one that meets the tolerance, else the one of
-    lowest estimated RMS at new points within the budget (the RMS times
-    :func:`new_point_factor`; with tolerance 0 the RMS itself). A run with a tolerance also stops when the error has stopped
-    falling (:func:`_stalled`: noise below the tolerance; reason :data:`STALLED`); the default
-    smoothness is then cross-validated.
+    lowest RMS within the budget. A run with a tolerance also stops when the error has stopped
+    falling (:func:`_stalled`: noise below the tolerance; reason :data:`STALLED`); it returns
+    the fit of the lowest estimated RMS at new points (the RMS times
+    :func:`new_point_factor`), and a default smoothness is then cross-validated.
     Returns the best iteration, the per-iteration reports and why the loop stopped.
     """
     options.validate()
@@ -648,8 +654,9 @@ def adaptive_fit(
         weights = None if weights is None else weights[pick]
 
     history: list[dict] = []
-    best: IterationState | None = None
-    best_score = np.inf
+    best: IterationState | None = None  # the lowest RMS (or the fit meeting the tolerance)
+    quiet: IterationState | None = None  # the lowest estimate at new points (for a stall)
+    best_rms = quiet_score = np.inf
     n_before, pending = len(interior), np.zeros((0, 2))
     prev = None  # (interior knots, control points) of the last iteration
     last_round = False
@@ -703,23 +710,28 @@ def adaptive_fit(
         e = fit.errors[:n_measured]
         rms, emax = float(np.sqrt(np.mean(e**2))), float(e.max(initial=0.0))
         value = rms if options.criterion == "rms" else emax
-        # with a tolerance the best is chosen by the estimate of the RMS at new points: with
-        # noise, a larger net lowers the RMS on the data by fitting the noise (tolerance 0
-        # fills the budget: the RMS itself, as with BEST_BY_NEW_POINTS off)
-        score = (rms * float(new_point_factor(n_ctrl, len(uv)))
-                 if BEST_BY_NEW_POINTS and tol > 0 else rms)
-        # the best: the lowest score within the budget, or the fit that meets the tolerance (a
+        # the best: the lowest RMS within the budget, or the fit that meets the tolerance (a
         # fresh start's knots do not contain the earlier ones: with the criterion "max" a fit
-        # of lower RMS may still miss it)
+        # of lower RMS may still miss it). A run that stops because the error stopped falling
+        # returns the lowest estimate of the RMS at new points instead: there a larger net
+        # lowers the RMS on the data by fitting the noise
         within = n_ctrl <= options.max_control_points
-        is_best = best is None or (within and (best.n_control > options.max_control_points
-                                               or score < best_score or value <= tol))
-        if is_best:
-            if best is not None:
-                best.fit.basis = None
-            best, best_score = state, score
-        if not (keep_basis and is_best):  # only the auto refit of the best space reuses it
-            fit.basis = None
+
+        def better(current, key, current_key):
+            return current is None or (within and (current.n_control > options.max_control_points
+                                                   or key < current_key or value <= tol))
+
+        held = [best, quiet]
+        if better(best, rms, best_rms):
+            best, best_rms = state, rms
+        if tol > 0 and BEST_BY_NEW_POINTS:
+            score = rms * float(new_point_factor(n_ctrl, len(uv)))
+            if better(quiet, score, quiet_score):
+                quiet, quiet_score = state, score
+        # only the auto refit of the returned space reuses a basis: free the others'
+        for old in held + [state]:
+            if old is not None and not (keep_basis and (old is best or old is quiet)):
+                old.fit.basis = None
         report = {
             "iteration": history_offset + it + 1,
             "knots": int(len(knots)),
@@ -754,6 +766,9 @@ def adaptive_fit(
         # knots fit the noise, so stop rather than spend the budget on it
         if tol > 0 and _stalled(history, len(uv)):
             reason = STALLED
+            if quiet is not None and quiet is not best:
+                best.fit.basis = None
+                best = quiet
             break
         if sizing:
             restart = next_start(len(interior), value, tol, sized, options.degree, n0)
@@ -797,6 +812,8 @@ def adaptive_fit(
         interior = np.vstack([interior, new])
     if best is None:  # cannot happen: the first fit of a run is always made
         raise RuntimeError("the refinement loop made no fit")
+    if quiet is not None and quiet is not best:  # not returned: no basis kept for it
+        quiet.fit.basis = None
     if best.n_control > options.max_control_points:  # only the first fit was made or kept
         what = ("even the coarsest surface needs" if start_knots is None
                 else "the surface to refine already has")
@@ -810,13 +827,14 @@ def adaptive_fit(
     # points of Franke's function: the surface swung to 2x the data's height range with 1e-4),
     # and a choice is kept even when it misses a tolerance the loop reached (the stop reason
     # then says so).
-    # A run stopped because the error stopped falling met noise (or detail the knots cannot
-    # resolve): the default weight was chosen for clean data, so it is cross-validated too
-    # (4000 points with noise 0.01: 0.0047 off the true surface with the choice, 0.013 without)
     fitted = len(full[0]) if full[2] is None else int(np.count_nonzero(full[2] > 0))
     sparse = fitted < SPARSE_POINTS_PER_CONTROL * best.n_control
-    noisy = reason == STALLED and CROSS_VALIDATE_STALLED
-    default_replaced = ((sparse or noisy) and not auto
+    # A stalled run's net is often not far from sparse (2-5 points per control point) and
+    # chosen on the error at new points: its default weight is cross-validated as well, among
+    # the sparse candidates too (clean F10, 3000 points: 0.0039 off the function with the
+    # choice, 0.053 with 1e-4 overshooting in the gaps; noisy clouds: 0.92-1.09x)
+    stalled = reason == STALLED and CROSS_VALIDATE_STALLED
+    default_replaced = ((sparse or stalled) and not auto
                         and isinstance(options.smoothness, DefaultSmoothness))
     auto = auto or default_replaced
     # a cancelled run is not refitted with a choice (30 factorizations the user asked to skip)
@@ -826,7 +844,7 @@ def adaptive_fit(
         fu, fp, fw, fm = full if sampled else (uv, points, weights, n_measured)
         fit = fit_control_points(best.space, fu, fp, fw, "auto" if auto else loop_smoothness,
                                  scored=fm, basis=None if sampled else best.fit.basis,
-                                 sparse=sparse or noisy)
+                                 sparse=sparse or stalled)
         best.fit.basis = None
         selection = None
         if auto:
@@ -840,8 +858,8 @@ def adaptive_fit(
                 selection["why"] = (f"sparse data: {fitted} points for {best.n_control} control "
                                     "points (the default 1e-4 is cross-validated)")
             elif default_replaced:
-                selection["why"] = ("the error stopped falling (noise): the default 1e-4 is "
-                                    "cross-validated")
+                selection["why"] = (f"{STALLED} (noise, or detail the knots cannot resolve): "
+                                    "the default 1e-4 is cross-validated")
             if reason == "tolerance reached" and value > tol and sparse:
                 reason = ("tolerance reached by the loop; the cross-validated smoothness of "
                           "sparse data misses it")

@@ -1052,11 +1052,12 @@ def fit_surface(
     smoothness : float or "auto"
         Fairing weight relative to the data term (method.md section 5); default 1e-4, except
         on sparse clouds (fewer than 2 points per control point) and when a tolerance run
-        stops because the error stopped falling (noise), where the default is replaced by the
-        cross-validated choice among 1e-2 ... 100 (``report["smoothness_selection"]["why"]``
+        stops because the error stopped falling, where the default is replaced by the
+        cross-validated choice among 100 ... 1e-7 (``report["smoothness_selection"]["why"]``
         says so; pass ``1e-4`` explicitly to keep it). ``"auto"``: the
         iterations use 1e-4 and the surface returned is refitted with the weight chosen by
-        5-fold cross-validation among 1e-2 ... 1e-7 (on sparse clouds also 1e-1 ... 100;
+        5-fold cross-validation among 1e-2 ... 1e-7 (on sparse clouds and after such a stop
+        also 1e-1 ... 100;
         one-standard-error rule; the value used is
         ``report["smoothness"]``, the scores ``report["smoothness_selection"]``; a mesh is
         scored at its vertices). On dense samples (50 points per control point) it changed the

@@ -177,7 +177,7 @@ def store_stats(tcb, surf, settings: dict) -> None:
             setattr(tcb, key, str(value) if key in {"degree", "mode", "criterion"} else value)
     if "smoothness" in rep:  # the value used: the chosen one with Auto Smoothness
         tcb.smoothness = float(rep["smoothness"])
-    # the default smoothness of a sparse cloud or a noise-stopped run is cross-validated
+    # the default smoothness of a sparse cloud or a stalled run is cross-validated
     tcb.smoothness_cross_validated = "why" in (rep.get("smoothness_selection") or {})
 
 
@@ -200,7 +200,8 @@ def _summary(surf) -> str:
     rep = dict(getattr(surf, "report", {}) or {})
     n = rep.get("control_points", len(surf.control_points))
     sel = rep.get("smoothness_selection") or {}
-    why = "noise" if "noise" in str(sel.get("why", "")) else "sparse data"
+    why = ("sparse data" if str(sel.get("why", "")).startswith("sparse")
+           else "the error stopped falling")
     how = f" ({why}: cross-validated)" if "why" in sel else " (auto)" if sel else ""
     return (
         f"TCB: {n} control points, RMS {rep.get('rms', float('nan')):.4g}, "
@@ -211,7 +212,8 @@ def _summary(surf) -> str:
         + (f", {rep['loose_vertices']} loose vertices (in no face) left out"
            if rep.get("loose_vertices") else "")
         + (f", the surface of iteration {rep['returned_iteration']} of {rep['iterations']} "
-           "(lowest estimated error)"
+           + ("(lowest estimated error)" if rep.get("stop_reason") == _core().refine.STALLED
+              else "(lowest RMS)")
            if 0 < rep.get("returned_iteration", 0) < rep.get("iterations", 0) else "")
     )
 
@@ -236,11 +238,11 @@ def report_result(op, surf, notes=(), warnings=()) -> None:
         what = "max" if str(opts.criterion).lower() == "max" else "RMS"
         level = (f"{100 * rep.get(what.lower() + '_rel', 0):.3g}% of the diagonal"
                  if opts.relative else f"{rep.get(what.lower(), 0):.4g}")
-        chosen = "noise" in str((rep.get("smoothness_selection") or {}).get("why", ""))
+        chosen = bool(rep.get("smoothness_selection"))  # by the engine, or Auto Smoothness
         op.report({"WARNING"}, f"{text}; the tolerance was not reached: {reason} with more "
                   f"control points (noise in the data, or detail the knots cannot resolve: more "
                   f"control points would fit the noise): set the tolerance above the {what} "
-                  f"reached ({level})" + (", the smoothness was cross-validated for the noise"
+                  f"reached ({level})" + (" (the smoothness was cross-validated)"
                                           if chosen else ", or turn on Auto Smoothness"))
     else:
         advice = {"control-point budget reached": "raise Max Control Points",

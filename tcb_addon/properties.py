@@ -83,7 +83,8 @@ class FitSettings:
         name="Smoothness",
         description="Weight of the smoothing term of the least-squares fit (0 = none); used "
         "when Auto Smoothness is off. At its default (0.0001) on a sparse cloud (under 2 "
-        "points per control point) it is chosen by cross-validation",
+        "points per control point), or when the error stopped falling above the tolerance, "
+        "it is chosen by cross-validation",
         default=DEFAULT_SMOOTHNESS, min=0.0, soft_max=1.0, precision=6, step=0.001,
     )  # fmt: skip
     auto_smoothness: BoolProperty(
@@ -166,7 +167,7 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     mode: StringProperty()
     smoothness: FloatProperty(precision=6)  # the value used (the chosen one with auto)
     auto_smoothness: BoolProperty()
-    # the value used was cross-validated although Auto Smoothness was off (sparse cloud)
+    # the value used was cross-validated although Auto Smoothness was off (sparse cloud, stall)
     smoothness_cross_validated: BoolProperty()
     resolution: IntProperty()
     # deviation map (distance of the surface vertices to the data)

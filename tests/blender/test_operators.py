@@ -213,9 +213,9 @@ def test_a_tolerance_below_the_noise_says_the_data_look_noisy(clean_scene, capfd
     assert "Warning: TCB:" in text and "the error stopped falling" in text, text
     assert "noise in the data" in text and "RMS reached (" in text and "% of the diagonal" in text
     assert "Max Control Points" not in text
-    # the engine cross-validated the default smoothness for the noise; the panel says so
-    assert "the smoothness was cross-validated for the noise" in text
-    assert "(noise: cross-validated)" in text
+    # the engine cross-validated the default smoothness after the stall; the panel says so
+    assert "(the smoothness was cross-validated)" in text and "Auto Smoothness" not in text
+    assert "(the error stopped falling: cross-validated)" in text
     # the surface is an earlier, smaller fit than the last one in the progress: it says which
     assert re.search(r"the surface of iteration \d+ of \d+ \(lowest estimated error\)", text), text
     state = bpy.context.view_layer.objects.active.tcb

@@ -1,5 +1,6 @@
 """The command line ``python -m core fit`` end to end, including bad paths and files."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -114,3 +115,19 @@ def test_nan_rows_name_the_option_that_drops_them(tmp_path):
             "--max-control-points", "100", "--max-iterations", "1")
     assert r.returncode == 0, r.stderr
     assert "597 points" in r.stdout
+
+
+def test_a_stalled_fit_says_which_iteration_and_why_the_smoothness_was_chosen(tmp_path):
+    """A noisy cloud with a tolerance below its noise stops because the error stopped falling;
+    the table names the iteration returned (an earlier, smaller fit) and why the default
+    smoothness was cross-validated."""
+    rng = np.random.default_rng(4000)
+    xy = rng.uniform(-1, 1, (4000, 2))
+    z = 0.3 * np.exp(-4 * (xy**2).sum(axis=1)) + 0.01 * rng.standard_normal(len(xy))
+    cloud = tmp_path / "noisy.xyz"
+    np.savetxt(cloud, np.c_[xy, z])
+    r = run("fit", cloud, "-o", tmp_path / "s.obj", "--tolerance", "1e-4")
+    assert r.returncode == 0, r.stderr
+    assert "(the error stopped falling)" in r.stdout, r.stdout
+    assert re.search(r"the surface is iteration \d+'s, of lowest estimated error", r.stdout)
+    assert "(cross-validated: the error stopped falling)" in r.stdout, r.stdout
