@@ -18,6 +18,7 @@ import numpy as np
 from .errors import InvalidInputError, OutlierError, TCBError
 from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
+from .refine import STALLED, replaced_default_reason
 
 __all__ = ["main"]
 
@@ -76,25 +77,18 @@ def _smoothness(text: str):
 def _returned(report: dict) -> str:
     """Which iteration's fit was returned, when it is not the last one."""
     k = report.get("returned_iteration", report["iterations"])
-    how = ("lowest estimated error" if report["stop_reason"] == "the error stopped falling"
-           else "lowest RMS")
+    how = "lowest estimated error" if report["stop_reason"] == STALLED else "lowest RMS"
     return f"; the surface is iteration {k}'s, of {how}" if 0 < k < report["iterations"] else ""
-
-
-def _why(selection: dict) -> str:
-    """Why the engine cross-validated the default smoothness, in a few words."""
-    why = str(selection.get("why", ""))
-    return "sparse data" if why.startswith("sparse") else "the error stopped falling"
 
 
 def _smoothness_text(report: dict) -> str:
     """The fairing weight used, and how it was chosen."""
     text = f"{report['smoothness']:.3g}"
     sel = report.get("smoothness_selection")
+    why = replaced_default_reason(sel)
     if sel is not None:
         text += (f" (auto chose {sel['chosen']:.3g}, which misses the tolerance: default kept)"
-                 if "kept" in sel else f" (cross-validated: {_why(sel)})" if "why" in sel
-                 else " (auto)")
+                 if "kept" in sel else f" (cross-validated: {why})" if why else " (auto)")
     return text
 
 

@@ -444,6 +444,14 @@ CROSS_VALIDATE_STALLED = True
 STALLED = "the error stopped falling"
 
 
+def replaced_default_reason(selection: dict | None) -> str | None:
+    """Why the engine cross-validated a default smoothness, in a few words ("sparse data" or
+    :data:`STALLED`), from ``report["smoothness_selection"]``; None when it did not (no
+    selection, or ``smoothness="auto"`` asked for it)."""
+    why = str((selection or {}).get("why", ""))
+    return None if not why else "sparse data" if why.startswith("sparse") else STALLED
+
+
 def automatic_start(mode: str, max_control_points: int) -> int:
     """Interior knots of the automatic start: budget / 12 (TCB), i.e. a fit with about a
     quarter of the budget in control points (the border functions that meet the domain add to

@@ -200,9 +200,8 @@ def _summary(surf) -> str:
     rep = dict(getattr(surf, "report", {}) or {})
     n = rep.get("control_points", len(surf.control_points))
     sel = rep.get("smoothness_selection") or {}
-    why = ("sparse data" if str(sel.get("why", "")).startswith("sparse")
-           else "the error stopped falling")
-    how = f" ({why}: cross-validated)" if "why" in sel else " (auto)" if sel else ""
+    why = _core().refine.replaced_default_reason(sel)
+    how = f" ({why}: cross-validated)" if why else " (auto)" if sel else ""
     return (
         f"TCB: {n} control points, RMS {rep.get('rms', float('nan')):.4g}, "
         f"max {rep.get('max', float('nan')):.4g} ({100 * rep.get('max_rel', float('nan')):.3g}% "
