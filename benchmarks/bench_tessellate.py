@@ -9,8 +9,10 @@ seconds to evaluate the surface at those vertices (``surf(uv)``: what a Blender
 re-tessellation costs on top).
 
 Peer in the same run: the same method with every triangle from qhull's Delaunay (the lattice
-of grid cells deep inside the domain switched off, as before it existed). Both must give the
-same vertices (as a set) and the same covered area; the ratio column is peer / lattice seconds.
+of grid cells deep inside the domain switched off, as before it existed, also in the edge-split
+rounds). Both must cover the same area and give nearly the same vertices (at most 0.1% not
+shared: a lattice cell keeps its diagonal through the rounds, qhull may pick the other one, so
+an edge may be split in one and not the other); the ratio column is peer / lattice seconds.
 """
 
 from __future__ import annotations
@@ -65,8 +67,8 @@ def main() -> None:
     args = ap.parse_args()
     sets = [D.mesh("nefertiti"), D.mesh("patch-01"), D.dem(3)]
     print("| data | resolution | vertices | triangles | tessellation_uv s | peak MiB "
-          "| Delaunay-only s | peak MiB | ratio | evaluate s |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| Delaunay-only s | peak MiB | ratio | vertices not shared | evaluate s |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for d in sets:
         surf = fit_surface(d["points"], d["faces"], tolerance=3e-3, max_control_points=500)
         for r in args.resolutions:
@@ -74,15 +76,16 @@ def main() -> None:
             with mock.patch.object(S, "_lattice", no_lattice):
                 uv0, tri0, t_old, m_old = timed(surf, r, repeats=1 if r > 512 else 2)
             surf._tess_cache.clear()
-            # the same vertices (edge splits may add them in another order) and the same area
-            assert np.array_equal(uv[np.lexsort(uv.T)], uv0[np.lexsort(uv0.T)])
-            assert len(tri) == len(tri0)
+            # nearly the same vertices (a lattice cell keeps its diagonal through the edge-split
+            # rounds, qhull may pick the other one: an edge split or not) and the same area
+            differ = len(set(map(tuple, uv)) ^ set(map(tuple, uv0)))
+            assert differ <= 1e-3 * len(uv0)
             assert abs(area(uv, tri) - area(uv0, tri0)) <= 1e-9 * abs(area(uv0, tri0))
             t0 = time.perf_counter()
             surf(uv)
             t_eval = time.perf_counter() - t0
             print(f"| {d['name']} | {r} | {len(uv)} | {len(tri)} | {t_new:.2f} | {m_new:.0f} "
-                  f"| {t_old:.2f} | {m_old:.0f} | {t_old / t_new:.1f}x | {t_eval:.2f} |", flush=True)
+                  f"| {t_old:.2f} | {m_old:.0f} | {t_old / t_new:.1f}x | {differ} | {t_eval:.2f} |", flush=True)
 
 
 if __name__ == "__main__":

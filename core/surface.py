@@ -277,9 +277,17 @@ class TCBSurface:
         uv = np.vstack([boundary, grid[inside]])
         number = np.full(len(grid), -1)
         number[inside] = len(boundary) + np.arange(np.count_nonzero(inside))
-        lattice = _lattice(deep.reshape(len(gv), len(gu)), number.reshape(len(gv), len(gu)),
-                           np.array([gu[0], gv[0]]) if len(gu) and len(gv) else None, d)
-        lattice = (lattice[0], np.concatenate([np.arange(len(boundary)), lattice[1]]), lattice[2])
+        deep = deep.reshape(len(gv), len(gu))
+        number = number.reshape(len(gv), len(gu))
+        origin = np.array([gu[0], gv[0]]) if len(gu) and len(gv) else None
+        n_grid = len(uv)  # the boundary samples and the grid points; split points follow
+
+        def lattice_of(uv):  # the boundary samples and the split points are never in cells
+            cells, rest, in_cells = _lattice(deep, number, origin, d)
+            return cells, np.concatenate([np.arange(len(boundary)), rest,
+                                          np.arange(n_grid, len(uv))]), in_cells
+
+        lattice = lattice_of(uv)
         data, ok = self._data_parameters()
         full = cKDTree(data)
         trim = None
@@ -289,8 +297,10 @@ class TCBSurface:
         tri = self._domain_triangles(uv, d, full, trim, lattice)
         stretch = self._local_stretch(data, full, np.asarray(self._param.stretch)[ok]
                                       if self._param.stretch is not None else None)
-        # each round triangulates again: above TESSELLATION_REFINE_POINTS (resolution ~250 on a
-        # disk) that costs more than the finer grid leaves to gain, and rounds are skipped
+        # above TESSELLATION_REFINE_POINTS (resolution ~250 on a disk) the rounds are skipped:
+        # there the grid's edges are short enough that splits added 0-2.6% vertices on the
+        # bundled samples at resolution 256, while a round's stretch lookups over every edge
+        # cost 3-5x the rest of the tessellation (11 s of 14 s at 1024 on the DEM)
         refine = stretch is not None and len(uv) <= TESSELLATION_REFINE_POINTS
         rounds = TESSELLATION_SPLITS if refine else 0
         for _ in range(rounds):
@@ -303,7 +313,11 @@ class TCBSurface:
             if not split.any():
                 break
             uv = np.vstack([uv, mid[split]])
-            tri = self._domain_triangles(uv, d, full, trim)
+            # the cells holding a new point are no longer split directly (their corners leave
+            # ``deep``): every new point is then at least a cell away from the split region,
+            # whose outline edges stay Gabriel edges (_lattice); the rest is triangulated again
+            _unsplit_cells(deep, mid[split], origin, d)
+            tri = self._domain_triangles(uv, d, full, trim, lattice_of(uv))
         used = np.unique(tri)
         remap = np.full(len(uv), -1)
         remap[used] = np.arange(len(used))
@@ -854,6 +868,23 @@ def _lattice(deep: np.ndarray, number: np.ndarray, origin, d: float):
         return out
 
     return cells.astype(np.intp), rest.astype(np.intp), in_cells if len(cells) else None
+
+
+def _unsplit_cells(deep: np.ndarray, x: np.ndarray, origin, d: float) -> None:
+    """Clear in ``deep`` (rows, cols; see :func:`_lattice`) the four corners of the grid cell
+    holding each parameter of ``x`` (m, 2), in place: no cell that :func:`_lattice` then
+    splits holds or touches a cell holding a point of ``x``, so those points are at least ``d``
+    from the split region and outside the diametral disks (radius ``d / 2``) of its outline
+    edges."""
+    if origin is None or not len(x):
+        return
+    rows, cols = deep.shape
+    k = np.floor((x - origin) / d).astype(np.int64)
+    for di in (0, 1):
+        for dj in (0, 1):
+            i, j = k[:, 0] + di, k[:, 1] + dj
+            ok = (i >= 0) & (i < cols) & (j >= 0) & (j < rows)
+            deep[j[ok], i[ok]] = False
 
 
 def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:
