@@ -96,8 +96,16 @@ def _world(positions: np.ndarray, matrix) -> np.ndarray:
 
 
 def read_positions(data) -> np.ndarray:
-    """(n, 3) float32 positions of a Mesh or PointCloud datablock."""
+    """(n, 3) float32 positions of a Mesh or PointCloud datablock. A mesh in Edit Mode has no
+    "position" attribute (its attributes are the edit mesh's layers): its vertices are read, as
+    loaded by ``Object.update_from_editmode``."""
     attr = data.attributes.get("position")
+    if attr is None and getattr(data, "is_editmode", False):
+        n = len(data.vertices)
+        buf = np.empty(n * 3, dtype=np.float32)
+        if n:
+            data.vertices.foreach_get("co", buf)
+        return buf.reshape(n, 3)
     n = len(attr.data) if attr is not None else 0
     buf = np.empty(n * 3, dtype=np.float32)
     if n:

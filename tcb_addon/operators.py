@@ -112,6 +112,8 @@ def with_net_edits(surface_obj, surf):
     """``surf`` (the stored spline) with the control points edited on the net."""
     net = surface_obj.tcb.net
     if net is not None and net.type == "MESH":
+        if net.mode == "EDIT":  # a drag in Edit Mode is in the edit mesh until it is loaded
+            net.update_from_editmode()
         ctrl, rounding = bridge.read_world_positions_and_rounding(net)
         # a net saved before control points left out the border rings' functions has a
         # vertex per basis function: its edits are kept and it is rewritten in today's form

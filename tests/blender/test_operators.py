@@ -574,6 +574,38 @@ def test_refine_retessellate_deviation_and_reopen(clean_scene, addon, tmp_path):
     assert core_module().TCBSurface.load(out).control_points.shape[1] == 3
 
 
+def test_export_in_edit_mode_saves_the_drag_on_screen(clean_scene, addon, tmp_path):
+    """A net vertex dragged in Edit Mode lives in the edit mesh until it is loaded into the
+    mesh data, and a mesh in Edit Mode has no "position" attribute: Export Spline (allowed in
+    Edit Mode) read an empty net and saved the spline without the drag on screen."""
+    import bmesh
+
+    bpy = clean_scene
+    verts, faces = grid(16, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(y))
+    obj = add_mesh(bpy, "Scan", verts, faces)
+    assert fit(bpy, obj, tolerance=2e-3, max_control_points=150) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    before = spline_of(surface).control_points.copy()
+    with bpy.context.temp_override(**select(bpy, net)):
+        bpy.ops.object.mode_set(mode="EDIT")
+    try:
+        bm = bmesh.from_edit_mesh(net.data)
+        bm.verts.ensure_lookup_table()
+        bm.verts[4].co.z += 0.5
+        bmesh.update_edit_mesh(net.data)
+        out = tmp_path / "edit.npz"
+        with bpy.context.temp_override(**select(bpy, net)):
+            assert bpy.ops.tcb.export_spline(filepath=str(out)) == {"FINISHED"}
+    finally:
+        with bpy.context.temp_override(**select(bpy, net)):
+            bpy.ops.object.mode_set(mode="OBJECT")
+    saved = core_module().TCBSurface.load(out).control_points
+    moved = np.abs(saved - before).max(axis=1) > 1e-6
+    assert np.flatnonzero(moved).tolist() == [4]
+    assert saved[4, 2] - before[4, 2] == pytest.approx(0.5, abs=1e-5)
+
+
 def test_a_net_with_a_vertex_per_basis_function_is_rewritten_keeping_its_edits(clean_scene, addon):
     """Nets written before control points left out the border rings' functions have one vertex
     per basis function; re-tessellating keeps an edit made on such a net and rewrites the net
