@@ -52,7 +52,8 @@ def _parser() -> argparse.ArgumentParser:
                    "clouds, under 2 points per control point, and when the error stopped "
                    "falling above the tolerance, the default is cross-validated)")
     f.add_argument("--resolution", type=int, default=64,
-                   help="tessellation steps across the longer side of the domain (default 64)")
+                   help="tessellation steps across the longer side of the domain (default 64; at "
+                   "least 8 across the shorter one)")
     f.add_argument("--net", help="write the control net (.obj or .ply) here")
     f.add_argument("--spline", help="write the spline (.npz, TCBSurface.save) here")
     f.add_argument("--drop-invalid", action="store_true",

@@ -55,7 +55,12 @@ MAX_FIT_POINTS = 2_000_000
 MIN_ASPECT = 1e-3
 # tessellation: rounds of edge splits where the data parameters are denser than on average
 TESSELLATION_SPLITS = 4
-TESSELLATION_REFINE_POINTS = 50_000
+# the edge-split rounds look the compression up on a grid of at most this many cells along the
+# longer side (the tessellation's own grid up to that resolution)
+TESSELLATION_STRETCH_CELLS = 512
+# grid steps across the shorter side of the domain at least (a road strip 250 times longer than
+# wide had 143 triangles in one row at resolution 64, up to 0.34 m off an 8 m wide road)
+TESSELLATION_MIN_ACROSS = 8
 # tessellation_uv keeps this many of the most recent resolutions (a fine one is megabytes)
 TESSELLATION_CACHE = 4
 # the spline is defined where its basis sums to 1 to within this (TCBSurface.covers)
@@ -224,13 +229,16 @@ class TCBSurface:
 
         The domain is the disk polygon for meshes and the convex hull of the parameters for
         clouds, trimmed to where data is (triangles farther than a few data spacings from any
-        data parameter are dropped). ``resolution`` grid steps span the longer side; where the
-        parameterization compresses the surface more than on average (a mesh's map to the disk
-        compresses steep and outlying parts, a projection steep slopes), edges are split until
-        their length times the local compression is at most two grid steps
-        (:data:`TESSELLATION_SPLITS` rounds at most; none above
-        :data:`TESSELLATION_REFINE_POINTS` grid points), so the surface mesh does not coarsen in
-        3D where the parameters are crowded. Meshes measure the compression by the vertex
+        data parameter are dropped). ``resolution`` grid steps span the longer side, and at
+        least :data:`TESSELLATION_MIN_ACROSS` the shorter one (a long thin strip is not one
+        triangle wide); where the parameterization compresses the surface more than on
+        average (a mesh's map to the disk compresses steep and outlying parts, a projection
+        steep slopes), edges are split until their length times the local compression is at
+        most two grid steps (conforming red-green splits, :func:`_split_edges`;
+        :data:`TESSELLATION_SPLITS` rounds at most; the compression is looked up at the nearest
+        centre of a grid of at most :data:`TESSELLATION_STRETCH_CELLS` cells along the longer
+        side), so the surface mesh does not coarsen in 3D where the parameters are crowded.
+        Meshes measure the compression by the vertex
         ``stretch`` of their parameterization (3D over uv edge length), clouds (and files
         without it) by the density of the data parameters. The parameters depend only on the
         data, not on the control points (``evaluation_matrix`` of them re-evaluates edits).
@@ -250,7 +258,8 @@ class TCBSurface:
             return cached
         poly = np.asarray(self._param.domain_polygon, dtype=np.float64)
         lo, hi = poly.min(axis=0), poly.max(axis=0)
-        d = float(np.max(hi - lo)) / resolution
+        d = min(float(np.max(hi - lo)) / resolution,
+                float(np.min(hi - lo)) / TESSELLATION_MIN_ACROSS)
         # boundary: every polygon edge resampled at spacing ~d (keeping the corners)
         nxt = np.roll(poly, -1, axis=0)
         seg = np.linalg.norm(nxt - poly, axis=1)
@@ -280,14 +289,8 @@ class TCBSurface:
         deep = deep.reshape(len(gv), len(gu))
         number = number.reshape(len(gv), len(gu))
         origin = np.array([gu[0], gv[0]]) if len(gu) and len(gv) else None
-        n_grid = len(uv)  # the boundary samples and the grid points; split points follow
-
-        def lattice_of(uv):  # the boundary samples and the split points are never in cells
-            cells, rest, in_cells = _lattice(deep, number, origin, d)
-            return cells, np.concatenate([np.arange(len(boundary)), rest,
-                                          np.arange(n_grid, len(uv))]), in_cells
-
-        lattice = lattice_of(uv)
+        cells, rest, in_cells = _lattice(deep, number, origin, d)
+        lattice = (cells, np.concatenate([np.arange(len(boundary)), rest]), in_cells)
         data, ok = self._data_parameters()
         full = cKDTree(data)
         trim = None
@@ -297,27 +300,21 @@ class TCBSurface:
         tri = self._domain_triangles(uv, d, full, trim, lattice)
         stretch = self._local_stretch(data, full, np.asarray(self._param.stretch)[ok]
                                       if self._param.stretch is not None else None)
-        # above TESSELLATION_REFINE_POINTS (resolution ~250 on a disk) the rounds are skipped:
-        # there the grid's edges are short enough that splits added 0-2.6% vertices on the
-        # bundled samples at resolution 256, while a round's stretch lookups over every edge
-        # cost 3-5x the rest of the tessellation (11 s of 14 s at 1024 on the DEM)
-        refine = stretch is not None and len(uv) <= TESSELLATION_REFINE_POINTS
-        rounds = TESSELLATION_SPLITS if refine else 0
-        for _ in range(rounds):
-            ends = np.sort(tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-            key = np.unique(ends[:, 0] * len(uv) + ends[:, 1])  # each edge once
-            i, j = key // len(uv), key % len(uv)
-            mid = 0.5 * (uv[i] + uv[j])
-            length = np.linalg.norm(uv[i] - uv[j], axis=1)
-            split = (length * stretch(mid) > 2.0 * d) & (length > d / 2**TESSELLATION_SPLITS)
-            if not split.any():
+        if stretch is not None:
+            # evaluated once, on a grid 4x finer than the tessellation's (at most
+            # TESSELLATION_STRETCH_CELLS): at every edge of every round it took 11 of the 14 s
+            # of resolution 1024 on the DEM
+            stretch = _gridded(stretch, lo, hi, min(4 * resolution, TESSELLATION_STRETCH_CELLS))
+        # the rounds split the marked edges in place (red-green): a new Delaunay triangulation
+        # per round cost seconds at resolution ~250, and the rounds were skipped above it, so a
+        # steep mesh got a coarser surface at 251 than at 250 (three_peaks: longest 3D edge
+        # 2.06 against 0.64, sag 0.80 against 0.07)
+        for _ in range(TESSELLATION_SPLITS if stretch is not None else 0):
+            uv, tri, more = _split_edges(
+                uv, tri, lambda length, mid: (length * stretch(mid) > 2.0 * d)
+                & (length > d / 2**TESSELLATION_SPLITS))
+            if not more:
                 break
-            uv = np.vstack([uv, mid[split]])
-            # the cells holding a new point are no longer split directly (their corners leave
-            # ``deep``): every new point is then at least a cell away from the split region,
-            # whose outline edges stay Gabriel edges (_lattice); the rest is triangulated again
-            _unsplit_cells(deep, mid[split], origin, d)
-            tri = self._domain_triangles(uv, d, full, trim, lattice_of(uv))
         used = np.unique(tri)
         remap = np.full(len(uv), -1)
         remap[used] = np.arange(len(used))
@@ -870,21 +867,77 @@ def _lattice(deep: np.ndarray, number: np.ndarray, origin, d: float):
     return cells.astype(np.intp), rest.astype(np.intp), in_cells if len(cells) else None
 
 
-def _unsplit_cells(deep: np.ndarray, x: np.ndarray, origin, d: float) -> None:
-    """Clear in ``deep`` (rows, cols; see :func:`_lattice`) the four corners of the grid cell
-    holding each parameter of ``x`` (m, 2), in place: no cell that :func:`_lattice` then
-    splits holds or touches a cell holding a point of ``x``, so those points are at least ``d``
-    from the split region and outside the diametral disks (radius ``d / 2``) of its outline
-    edges."""
-    if origin is None or not len(x):
-        return
-    rows, cols = deep.shape
-    k = np.floor((x - origin) / d).astype(np.int64)
-    for di in (0, 1):
-        for dj in (0, 1):
-            i, j = k[:, 0] + di, k[:, 1] + dj
-            ok = (i >= 0) & (i < cols) & (j >= 0) & (j < rows)
-            deep[j[ok], i[ok]] = False
+def _split_edges(uv: np.ndarray, tri: np.ndarray, marked) -> tuple[np.ndarray, np.ndarray, bool]:
+    """One round of conforming edge splits: every edge for which ``marked(length, midpoint)``
+    holds gets its midpoint, and each triangle is split by the number of its marked edges
+    (red-green refinement): 1 -> 2 triangles (the midpoint joined to the opposite corner),
+    2 -> 3 (the corner between them cut off, the rest along the shorter diagonal), 3 -> 4
+    (the midpoint triangle). Both triangles of an edge see the same midpoint, so the mesh
+    stays conforming; CCW triangles stay CCW. Returns the parameters with the midpoints
+    appended, the triangles, and whether any edge was split."""
+    n = len(uv)
+    # each triangle's edges, column by column (the two triangles of an edge see the same
+    # sorted ends, hence the same midpoint and length, to the bit, and the same mark); only
+    # the marked ones are numbered (np.unique of every edge cost ~1 s at resolution 1024)
+    key = np.empty(tri.shape, dtype=np.int64)
+    hit = np.empty(tri.shape, dtype=bool)
+    for k in range(3):
+        a, b = np.minimum(tri[:, k], tri[:, (k + 1) % 3]), np.maximum(tri[:, k], tri[:, (k + 1) % 3])
+        key[:, k] = a * n + b
+        hit[:, k] = marked(np.linalg.norm(uv[a] - uv[b], axis=1), 0.5 * (uv[a] + uv[b]))
+    if not hit.any():
+        return uv, tri, False
+    split = np.unique(key[hit])
+    i, j = split // n, split % n
+    mid = 0.5 * (uv[i] + uv[j])
+    m = np.full(tri.shape, -1)  # (T, 3) midpoint of edge k = (v_k, v_k+1), or -1
+    m[hit] = n + np.searchsorted(split, key[hit])
+    count = np.count_nonzero(hit, axis=1)
+    out = [tri[count == 0]]
+    rows = np.arange(len(tri))[:, None]
+    # one split edge: rotate it to (v0, v1); triangles (v0, m, v2), (m, v1, v2)
+    t1 = count == 1
+    r = np.argmax(m[t1] >= 0, axis=1)
+    rot = (r[:, None] + np.arange(3)) % 3
+    v, mm = tri[t1][rows[: len(r)], rot], m[t1][rows[: len(r)], rot][:, 0]
+    out += [np.c_[v[:, 0], mm, v[:, 2]], np.c_[mm, v[:, 1], v[:, 2]]]
+    # two split edges: rotate the unsplit one to (v2, v0); corner (m01, v1, m12), and the
+    # quad (v0, m01, m12, v2) along its shorter diagonal
+    t2 = count == 2
+    u = np.argmax(m[t2] < 0, axis=1)
+    rot = (u[:, None] + 1 + np.arange(3)) % 3
+    v, mm = tri[t2][rows[: len(u)], rot], m[t2][rows[: len(u)], rot]
+    allp = np.vstack([uv, mid])
+    a, m01, m12, c = v[:, 0], mm[:, 0], mm[:, 1], v[:, 2]
+    first = (np.linalg.norm(allp[a] - allp[m12], axis=1)
+             <= np.linalg.norm(allp[m01] - allp[c], axis=1))[:, None]
+    out += [np.c_[m01, v[:, 1], m12],
+            np.where(first, np.c_[a, m01, m12], np.c_[a, m01, c]),
+            np.where(first, np.c_[a, m12, c], np.c_[m01, m12, c])]
+    # three: the midpoint triangle and the three corners
+    t3 = count == 3
+    v, mm = tri[t3], m[t3]
+    out += [np.c_[v[:, 0], mm[:, 0], mm[:, 2]], np.c_[mm[:, 0], v[:, 1], mm[:, 1]],
+            np.c_[mm[:, 2], mm[:, 1], v[:, 2]], mm]
+    return allp, np.vstack(out), True
+
+
+def _gridded(f, lo: np.ndarray, hi: np.ndarray, cells: int):
+    """``f`` (parameters (m, 2) -> (m,)) evaluated once at the centres of a grid over the box
+    ``lo``-``hi`` with ``cells`` square cells along its longer side; returns the lookup ``x ->
+    f(centre of the cell holding x)`` (clamped to the grid)."""
+    step = float(np.max(hi - lo)) / cells
+    shape = np.maximum(np.ceil((hi - lo) / step - 1e-9).astype(np.int64), 1)  # (u cells, v cells)
+    gu = lo[0] + step * (np.arange(shape[0]) + 0.5)
+    gv = lo[1] + step * (np.arange(shape[1]) + 0.5)
+    values = np.asarray(f(np.stack(np.meshgrid(gu, gv), -1).reshape(-1, 2)), dtype=np.float64)
+    values = values.reshape(shape[1], shape[0])
+
+    def lookup(x):
+        k = np.clip(np.floor((np.asarray(x) - lo) / step).astype(np.int64), 0, shape - 1)
+        return values[k[:, 1], k[:, 0]]
+
+    return lookup
 
 
 def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:

@@ -107,7 +107,10 @@ class FitSettings:
     )  # fmt: skip
     resolution: IntProperty(
         name="Resolution",
-        description="Subdivisions of the output surface mesh along each side of the domain",
+        description=(
+            "Subdivisions of the output surface mesh along the longer side of the domain (at "
+            "least 8 across the shorter one; finer where steep parts are crowded)"
+        ),
         default=64, min=2, soft_max=512, max=4096,
     )  # fmt: skip
 

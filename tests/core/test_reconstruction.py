@@ -20,7 +20,6 @@ from core.fit import fit_control_points
 from core.refine import automatic_start, next_start
 from core.meshio import read_geometry
 from core.simplex import orient2d
-from core.surface import TESSELLATION_REFINE_POINTS
 from knotsets import knot_set
 
 DATA = __import__("pathlib").Path(__file__).resolve().parents[2] / "data"
@@ -285,7 +284,7 @@ def _edge_uses(tri):
 
 
 def test_fine_tessellation_is_a_lattice_inside_and_covers_the_disk_exactly(nefertiti):
-    """Above TESSELLATION_REFINE_POINTS grid points the tessellation splits the grid cells deep
+    """At resolution 400 the tessellation splits the grid cells deep
     inside the domain into two triangles each and Delaunay-triangulates only the boundary
     strip (``core.surface._lattice``). The pieces must join into one triangulated disk: the
     polygon's area exactly, every triangle CCW, each edge in one or two triangles, Euler
@@ -304,7 +303,6 @@ def test_fine_tessellation_is_a_lattice_inside_and_covers_the_disk_exactly(nefer
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(core.surface, "_lattice", spy)
         uv, tri = surf.tessellation_uv(400)
-    assert len(uv) > TESSELLATION_REFINE_POINTS  # no edge-split rounds: the lattice is all
     assert split and split[0] > 0.8 * len(tri)  # most triangles are split cells, not qhull's
     a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
     doubled = orient2d(a, b, c)
@@ -934,43 +932,76 @@ def test_tessellation_refines_where_the_mesh_map_compresses_and_ignores_the_cont
     assert len(old.tessellate(64)[0]) > 0
 
 
-def test_edge_split_rounds_keep_the_lattice_away_from_new_points(three_peaks):
-    """The edge-split rounds triangulate again with the lattice minus the cells that hold a
-    new point (``core.surface._unsplit_cells``) instead of qhull on every point: still one
-    disk covering the polygon (a cell split next to a new point could overlap a strip
-    triangle), and nearly the vertices of the all-Delaunay tessellation (a lattice cell keeps
-    its diagonal from round to round, qhull picks either: on three_peaks at 100, 1 vertex of
-    12 765 differs and 4 of the reference's are missing)."""
-    import core.surface
+def test_edge_splits_keep_a_conforming_ccw_mesh_of_the_same_area():
+    """``core.surface._split_edges`` on a Delaunay mesh with random marks (by a hash of the
+    midpoint, so both triangles of an edge agree): one new vertex per marked edge, at its
+    midpoint; the marked edges are gone and their halves are there; every triangle CCW, each
+    edge in one or two triangles, Euler characteristic and area unchanged."""
+    from scipy.spatial import Delaunay
 
-    _, _, surf = three_peaks
-    lattice, split = core.surface._lattice, []
+    from core.surface import _split_edges
 
-    def spy(*args):
-        cells, rest, in_cells = lattice(*args)
-        split.append(len(cells))
-        return cells, rest, in_cells
+    rng = np.random.default_rng(3)
+    uv = rng.random((400, 2))
+    tri = Delaunay(uv).simplices
+    tri = np.where((orient2d(*(uv[tri[:, k]] for k in range(3))) < 0)[:, None],
+                   tri[:, [0, 2, 1]], tri)
 
-    def none(deep, number, origin, d):
-        return np.zeros((0, 3), dtype=np.intp), number[number >= 0].astype(np.intp), None
+    def mark(length, mid):
+        return np.sin(1e4 * mid[:, 0]) * np.cos(7e3 * mid[:, 1]) > 0.2
 
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(core.surface, "_lattice", spy)
-        uv, tri = surf.tessellation_uv(100)
-        mp.setattr(core.surface, "_lattice", none)
-        surf._tess_cache.clear()
-        ref_uv, ref_tri = surf.tessellation_uv(100)
-    surf._tess_cache.clear()
-    assert len(uv) <= TESSELLATION_REFINE_POINTS and len(split) >= 3  # rounds ran
-    assert min(split) > 0.3 * len(tri) and split[-1] < split[0]  # each round kept cells
-    ours, theirs = set(map(tuple, uv)), set(map(tuple, ref_uv))
-    assert len(ours ^ theirs) <= 1e-3 * len(theirs) and len(ours & theirs) > 12_000
-    doubled = orient2d(uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]])
-    ref = orient2d(ref_uv[ref_tri[:, 0]], ref_uv[ref_tri[:, 1]], ref_uv[ref_tri[:, 2]])
+    ends = np.unique(np.sort(tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    marked = mark(None, 0.5 * (uv[ends[:, 0]] + uv[ends[:, 1]]))
+    new_uv, new_tri, more = _split_edges(uv, tri, mark)
+    assert more and 0.2 < marked.mean() < 0.6
+    assert len(new_uv) == len(uv) + marked.sum()
+    np.testing.assert_array_equal(new_uv[: len(uv)], uv)
+    doubled = orient2d(*(new_uv[new_tri[:, k]] for k in range(3)))
     assert np.all(doubled > 0)
-    assert doubled.sum() == pytest.approx(ref.sum(), rel=1e-12)
-    uses = _edge_uses(tri)
-    assert uses.max() == 2 and len(uv) - len(uses) + len(tri) == 1
+    assert doubled.sum() == pytest.approx(orient2d(*(uv[tri[:, k]] for k in range(3))).sum(),
+                                          rel=1e-12)
+    e = np.sort(new_tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges, uses = np.unique(e, axis=0, return_counts=True)
+    assert uses.max() == 2
+    assert len(new_uv) - len(edges) + len(new_tri) == len(uv) - len(ends) + len(tri) == 1
+    have = set(map(tuple, edges))
+    mids = {tuple(p): i for i, p in enumerate(new_uv)}
+    for (a, b) in ends[marked]:
+        m = mids[tuple(0.5 * (uv[a] + uv[b]))]
+        assert (a, b) not in have and (min(a, m), max(a, m)) in have and (min(b, m), max(b, m)) in have
+    assert _split_edges(uv, tri, lambda length, mid: np.zeros(len(mid), bool))[2] is False
+
+
+def test_a_long_thin_strip_is_tessellated_several_triangles_wide():
+    """A road 250 times longer than wide with a 0.32 m crown: 64 steps along its length made a
+    mesh one triangle wide (143 triangles), 0.29 m off the fitted surface; at least
+    TESSELLATION_MIN_ACROSS steps across keep it within a few centimetres."""
+    from core.surface import TESSELLATION_MIN_ACROSS
+
+    rng = np.random.default_rng(1)
+    xy = np.c_[rng.uniform(0, 2000, 2000), rng.uniform(0, 8, 2000)]
+    z = 0.02 * xy[:, 0] + 0.05 * np.sin(xy[:, 0] / 50) - 0.02 * (xy[:, 1] - 4) ** 2
+    surf = fit_surface(np.c_[xy, z], tolerance=0.01, relative=False)
+    uv, tri = surf.tessellation_uv(64)
+    across = np.ptp(uv, axis=0).min()
+    edges = np.linalg.norm(uv[tri] - uv[tri[:, [1, 2, 0]]], axis=2)
+    assert np.median(edges) <= 1.01 * across / TESSELLATION_MIN_ACROSS
+    sag = np.linalg.norm(surf(uv[tri].mean(axis=1)) - surf(uv)[tri].mean(axis=1), axis=1)
+    assert sag.max() < 0.05
+
+
+def test_a_finer_tessellation_of_a_steep_mesh_is_never_coarser(three_peaks):
+    """The edge-split rounds run at every resolution: they were skipped above resolution ~250,
+    where three_peaks' surface mesh then had a 3x longer longest edge and 10x the sag at 251
+    than at 250."""
+    points, faces, surf = three_peaks
+
+    def longest_edge(resolution):
+        v, t = surf.tessellate(resolution)
+        return float(np.linalg.norm(v[t] - v[t[:, [1, 2, 0]]], axis=2).max())
+
+    at = {r: longest_edge(r) for r in (250, 251, 320)}
+    assert at[251] <= 1.1 * at[250] and at[320] <= at[250]
 
 
 def test_distances_to_the_fitted_data_are_at_most_the_fit_errors(three_peaks):
