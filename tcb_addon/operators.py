@@ -81,9 +81,25 @@ def result_objects(obj):
     role = obj.tcb.role
     if role == "SURFACE":
         return obj, obj.tcb.net
-    if role in {"NET", "DEVIATION", "WEIGHTS"} and obj.tcb.surface is not None:
-        return obj.tcb.surface, obj.tcb.surface.tcb.net
+    surface = obj.tcb.surface
+    # a surface deleted from the scene (X) lives on while its net points to it: not a result
+    if role in {"NET", "DEVIATION", "WEIGHTS"} and surface is not None and surface.users_scene:
+        return surface, surface.tcb.net
     return None, None
+
+
+def drop_deviation_points(surface_obj) -> bool:
+    """Remove the surface's Deviation Points object (the distances of the data to a surface
+    that has just been replaced); whether there was one."""
+    pts = surface_obj.tcb.deviation_points
+    if pts is None:
+        return False
+    surface_obj.tcb.deviation_points = None
+    mesh = pts.data if pts.type == "MESH" else None
+    bpy.data.objects.remove(pts)
+    if mesh is not None and mesh.users == 0:
+        bpy.data.meshes.remove(mesh)
+    return True
 
 
 def active_surface(context):
@@ -579,6 +595,10 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         store_spline(surface, surf)
         store_stats(st, surf, self._settings)
         warnings = list(getattr(self, "_warnings", ()))
+        notes = list(getattr(self, "_notes", ()))
+        if drop_deviation_points(surface):
+            notes.append("the Deviation Points of the previous surface were removed (run "
+                         "Deviation Map again)")
         rep = dict(surf.report or {})
         if (len(surf.control_points) == self._before[1]
                 and str(rep.get("stop_reason", "")).startswith("tolerance reached")):
@@ -587,7 +607,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             warnings.append(f"nothing was refined: the surface already meets the tolerance "
                             f"{self._settings['tolerance']:.4g}{unit} ({what} "
                             f"{self._before[0]:.4g}); set a smaller Tolerance")
-        report_result(self, surf, getattr(self, "_notes", ()), warnings)
+        report_result(self, surf, notes, warnings)
         return {"FINISHED"}
 
 

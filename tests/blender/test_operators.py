@@ -606,6 +606,48 @@ def test_export_in_edit_mode_saves_the_drag_on_screen(clean_scene, addon, tmp_pa
     assert saved[4, 2] - before[4, 2] == pytest.approx(0.5, abs=1e-5)
 
 
+def test_refine_removes_deviation_points_of_the_old_surface(clean_scene, capfd):
+    """The Deviation Points hold the distances to the surface they were computed for: after
+    Refine they described the old one (max 0.0107 against 0.0032), with nothing saying so."""
+    bpy = clean_scene
+    verts, faces = grid(20, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y))
+    obj = add_mesh(bpy, "Wave", verts, faces)
+    assert fit(bpy, obj, tolerance=2e-2, max_control_points=300) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
+    name = surface.tcb.deviation_points.name
+    capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.refine(tolerance=2e-3, max_control_points=800) == {"FINISHED"}
+    assert surface.tcb.deviation_points is None and name not in bpy.data.objects
+    assert "Deviation Points of the previous surface were removed" in capfd.readouterr().out
+    with bpy.context.temp_override(**select(bpy, surface)):  # and a new map makes new ones
+        assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
+    d = np.empty(len(verts), np.float32)
+    surface.tcb.deviation_points.data.attributes["tcb_deviation"].data.foreach_get("value", d)
+    assert np.allclose(d, spline_of(surface).distances(verts), atol=1e-5)
+
+
+def test_a_net_whose_surface_was_deleted_enables_no_surface_operator(clean_scene):
+    """X on the surface leaves it in bpy.data while its net points to it: with the orphaned
+    net active, Re-tessellate, Refine, Deviation Map, Export and Show/Hide Net were offered."""
+    bpy = clean_scene
+    verts, faces = grid(16)
+    obj = add_mesh(bpy, "Scan", verts, faces)
+    assert fit(bpy, obj, tolerance=2e-2, max_control_points=150) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    with bpy.context.temp_override(**select(bpy, net)):
+        assert bpy.ops.tcb.retessellate.poll()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.object.delete() == {"FINISHED"}
+    with bpy.context.temp_override(**select(bpy, net)):
+        for op in (bpy.ops.tcb.retessellate, bpy.ops.tcb.refine, bpy.ops.tcb.deviation_map,
+                   bpy.ops.tcb.export_spline, bpy.ops.tcb.toggle_net):
+            assert not op.poll(), op.idname()
+
+
 def test_a_net_with_a_vertex_per_basis_function_is_rewritten_keeping_its_edits(clean_scene, addon):
     """Nets written before control points left out the border rings' functions have one vertex
     per basis function; re-tessellating keeps an edit made on such a net and rewrites the net
