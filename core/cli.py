@@ -60,7 +60,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--drop-invalid", action="store_true",
                    help="leave out points with NaN or infinite coordinates (point clouds)")
     f.add_argument("--drop-outliers", action="store_true",
-                   help="leave out points far from all others (point clouds; refused otherwise)")
+                   help="leave out points far from all others instead of refusing the cloud "
+                   "(point clouds only: refused for a mesh)")
     f.add_argument("--quiet", action="store_true", help="no progress output")
     return p
 
@@ -176,6 +177,11 @@ def _fit(args) -> int:
         raise TCBError(f"--resolution must be at least 2, got {args.resolution}")
     t0 = time.perf_counter()
     points, faces = read_geometry(args.input)
+    if faces is not None and args.drop_outliers:
+        raise TCBError(
+            f"--drop-outliers applies to point clouds; {args.input} is a mesh, whose faces "
+            "hold its vertices: leave the option out"
+        )
     given = points
     bad = ~np.isfinite(points).all(axis=1)
     if bad.any() and faces is None:

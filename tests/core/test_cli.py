@@ -180,3 +180,13 @@ def test_an_output_path_that_cannot_be_written_is_refused_before_the_fit(tmp_pat
     assert not Path("/proc/a.obj").exists()
     assert list(tmp_path.iterdir()) == [tmp_path / "x.obj"]  # no probe file left behind
 
+
+def test_drop_outliers_on_a_mesh_is_refused(tmp_path):
+    """--drop-outliers applies to point clouds (a mesh's faces hold its vertices): given for a
+    mesh it is refused with one line instead of being ignored."""
+    r = run("fit", ROOT / "data" / "nefertiti.off", "-o", tmp_path / "s.obj", "--quiet",
+            "--drop-outliers", "--max-iterations", "1", "--max-control-points", "100")
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.strip().count("\n") == 0
+    assert "--drop-outliers applies to point clouds" in r.stderr and "is a mesh" in r.stderr
+    assert not (tmp_path / "s.obj").exists()
