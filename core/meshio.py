@@ -27,9 +27,12 @@ Every problem with a file raises :class:`~.errors.FileFormatError` naming the fi
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import struct
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -86,7 +89,8 @@ def read_geometry(path: PathLike) -> tuple[np.ndarray, np.ndarray | None]:
         raise FileFormatError(f"cannot read {p.name!r}: {exc}") from None
     except OSError as exc:
         raise FileFormatError(f"cannot read {p.name!r}: {exc.strerror or exc}") from None
-    except (ValueError, IndexError, TypeError, struct.error, UnicodeDecodeError) as exc:
+    except (ValueError, IndexError, TypeError, struct.error, UnicodeDecodeError, EOFError,
+            zipfile.BadZipFile, zlib.error) as exc:
         raise FileFormatError(f"cannot read {p.name!r}: malformed content ({exc})") from None
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     if faces is not None:
@@ -648,8 +652,46 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
     return _loadtxt(lines, "line", usecols=(0, 1, 2), delimiter=delim), None
 
 
+_NPY_MAGIC = b"\x93NUMPY"
+_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a zip's first entry, or an empty zip
+
+
+def _check_npy_size(fh, size: int, what: str) -> None:
+    """Refuse a ``.npy`` stream whose header announces more data than the ``size`` bytes it
+    has (a truncated file), before numpy allocates the announced array. ``fh`` is at the
+    magic string; format 3.0 headers (rare) are left to numpy."""
+    version = np.lib.format.read_magic(fh)
+    if version == (1, 0):
+        shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+    elif version == (2, 0):
+        shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+    else:
+        return
+    if dtype.hasobject:
+        return  # refused by np.load(allow_pickle=False)
+    need = math.prod(shape) * dtype.itemsize
+    have = size - fh.tell()
+    if need > have:
+        raise _MalformedError(
+            f"{what} is truncated: its header announces shape {shape} of {dtype} ({need} bytes) "
+            f"but {have} bytes follow"
+        )
+
+
 def _read_npy(path: Path) -> tuple[np.ndarray, None]:
-    arr = np.load(path, allow_pickle=False)
+    """An array saved by ``np.save``: an empty, truncated or foreign file is refused before
+    numpy reads it (numpy would raise EOFError, or try to unpickle it)."""
+    with open(path, "rb") as fh:
+        magic = fh.read(len(_NPY_MAGIC))
+        if not magic:
+            raise _MalformedError("the file is empty")
+        if magic != _NPY_MAGIC:
+            hint = "; it is a zip archive: name it .npz" if magic.startswith(_ZIP_MAGIC) else ""
+            raise _MalformedError(f"not a NumPy .npy file (no .npy header){hint}")
+        fh.seek(0)
+        _check_npy_size(fh, os.fstat(fh.fileno()).st_size, "the array")
+        fh.seek(0)
+        arr = np.load(fh, allow_pickle=False)
     return _points_array(arr, "the array"), None
 
 
@@ -659,20 +701,43 @@ def _points_array(arr: np.ndarray, what: str) -> np.ndarray:
     return arr[:, :3].astype(np.float64)
 
 
+def _npz_array(z, key: str) -> np.ndarray:
+    """Array ``key`` of an open ``.npz``, its size checked against its member's first."""
+    name = key + ".npy"
+    if name not in z.zip.namelist():
+        raise _MalformedError(f"{key!r} is not a NumPy array (the member {key!r} has no .npy)")
+    with z.zip.open(name) as fh:
+        _check_npy_size(fh, z.zip.getinfo(name).file_size, repr(key))
+    return z[key]
+
+
 def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    """``points`` (+ optional ``faces``), or a DEM (``elevation`` + ``xmin..ymax``)."""
-    with np.load(path, allow_pickle=False) as z:
-        keys = set(z.files)
-        if "points" in keys:
-            pts = _points_array(z["points"], "'points'")
-            if "faces" not in keys:
-                return pts, None
-            f = z["faces"]
-            if f.ndim != 2 or f.shape[1] < 3 or not np.issubdtype(f.dtype, np.integer):
-                raise _MalformedError(f"'faces' must be an (F, 3) integer array; got {f.shape}")
-            return pts, _fan(f)
-        if "elevation" in keys:
-            return _dem_points({k: z[k] for k in keys}), None
+    """``points`` (+ optional ``faces``), or a DEM (``elevation`` + ``xmin..ymax``). A file
+    that is not a zip archive, or a damaged or truncated one, is refused with a message."""
+    with open(path, "rb") as fh:
+        magic = fh.read(len(_NPY_MAGIC))
+    if not magic:
+        raise _MalformedError("the file is empty")
+    if not magic.startswith(_ZIP_MAGIC):
+        hint = "; it is a single array: name it .npy" if magic == _NPY_MAGIC else ""
+        raise _MalformedError(f"not a NumPy .npz file (not a zip archive){hint}")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            keys = set(z.files)
+            if "points" in keys:
+                pts = _points_array(_npz_array(z, "points"), "'points'")
+                if "faces" not in keys:
+                    return pts, None
+                f = _npz_array(z, "faces")
+                if f.ndim != 2 or f.shape[1] < 3 or not np.issubdtype(f.dtype, np.integer):
+                    raise _MalformedError(
+                        f"'faces' must be an (F, 3) integer array; got {f.shape}"
+                    )
+                return pts, _fan(f)
+            if "elevation" in keys:
+                return _dem_points({k: _npz_array(z, k) for k in keys}), None
+    except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+        raise _MalformedError(f"the zip archive is damaged or truncated ({exc})") from None
     raise _MalformedError(
         f"expected key 'points' (and optional 'faces') or a DEM with 'elevation'; found keys "
         f"{sorted(keys)}"

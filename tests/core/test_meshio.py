@@ -3,6 +3,8 @@ and malformed, truncated or missing files raise FileFormatError naming the probl
 
 from __future__ import annotations
 
+import io
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -332,6 +334,74 @@ def test_npy_and_npz_points_and_faces(tmp_path: Path) -> None:
     np.savez(tmp_path / "other.npz", stuff=VERTS)
     with pytest.raises(FileFormatError, match="'stuff'"):
         read_geometry(tmp_path / "other.npz")
+
+
+def npy_bytes(arr: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, arr)
+    return buf.getvalue()
+
+
+def npz_bytes(**arrays: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return buf.getvalue()
+
+
+def huge_npy_header() -> bytes:
+    """A .npy header announcing 10**12 x 3 doubles, followed by 24 bytes."""
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        buf, {"descr": "<f8", "fortran_order": False, "shape": (10**12, 3)}
+    )
+    return buf.getvalue() + bytes(24)
+
+
+def zip_bytes(members: dict[str, bytes]) -> bytes:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    return buf.getvalue()
+
+
+def damaged_member() -> bytes:
+    """An uncompressed .npz whose last coordinate byte is changed: its CRC no longer fits."""
+    data = bytearray(npz_bytes(points=VERTS))
+    at = bytes(data).index(VERTS.tobytes()) + VERTS.nbytes - 1
+    data[at] ^= 0xFF
+    return bytes(data)
+
+
+@pytest.mark.parametrize(
+    ("name", "data", "problem"),
+    [
+        ("p.npy", b"", "the file is empty"),
+        ("p.npy", npy_bytes(VERTS)[:-7], r"truncated: .*shape \(5, 3\) of float64"),
+        ("p.npy", huge_npy_header(), r"truncated: .*\(1000000000000, 3\)"),
+        ("p.npy", b"x y z\n0 0 0\n", "not a NumPy .npy file"),
+        ("p.npy", npz_bytes(points=VERTS), "zip archive: name it .npz"),
+        ("m.npz", b"", "the file is empty"),
+        ("m.npz", b"PK\x03\x04garbage" * 10, "damaged or truncated"),
+        ("m.npz", npz_bytes(points=VERTS)[:200], "damaged or truncated"),
+        ("m.npz", damaged_member(), "damaged or truncated"),
+        ("m.npz", npy_bytes(VERTS), "single array: name it .npy"),
+        ("m.npz", zip_bytes({"points.npy": huge_npy_header()}), r"'points' is truncated"),
+        ("m.npz", zip_bytes({"points": VERTS.tobytes()}), "'points' is not a NumPy array"),
+    ],
+    ids=["npy-empty", "npy-truncated", "npy-huge-shape", "npy-text", "npy-is-zip", "npz-empty",
+         "npz-garbage", "npz-truncated", "npz-bad-crc", "npz-is-npy", "npz-huge-shape",
+         "npz-raw-member"],
+)
+def test_corrupt_npy_and_npz_raise_file_format_error(
+    tmp_path: Path, name: str, data: bytes, problem: str
+) -> None:
+    """Empty, truncated, damaged or foreign .npy/.npz files: FileFormatError naming the file
+    and the problem (not numpy's EOFError, BadZipFile or MemoryError)."""
+    (tmp_path / name).write_bytes(data)
+    with pytest.raises(FileFormatError, match=problem) as info:
+        read_geometry(tmp_path / name)
+    assert str(info.value).startswith(f"cannot read {name!r}: ")
 
 
 def test_dem_npz_becomes_grid_points_in_metres() -> None:
