@@ -210,6 +210,14 @@ def _polygons_from_lines(lines: list[str], what: str, first_col: int = 0) -> np.
     counts = _loadtxt(lines, what, usecols=(first_col,), dtype=np.int64)[:, 0]
     if counts.min() < 0:
         raise _MalformedError(f"bad {what}: negative vertex count")
+    # each index takes a character at least: a larger count (a damaged file) is refused
+    # before it becomes the number of columns to read
+    lengths = np.fromiter(map(len, lines), dtype=np.int64, count=len(lines))
+    if (over := np.flatnonzero(counts > lengths)).size:
+        raise _MalformedError(
+            f"bad {what} {lines[over[0]].strip()[:40]!r}: it announces {counts[over[0]]} "
+            "vertices but lists fewer"
+        )
     arr = np.array(lines, dtype=object)
     groups = []
     for n in np.unique(counts[counts >= 3]):
@@ -353,6 +361,11 @@ class _PlyElement:
     def has_list(self) -> bool:
         return any(isinstance(t, tuple) for _, t in self.props)
 
+    def min_record_size(self) -> int:
+        """Bytes of the smallest binary record: the scalars and the lists' counts (an empty
+        list has no items)."""
+        return sum(np.dtype(t[0] if isinstance(t, tuple) else t).itemsize for _, t in self.props)
+
 
 def _ply_header(data: bytes) -> tuple[str, list[_PlyElement], int]:
     """Parse the header; return the format, the elements, and the byte offset of the body."""
@@ -374,6 +387,10 @@ def _ply_header(data: bytes) -> tuple[str, list[_PlyElement], int]:
                 elements.append(_PlyElement(t[1], int(t[2])))
             except ValueError:
                 raise _MalformedError(f"bad header line {raw.strip()!r}") from None
+            if elements[-1].count < 0:
+                raise _MalformedError(
+                    f"bad header line {raw.strip()!r}: an element count cannot be negative"
+                )
         elif t[0] == "property" and elements:
             try:
                 if t[1] == "list" and len(t) == 5:
@@ -487,6 +504,13 @@ def _ply_binary_element(
     """
     if el.count == 0:
         return {}, offset
+    # before anything is allocated for the announced count: do the records fit at all?
+    least = el.min_record_size() * el.count
+    if offset + least > len(data):
+        raise _MalformedError(
+            f"the {el.name!r} data are truncated: {el.count} records need at least {least} "
+            f"bytes, {max(len(data) - offset, 0)} present"
+        )
     if not el.has_list():
         dt = np.dtype([(n, endian + t) for n, t in el.props])
         arr = _frombuffer(data, dt, el.count, offset, el.name)
@@ -501,6 +525,8 @@ def _ply_binary_element(
             if pos + cdt.itemsize > len(data):
                 raise _MalformedError(f"the {el.name!r} data are truncated")
             n = int(np.frombuffer(data, cdt, 1, pos)[0])
+            if n < 0:
+                raise _MalformedError(f"the {el.name!r} data hold a negative list length {n}")
             sizes.append(n)
             pos += cdt.itemsize + n * np.dtype(t[1]).itemsize
         else:
@@ -569,6 +595,10 @@ def _ply_binary_ragged(el: _PlyElement, data: bytes, offset: int, endian: str) -
                 starts[name][r] = pos
                 if is_list:
                     k = unpack(data, pos)[0]
+                    if k < 0:
+                        raise _MalformedError(
+                            f"the {el.name!r} data hold a negative list length {k}"
+                        )
                     counts[name][r] = k
                     pos += size + k * item
                 else:

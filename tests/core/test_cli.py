@@ -190,3 +190,24 @@ def test_drop_outliers_on_a_mesh_is_refused(tmp_path):
     assert r.stderr.strip().count("\n") == 0
     assert "--drop-outliers applies to point clouds" in r.stderr and "is a mesh" in r.stderr
     assert not (tmp_path / "s.obj").exists()
+
+
+def test_corrupt_input_files_give_one_line_and_exit_2(tmp_path):
+    """An empty .npy, a damaged .npz and a PLY announcing 10**12 faces on a 100-byte body:
+    one line naming the file, exit 2, no traceback (they were EOFError, BadZipFile and
+    MemoryError)."""
+    (tmp_path / "empty.npy").write_bytes(b"")
+    (tmp_path / "garbage.npz").write_bytes(b"PK\x03\x04garbage" * 10)
+    head = (
+        "ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\n"
+        "property float y\nproperty float z\nelement face 1000000000000\n"
+        "property list uchar int vertex_indices\nend_header\n"
+    ).encode()
+    (tmp_path / "huge.ply").write_bytes(head + bytes(60) + b"\x03" + bytes(12))
+    for name, words in [("empty.npy", "the file is empty"),
+                        ("garbage.npz", "damaged or truncated"),
+                        ("huge.ply", "'face' data are truncated")]:
+        r = run("fit", tmp_path / name, "-o", tmp_path / "s.obj", "--quiet")
+        assert r.returncode == 2, r.stderr
+        assert r.stderr.strip().count("\n") == 0 and "Traceback" not in r.stderr, r.stderr
+        assert r.stderr.startswith(f"error: cannot read {name!r}: ") and words in r.stderr

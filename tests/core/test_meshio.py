@@ -290,6 +290,56 @@ def test_malformed_ply_raises_file_format_error(tmp_path: Path, data: bytes, pro
         read_geometry(tmp_path / "bad.ply")
 
 
+def binary_ply(n_vertices: int | str, n_faces: int | str, count_type: str = "uchar") -> bytes:
+    """A little-endian PLY header announcing the given counts, then VERTS as floats and one
+    triangle: a 103-byte body whatever the counts say."""
+    head = (
+        f"ply\nformat binary_little_endian 1.0\nelement vertex {n_vertices}\n"
+        "property float x\nproperty float y\nproperty float z\n"
+        f"element face {n_faces}\nproperty list {count_type} int vertex_indices\nend_header\n"
+    ).encode()
+    count = np.array([3], {"uchar": "u1", "int": "<i4"}[count_type]).tobytes()
+    return head + VERTS.astype("<f4").tobytes() + count + np.array([0, 1, 2], "<i4").tobytes()
+
+
+@pytest.mark.parametrize(
+    ("name", "data", "problem"),
+    [
+        ("f.ply", binary_ply(5, 10**12), r"'face' data are truncated: 1000000000000 records"),
+        ("f.ply", binary_ply(5, 10**12, "int"), r"'face' data are truncated"),
+        ("v.ply", binary_ply(10**12, 1), r"'vertex' data are truncated"),
+        ("n.ply", binary_ply(-5, 1), "'element vertex -5': an element count cannot be negative"),
+        ("n.ply", binary_ply(5, -1), "'element face -1': an element count cannot be negative"),
+        (
+            "l.ply",
+            binary_ply(5, 1, "int").replace(np.array([3], "<i4").tobytes() + b"\0" * 4,
+                                            np.array([-3], "<i4").tobytes() + b"\0" * 4),
+            "negative list length -3",
+        ),
+        (
+            "a.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+            b"property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+            b"end_header\n0 0 0\n1 0 0\n0 1 0\n1000000000000 0 1 2\n",
+            "announces 1000000000000 vertices but lists fewer",
+        ),
+        ("a.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n1000000000000 0 1 2\n", "lists fewer"),
+    ],
+    ids=["faces-count-uchar", "faces-count-int", "vertex-count", "negative-vertex-count",
+         "negative-face-count", "negative-list-length", "ascii-ply-polygon", "off-polygon"],
+)
+def test_counts_beyond_the_data_are_refused_before_allocating(
+    tmp_path: Path, name: str, data: bytes, problem: str
+) -> None:
+    """Element counts and polygon sizes are checked against the bytes or columns present
+    before anything of that size is allocated (a huge count was a MemoryError), and negative
+    counts are refused (np.frombuffer took -1 as 'all')."""
+    (tmp_path / name).write_bytes(data)
+    with pytest.raises(FileFormatError, match=problem) as info:
+        read_geometry(tmp_path / name)
+    assert str(info.value).startswith(f"cannot read {name!r}: ")
+
+
 # ---------------------------------------------------------------------------------------------
 # point clouds: text, npy, npz (points / DEM)
 # ---------------------------------------------------------------------------------------------
