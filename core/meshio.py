@@ -23,6 +23,7 @@ Writers: :func:`write_mesh` for ``.obj`` (ASCII) and ``.ply`` (binary little end
 Bulk data are parsed with numpy (``np.loadtxt``, structured dtypes on the raw bytes); only OBJ
 files and binary PLY files with mixed polygon sizes use a Python loop over lines / faces.
 Every problem with a file raises :class:`~.errors.FileFormatError` naming the file.
+Text (and PLY headers) may start with a UTF-8 byte-order mark; UTF-16 text is refused.
 """
 
 from __future__ import annotations
@@ -227,9 +228,29 @@ def _polygons_from_lines(lines: list[str], what: str, first_col: int = 0) -> np.
     return _fan_groups(groups)
 
 
+_UTF8_BOM = b"\xef\xbb\xbf"
+_UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")  # little and big endian (UTF-32 LE starts alike)
+
+
+def _strip_bom(data: bytes) -> bytes:
+    """The bytes of a text file without a leading UTF-8 byte-order mark (some Windows editors
+    write one); UTF-16/32 text, which numbers cannot be parsed from byte by byte, is refused."""
+    if data.startswith(_UTF16_BOMS):
+        raise _MalformedError(
+            "the file starts with a UTF-16 byte-order mark (UTF-16 text); "
+            "save it as UTF-8 or ASCII"
+        )
+    return data[len(_UTF8_BOM) :] if data.startswith(_UTF8_BOM) else data
+
+
+def _read_text(path: Path) -> str:
+    """A text file decoded as UTF-8 (bad bytes replaced), without a byte-order mark."""
+    return _strip_bom(path.read_bytes()).decode("utf-8", errors="replace")
+
+
 def _text_lines(path: Path) -> list[str]:
     """Non-empty lines of a text file with ``#`` comments removed."""
-    text = path.read_text(encoding="utf-8", errors="replace")
+    text = _read_text(path)
     text = re.sub(r"#[^\n]*", "", text)
     return [ln for ln in text.splitlines() if ln.strip()]
 
@@ -291,7 +312,7 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     the ``v``/``f`` lines; coordinates are converted in bulk by ``np.loadtxt``."""
     coords: list[str] = []
     polys: list[list[int]] = []
-    text = path.read_text(encoding="utf-8", errors="replace")
+    text = _read_text(path)
     for lineno, raw in enumerate(text.splitlines(), 1):
         parts = raw.split("#", 1)[0].split()
         if not parts or parts[0] not in ("v", "f"):
@@ -435,7 +456,7 @@ def _face_list_name(el: _PlyElement) -> str | None:
 
 def _read_ply(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     """PLY (ascii, binary_little_endian, binary_big_endian)."""
-    data = path.read_bytes()
+    data = _strip_bom(path.read_bytes())
     fmt, elements, offset = _ply_header(data)
     tables: dict[str, dict[str, np.ndarray]] = {}
     if fmt == "ascii":

@@ -361,6 +361,43 @@ def test_text_point_clouds(tmp_path: Path, name: str, text: str) -> None:
     assert faces is None
 
 
+BOM_TEXTS = {
+    "p.obj": "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in ROWS) + "f 1 2 3 4\nf 2 5 3\n",
+    "p.csv": "".join(f"{x!r},{y!r},{z!r}\n" for x, y, z in ROWS),
+    "p.xyz": "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in ROWS),
+    "p.off": "OFF\n5 2 0\n" + "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in ROWS)
+    + "4 0 1 2 3\n3 1 4 2\n",
+    "p.ply": "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+    "property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n"
+    + "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in ROWS) + "4 0 1 2 3\n3 1 4 2\n",
+}
+
+
+@pytest.mark.parametrize("name", list(BOM_TEXTS))
+def test_a_utf8_byte_order_mark_is_skipped(tmp_path: Path, name: str) -> None:
+    """A leading UTF-8 byte-order mark (Windows editors write one): every point is read, the
+    first one too (it was skipped in an OBJ, and taken for a header in a headerless CSV)."""
+    (tmp_path / name).write_bytes(b"\xef\xbb\xbf" + BOM_TEXTS[name].encode())
+    pts, faces = read_geometry(tmp_path / name)
+    np.testing.assert_array_equal(pts, VERTS)
+    if name.endswith((".obj", ".off", ".ply")):
+        np.testing.assert_array_equal(faces, TRIS)
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be"])
+@pytest.mark.parametrize("name", ["p.xyz", "p.obj", "p.off", "p.ply"])
+def test_utf16_text_is_refused_with_a_message(tmp_path: Path, name: str, encoding: str) -> None:
+    """UTF-16 text (with its byte-order mark) is refused with a message saying what to do."""
+    text = BOM_TEXTS[name]
+    data = text.encode(encoding)
+    if encoding != "utf-16":  # the -le/-be codecs write no mark: add the usual one
+        data = "\ufeff".encode(encoding) + data
+    (tmp_path / name).write_bytes(data)
+    with pytest.raises(FileFormatError, match="UTF-16 .*save it as UTF-8 or ASCII") as info:
+        read_geometry(tmp_path / name)
+    assert name in str(info.value)
+
+
 def test_text_in_a_number_column_raises_file_format_error(tmp_path: Path) -> None:
     (tmp_path / "p.xyz").write_text("0 0 0\n1 0 0\n1 one 0\n")
     with pytest.raises(FileFormatError, match="p.xyz"):
