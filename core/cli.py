@@ -1,8 +1,8 @@
 """Command line: ``python -m core fit INPUT -o OUTPUT [options]``.
 
-Reads a point cloud or a disk-like mesh (.ply .obj .off .xyz .txt .csv .npy .npz), fits a TCB
-surface (method.md sections 4-6), writes the tessellated surface (.obj or .ply), optionally the
-control net and the spline itself, shows a progress line per iteration and a final report.
+Reads a point cloud or a disk-like mesh (.ply .obj .off .xyz .pts .txt .csv .npy .npz), fits a
+TCB surface (method.md sections 4-6), writes the tessellated surface (.obj or .ply), optionally
+the control net and the spline itself, shows a progress line per iteration and a final report.
 Bad input ends with a one-line message and exit status 2; no traceback.
 """
 
@@ -32,7 +32,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     sub = p.add_subparsers(dest="command", required=True)
     f = sub.add_parser("fit", help="fit a surface to a point cloud or a disk-like mesh")
-    f.add_argument("input", help="points or mesh: .ply .obj .off .xyz .txt .csv .npy .npz")
+    f.add_argument("input", help="points or mesh: .ply .obj .off .xyz .pts .txt .csv .npy .npz")
     f.add_argument("-o", "--output", required=True, help="tessellated surface: .obj or .ply")
     f.add_argument("--tolerance", type=float, default=1e-3,
                    help="stop when the error (RMS, or max with --criterion max) is at most "

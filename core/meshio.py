@@ -12,7 +12,8 @@ cloud. Supported:
 ``.ply``                   PLY ascii, binary_little_endian, binary_big_endian: vertex ``x, y, z``
                            of any numeric type, face list ``vertex_indices``/``vertex_index``
 ``.xyz .txt .csv .pts``    text columns (whitespace or comma separated); the first three are
-                           ``x, y, z``; an optional header line is skipped
+                           ``x, y, z``; an optional header line is skipped, and so is a point
+                           count line (Leica ``.pts``: before each scan)
 ``.npy``                   an ``(n, 3)`` array (more columns: the first three are used)
 ``.npz``                   key ``points`` (and optional ``faces``), or a DEM: key ``elevation``
                            (rows, cols) with ``xmin, xmax, ymin, ymax``
@@ -686,9 +687,31 @@ def _write_ply(path: Path, v: np.ndarray, f: np.ndarray) -> None:
 # --------------------------------------------------------------------------------------------
 
 
+_COUNT_LINE = re.compile(r"\s*\d+\s*")
+
+
+def _skip_point_counts(lines: list[str]) -> list[str]:
+    """The lines without the point counts of a Leica ``.pts`` file: a first line holding a
+    lone integer, and, in a file of several scans one after the other, the count before each
+    scan (found by following the counts). A count beyond the lines left means a truncated
+    file; lines after the counted ones are kept as points."""
+    pos, kept = 0, []
+    while pos < len(lines) and _COUNT_LINE.fullmatch(lines[pos]):
+        n = int(lines[pos])
+        if pos + 1 + n > len(lines):
+            raise _MalformedError(
+                f"a point count line says {n} points but {len(lines) - pos - 1} lines follow "
+                "(the file is truncated)"
+            )
+        kept.append(lines[pos + 1 : pos + 1 + n])
+        pos += 1 + n
+    return lines if pos == 0 else [ln for scan in kept for ln in scan] + lines[pos:]
+
+
 def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
-    """Text columns: whitespace or comma separated; the first three are x, y, z."""
-    lines = _text_lines(path)
+    """Text columns: whitespace or comma separated; the first three are x, y, z. A first line
+    holding a lone integer is a point count (Leica ``.pts``) and is skipped."""
+    lines = _skip_point_counts(_text_lines(path))
     if not lines:
         raise _MalformedError("the file has no data lines")
     delim = "," if "," in lines[0] or (len(lines) > 1 and "," in lines[1]) else None

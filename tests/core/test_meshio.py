@@ -398,6 +398,21 @@ def test_utf16_text_is_refused_with_a_message(tmp_path: Path, name: str, encodin
     assert name in str(info.value)
 
 
+def test_leica_pts_point_counts_are_skipped(tmp_path: Path) -> None:
+    """Leica .pts: a point count line (before each scan), then 'x y z intensity r g b' lines;
+    the points are read, the counts are not taken for points or refused as short lines."""
+    rows = [f"{x!r} {y!r} {z!r} -1200 10 20 30\n" for x, y, z in ROWS]
+    (tmp_path / "one.pts").write_text("5\n" + "".join(rows))
+    (tmp_path / "two.pts").write_text("3\n" + "".join(rows[:3]) + "2\n" + "".join(rows[3:]))
+    for name in ("one.pts", "two.pts"):
+        pts, faces = read_geometry(tmp_path / name)
+        np.testing.assert_array_equal(pts, VERTS)
+        assert faces is None
+    (tmp_path / "cut.pts").write_text("8\n" + "".join(rows))
+    with pytest.raises(FileFormatError, match="says 8 points but 5 lines follow .*truncated"):
+        read_geometry(tmp_path / "cut.pts")
+
+
 def test_text_in_a_number_column_raises_file_format_error(tmp_path: Path) -> None:
     (tmp_path / "p.xyz").write_text("0 0 0\n1 0 0\n1 one 0\n")
     with pytest.raises(FileFormatError, match="p.xyz"):
