@@ -770,8 +770,21 @@ def _read_npy(path: Path) -> tuple[np.ndarray, None]:
 
 
 def _points_array(arr: np.ndarray, what: str) -> np.ndarray:
+    """The first three columns of an ``(N, k >= 3)`` array of real numbers, as float64. A wide
+    array (more columns than rows, more than 3) is refused as transposed: points are rows."""
+    if np.iscomplexobj(arr):
+        raise _MalformedError(
+            f"{what} holds complex numbers ({arr.dtype}); coordinates must be real numbers"
+        )
+    if arr.ndim == 2 and arr.shape[0] < arr.shape[1] and arr.shape[1] > 3:
+        raise _MalformedError(
+            f"{what} has shape {arr.shape}: it looks transposed (points must be rows, an "
+            "(N, 3) array); save its transpose, array.T"
+        )
     if arr.ndim != 2 or arr.shape[1] < 3 or not np.issubdtype(arr.dtype, np.number):
-        raise _MalformedError(f"{what} must be an (N, 3) array of numbers; got shape {arr.shape}")
+        raise _MalformedError(
+            f"{what} must be an (N, 3) array of numbers; got shape {arr.shape}, type {arr.dtype}"
+        )
     return arr[:, :3].astype(np.float64)
 
 

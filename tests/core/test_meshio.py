@@ -4,6 +4,7 @@ and malformed, truncated or missing files raise FileFormatError naming the probl
 from __future__ import annotations
 
 import io
+import re
 import zipfile
 from pathlib import Path
 
@@ -436,6 +437,31 @@ def test_npy_and_npz_points_and_faces(tmp_path: Path) -> None:
     np.savez(tmp_path / "other.npz", stuff=VERTS)
     with pytest.raises(FileFormatError, match="'stuff'"):
         read_geometry(tmp_path / "other.npz")
+
+
+@pytest.mark.parametrize("shape", [(3, 2000), (4, 50), (2, 50)])
+def test_a_transposed_array_is_refused_as_transposed(tmp_path: Path, shape: tuple) -> None:
+    """An array with points as columns, (3, N): refused as transposed (it was read as 3
+    points, and the fit said 'at least 10 points are needed; got 3')."""
+    arr = np.random.default_rng(0).random(shape)
+    np.save(tmp_path / "t.npy", arr)
+    np.savez(tmp_path / "t.npz", points=arr)
+    for name in ("t.npy", "t.npz"):
+        with pytest.raises(FileFormatError, match=rf"{re.escape(str(shape))}: it looks transposed"):
+            read_geometry(tmp_path / name)
+    np.save(tmp_path / "ok.npy", arr.T)  # the transpose is read, its first three columns
+    if shape[0] >= 3:
+        np.testing.assert_array_equal(read_geometry(tmp_path / "ok.npy")[0], arr.T[:, :3])
+
+
+def test_a_complex_array_is_refused(tmp_path: Path) -> None:
+    """Complex coordinates are refused, not read with their imaginary parts dropped."""
+    arr = VERTS + 1j
+    np.save(tmp_path / "c.npy", arr)
+    np.savez(tmp_path / "c.npz", points=arr)
+    for name in ("c.npy", "c.npz"):
+        with pytest.raises(FileFormatError, match="complex numbers .*must be real"):
+            read_geometry(tmp_path / name)
 
 
 def npy_bytes(arr: np.ndarray) -> bytes:
