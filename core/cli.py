@@ -1,15 +1,17 @@
 """Command line: ``python -m core fit INPUT -o OUTPUT [options]``.
 
-Reads a point cloud or a disk-like mesh (.ply .obj .off .xyz .txt .csv .npy .npz), fits a TCB
-surface (method.md sections 4-6), writes the tessellated surface (.obj or .ply), optionally the
-control net and the spline itself, shows a progress line per iteration and a final report.
+Reads a point cloud or a disk-like mesh (.ply .obj .off .xyz .pts .txt .csv .npy .npz), fits a
+TCB surface (method.md sections 4-6), writes the tessellated surface (.obj or .ply), optionally
+the control net and the spline itself, shows a progress line per iteration and a final report.
 Bad input ends with a one-line message and exit status 2; no traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -30,7 +32,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     sub = p.add_subparsers(dest="command", required=True)
     f = sub.add_parser("fit", help="fit a surface to a point cloud or a disk-like mesh")
-    f.add_argument("input", help="points or mesh: .ply .obj .off .xyz .txt .csv .npy .npz")
+    f.add_argument("input", help="points or mesh: .ply .obj .off .xyz .pts .txt .csv .npy .npz")
     f.add_argument("-o", "--output", required=True, help="tessellated surface: .obj or .ply")
     f.add_argument("--tolerance", type=float, default=1e-3,
                    help="stop when the error (RMS, or max with --criterion max) is at most "
@@ -59,7 +61,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--drop-invalid", action="store_true",
                    help="leave out points with NaN or infinite coordinates (point clouds)")
     f.add_argument("--drop-outliers", action="store_true",
-                   help="leave out points far from all others (point clouds; refused otherwise)")
+                   help="leave out points far from all others instead of refusing the cloud "
+                   "(point clouds only: refused for a mesh)")
     f.add_argument("--quiet", action="store_true", help="no progress output")
     return p
 
@@ -94,8 +97,9 @@ def _smoothness_text(report: dict) -> str:
 
 
 def _check_output(path: str | None, what: str, extensions=WRITE_EXTENSIONS) -> None:
-    """Refuse an output path before the fit, not after it: a wrong extension or a missing
-    folder."""
+    """Refuse an output path before the fit, not after it: a wrong extension, a folder in its
+    place, a missing folder or one that does not accept new files, a file that cannot be
+    replaced."""
     if path is None:
         return
     if Path(path).suffix.lower() not in extensions:
@@ -103,9 +107,47 @@ def _check_output(path: str | None, what: str, extensions=WRITE_EXTENSIONS) -> N
             f"cannot write the {what} as {Path(path).suffix or 'a file without extension'}: "
             f"use one of {', '.join(sorted(extensions))}"
         )
+    if Path(path).is_dir():
+        raise TCBError(f"cannot write the {what} to {path}: it is a folder; give a file name")
     folder = Path(path).parent
     if not folder.is_dir():
         raise TCBError(f"cannot write the {what} to {path}: the folder {folder} does not exist")
+    if Path(path).exists() and not os.access(path, os.W_OK):
+        raise TCBError(f"cannot write the {what} to {path}: the file is read-only")
+    try:  # a file without a name (or removed at once): os.access says yes to root everywhere
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise TCBError(
+            f"cannot write the {what} to {path}: the folder {folder} does not accept new files "
+            f"({exc.strerror or exc})"
+        ) from None
+
+
+def _same_file(a: str, b: str) -> bool:
+    """Whether two paths name the same file: equal once resolved (symbolic links followed), or,
+    when both exist, the same file on disk (hard links)."""
+    if Path(a).resolve() == Path(b).resolve():
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return False
+
+
+def _check_distinct(args) -> None:
+    """Refuse, before the fit, an output that would replace the input or another output."""
+    paths = [("the input", args.input), ("-o", args.output), ("--net", args.net),
+             ("--spline", args.spline)]
+    paths = [(name, p) for name, p in paths if p is not None]
+    for i, (name, path) in enumerate(paths):
+        for other, earlier in paths[:i]:
+            if _same_file(earlier, path):
+                raise TCBError(
+                    f"{name} {path} is the same file as {other}"
+                    + (" (the input is never overwritten)" if other == "the input" else "")
+                    + f"; give {name} another path"
+                )
 
 
 def _progress(quiet: bool):
@@ -131,10 +173,16 @@ def _fit(args) -> int:
     _check_output(args.output, "surface")
     _check_output(args.net, "control net")
     _check_output(args.spline, "spline", {".npz"})
+    _check_distinct(args)
     if args.resolution < 2:
         raise TCBError(f"--resolution must be at least 2, got {args.resolution}")
     t0 = time.perf_counter()
     points, faces = read_geometry(args.input)
+    if faces is not None and args.drop_outliers:
+        raise TCBError(
+            f"--drop-outliers applies to point clouds; {args.input} is a mesh, whose faces "
+            "hold its vertices: leave the option out"
+        )
     given = points
     bad = ~np.isfinite(points).all(axis=1)
     if bad.any() and faces is None:

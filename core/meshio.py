@@ -12,7 +12,8 @@ cloud. Supported:
 ``.ply``                   PLY ascii, binary_little_endian, binary_big_endian: vertex ``x, y, z``
                            of any numeric type, face list ``vertex_indices``/``vertex_index``
 ``.xyz .txt .csv .pts``    text columns (whitespace or comma separated); the first three are
-                           ``x, y, z``; an optional header line is skipped
+                           ``x, y, z``; an optional header line is skipped, and so is a point
+                           count line (Leica ``.pts``: before each scan)
 ``.npy``                   an ``(n, 3)`` array (more columns: the first three are used)
 ``.npz``                   key ``points`` (and optional ``faces``), or a DEM: key ``elevation``
                            (rows, cols) with ``xmin, xmax, ymin, ymax``
@@ -23,13 +24,17 @@ Writers: :func:`write_mesh` for ``.obj`` (ASCII) and ``.ply`` (binary little end
 Bulk data are parsed with numpy (``np.loadtxt``, structured dtypes on the raw bytes); only OBJ
 files and binary PLY files with mixed polygon sizes use a Python loop over lines / faces.
 Every problem with a file raises :class:`~.errors.FileFormatError` naming the file.
+Text (and PLY headers) may start with a UTF-8 byte-order mark; UTF-16 text is refused.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import struct
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -86,7 +91,8 @@ def read_geometry(path: PathLike) -> tuple[np.ndarray, np.ndarray | None]:
         raise FileFormatError(f"cannot read {p.name!r}: {exc}") from None
     except OSError as exc:
         raise FileFormatError(f"cannot read {p.name!r}: {exc.strerror or exc}") from None
-    except (ValueError, IndexError, TypeError, struct.error, UnicodeDecodeError) as exc:
+    except (ValueError, IndexError, TypeError, struct.error, UnicodeDecodeError, EOFError,
+            zipfile.BadZipFile, zlib.error) as exc:
         raise FileFormatError(f"cannot read {p.name!r}: malformed content ({exc})") from None
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     if faces is not None:
@@ -206,6 +212,14 @@ def _polygons_from_lines(lines: list[str], what: str, first_col: int = 0) -> np.
     counts = _loadtxt(lines, what, usecols=(first_col,), dtype=np.int64)[:, 0]
     if counts.min() < 0:
         raise _MalformedError(f"bad {what}: negative vertex count")
+    # each index takes a character at least: a larger count (a damaged file) is refused
+    # before it becomes the number of columns to read
+    lengths = np.fromiter(map(len, lines), dtype=np.int64, count=len(lines))
+    if (over := np.flatnonzero(counts > lengths)).size:
+        raise _MalformedError(
+            f"bad {what} {lines[over[0]].strip()[:40]!r}: it announces {counts[over[0]]} "
+            "vertices but lists fewer"
+        )
     arr = np.array(lines, dtype=object)
     groups = []
     for n in np.unique(counts[counts >= 3]):
@@ -215,9 +229,29 @@ def _polygons_from_lines(lines: list[str], what: str, first_col: int = 0) -> np.
     return _fan_groups(groups)
 
 
+_UTF8_BOM = b"\xef\xbb\xbf"
+_UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")  # little and big endian (UTF-32 LE starts alike)
+
+
+def _strip_bom(data: bytes) -> bytes:
+    """The bytes of a text file without a leading UTF-8 byte-order mark (some Windows editors
+    write one); UTF-16/32 text, which numbers cannot be parsed from byte by byte, is refused."""
+    if data.startswith(_UTF16_BOMS):
+        raise _MalformedError(
+            "the file starts with a UTF-16 byte-order mark (UTF-16 text); "
+            "save it as UTF-8 or ASCII"
+        )
+    return data[len(_UTF8_BOM) :] if data.startswith(_UTF8_BOM) else data
+
+
+def _read_text(path: Path) -> str:
+    """A text file decoded as UTF-8 (bad bytes replaced), without a byte-order mark."""
+    return _strip_bom(path.read_bytes()).decode("utf-8", errors="replace")
+
+
 def _text_lines(path: Path) -> list[str]:
     """Non-empty lines of a text file with ``#`` comments removed."""
-    text = path.read_text(encoding="utf-8", errors="replace")
+    text = _read_text(path)
     text = re.sub(r"#[^\n]*", "", text)
     return [ln for ln in text.splitlines() if ln.strip()]
 
@@ -279,7 +313,7 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     the ``v``/``f`` lines; coordinates are converted in bulk by ``np.loadtxt``."""
     coords: list[str] = []
     polys: list[list[int]] = []
-    text = path.read_text(encoding="utf-8", errors="replace")
+    text = _read_text(path)
     for lineno, raw in enumerate(text.splitlines(), 1):
         parts = raw.split("#", 1)[0].split()
         if not parts or parts[0] not in ("v", "f"):
@@ -349,6 +383,11 @@ class _PlyElement:
     def has_list(self) -> bool:
         return any(isinstance(t, tuple) for _, t in self.props)
 
+    def min_record_size(self) -> int:
+        """Bytes of the smallest binary record: the scalars and the lists' counts (an empty
+        list has no items)."""
+        return sum(np.dtype(t[0] if isinstance(t, tuple) else t).itemsize for _, t in self.props)
+
 
 def _ply_header(data: bytes) -> tuple[str, list[_PlyElement], int]:
     """Parse the header; return the format, the elements, and the byte offset of the body."""
@@ -370,6 +409,10 @@ def _ply_header(data: bytes) -> tuple[str, list[_PlyElement], int]:
                 elements.append(_PlyElement(t[1], int(t[2])))
             except ValueError:
                 raise _MalformedError(f"bad header line {raw.strip()!r}") from None
+            if elements[-1].count < 0:
+                raise _MalformedError(
+                    f"bad header line {raw.strip()!r}: an element count cannot be negative"
+                )
         elif t[0] == "property" and elements:
             try:
                 if t[1] == "list" and len(t) == 5:
@@ -414,7 +457,7 @@ def _face_list_name(el: _PlyElement) -> str | None:
 
 def _read_ply(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     """PLY (ascii, binary_little_endian, binary_big_endian)."""
-    data = path.read_bytes()
+    data = _strip_bom(path.read_bytes())
     fmt, elements, offset = _ply_header(data)
     tables: dict[str, dict[str, np.ndarray]] = {}
     if fmt == "ascii":
@@ -483,6 +526,13 @@ def _ply_binary_element(
     """
     if el.count == 0:
         return {}, offset
+    # before anything is allocated for the announced count: do the records fit at all?
+    least = el.min_record_size() * el.count
+    if offset + least > len(data):
+        raise _MalformedError(
+            f"the {el.name!r} data are truncated: {el.count} records need at least {least} "
+            f"bytes, {max(len(data) - offset, 0)} present"
+        )
     if not el.has_list():
         dt = np.dtype([(n, endian + t) for n, t in el.props])
         arr = _frombuffer(data, dt, el.count, offset, el.name)
@@ -497,6 +547,8 @@ def _ply_binary_element(
             if pos + cdt.itemsize > len(data):
                 raise _MalformedError(f"the {el.name!r} data are truncated")
             n = int(np.frombuffer(data, cdt, 1, pos)[0])
+            if n < 0:
+                raise _MalformedError(f"the {el.name!r} data hold a negative list length {n}")
             sizes.append(n)
             pos += cdt.itemsize + n * np.dtype(t[1]).itemsize
         else:
@@ -565,6 +617,10 @@ def _ply_binary_ragged(el: _PlyElement, data: bytes, offset: int, endian: str) -
                 starts[name][r] = pos
                 if is_list:
                     k = unpack(data, pos)[0]
+                    if k < 0:
+                        raise _MalformedError(
+                            f"the {el.name!r} data hold a negative list length {k}"
+                        )
                     counts[name][r] = k
                     pos += size + k * item
                 else:
@@ -631,9 +687,31 @@ def _write_ply(path: Path, v: np.ndarray, f: np.ndarray) -> None:
 # --------------------------------------------------------------------------------------------
 
 
+_COUNT_LINE = re.compile(r"\s*\d+\s*")
+
+
+def _skip_point_counts(lines: list[str]) -> list[str]:
+    """The lines without the point counts of a Leica ``.pts`` file: a first line holding a
+    lone integer, and, in a file of several scans one after the other, the count before each
+    scan (found by following the counts). A count beyond the lines left means a truncated
+    file; lines after the counted ones are kept as points."""
+    pos, kept = 0, []
+    while pos < len(lines) and _COUNT_LINE.fullmatch(lines[pos]):
+        n = int(lines[pos])
+        if pos + 1 + n > len(lines):
+            raise _MalformedError(
+                f"a point count line says {n} points but {len(lines) - pos - 1} lines follow "
+                "(the file is truncated)"
+            )
+        kept.append(lines[pos + 1 : pos + 1 + n])
+        pos += 1 + n
+    return lines if pos == 0 else [ln for scan in kept for ln in scan] + lines[pos:]
+
+
 def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
-    """Text columns: whitespace or comma separated; the first three are x, y, z."""
-    lines = _text_lines(path)
+    """Text columns: whitespace or comma separated; the first three are x, y, z. A first line
+    holding a lone integer is a point count (Leica ``.pts``) and is skipped."""
+    lines = _skip_point_counts(_text_lines(path))
     if not lines:
         raise _MalformedError("the file has no data lines")
     delim = "," if "," in lines[0] or (len(lines) > 1 and "," in lines[1]) else None
@@ -648,31 +726,105 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
     return _loadtxt(lines, "line", usecols=(0, 1, 2), delimiter=delim), None
 
 
+_NPY_MAGIC = b"\x93NUMPY"
+_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a zip's first entry, or an empty zip
+
+
+def _check_npy_size(fh, size: int, what: str) -> None:
+    """Refuse a ``.npy`` stream whose header announces more data than the ``size`` bytes it
+    has (a truncated file), before numpy allocates the announced array. ``fh`` is at the
+    magic string; format 3.0 headers (rare) are left to numpy."""
+    version = np.lib.format.read_magic(fh)
+    if version == (1, 0):
+        shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+    elif version == (2, 0):
+        shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+    else:
+        return
+    if dtype.hasobject:
+        return  # refused by np.load(allow_pickle=False)
+    need = math.prod(shape) * dtype.itemsize
+    have = size - fh.tell()
+    if need > have:
+        raise _MalformedError(
+            f"{what} is truncated: its header announces shape {shape} of {dtype} ({need} bytes) "
+            f"but {have} bytes follow"
+        )
+
+
 def _read_npy(path: Path) -> tuple[np.ndarray, None]:
-    arr = np.load(path, allow_pickle=False)
+    """An array saved by ``np.save``: an empty, truncated or foreign file is refused before
+    numpy reads it (numpy would raise EOFError, or try to unpickle it)."""
+    with open(path, "rb") as fh:
+        magic = fh.read(len(_NPY_MAGIC))
+        if not magic:
+            raise _MalformedError("the file is empty")
+        if magic != _NPY_MAGIC:
+            hint = "; it is a zip archive: name it .npz" if magic.startswith(_ZIP_MAGIC) else ""
+            raise _MalformedError(f"not a NumPy .npy file (no .npy header){hint}")
+        fh.seek(0)
+        _check_npy_size(fh, os.fstat(fh.fileno()).st_size, "the array")
+        fh.seek(0)
+        arr = np.load(fh, allow_pickle=False)
     return _points_array(arr, "the array"), None
 
 
 def _points_array(arr: np.ndarray, what: str) -> np.ndarray:
+    """The first three columns of an ``(N, k >= 3)`` array of real numbers, as float64. A wide
+    array (more columns than rows, more than 3) is refused as transposed: points are rows."""
+    if np.iscomplexobj(arr):
+        raise _MalformedError(
+            f"{what} holds complex numbers ({arr.dtype}); coordinates must be real numbers"
+        )
+    if arr.ndim == 2 and arr.shape[0] < arr.shape[1] and arr.shape[1] > 3:
+        raise _MalformedError(
+            f"{what} has shape {arr.shape}: it looks transposed (points must be rows, an "
+            "(N, 3) array); save its transpose, array.T"
+        )
     if arr.ndim != 2 or arr.shape[1] < 3 or not np.issubdtype(arr.dtype, np.number):
-        raise _MalformedError(f"{what} must be an (N, 3) array of numbers; got shape {arr.shape}")
+        raise _MalformedError(
+            f"{what} must be an (N, 3) array of numbers; got shape {arr.shape}, type {arr.dtype}"
+        )
     return arr[:, :3].astype(np.float64)
 
 
+def _npz_array(z, key: str) -> np.ndarray:
+    """Array ``key`` of an open ``.npz``, its size checked against its member's first."""
+    name = key + ".npy"
+    if name not in z.zip.namelist():
+        raise _MalformedError(f"{key!r} is not a NumPy array (the member {key!r} has no .npy)")
+    with z.zip.open(name) as fh:
+        _check_npy_size(fh, z.zip.getinfo(name).file_size, repr(key))
+    return z[key]
+
+
 def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    """``points`` (+ optional ``faces``), or a DEM (``elevation`` + ``xmin..ymax``)."""
-    with np.load(path, allow_pickle=False) as z:
-        keys = set(z.files)
-        if "points" in keys:
-            pts = _points_array(z["points"], "'points'")
-            if "faces" not in keys:
-                return pts, None
-            f = z["faces"]
-            if f.ndim != 2 or f.shape[1] < 3 or not np.issubdtype(f.dtype, np.integer):
-                raise _MalformedError(f"'faces' must be an (F, 3) integer array; got {f.shape}")
-            return pts, _fan(f)
-        if "elevation" in keys:
-            return _dem_points({k: z[k] for k in keys}), None
+    """``points`` (+ optional ``faces``), or a DEM (``elevation`` + ``xmin..ymax``). A file
+    that is not a zip archive, or a damaged or truncated one, is refused with a message."""
+    with open(path, "rb") as fh:
+        magic = fh.read(len(_NPY_MAGIC))
+    if not magic:
+        raise _MalformedError("the file is empty")
+    if not magic.startswith(_ZIP_MAGIC):
+        hint = "; it is a single array: name it .npy" if magic == _NPY_MAGIC else ""
+        raise _MalformedError(f"not a NumPy .npz file (not a zip archive){hint}")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            keys = set(z.files)
+            if "points" in keys:
+                pts = _points_array(_npz_array(z, "points"), "'points'")
+                if "faces" not in keys:
+                    return pts, None
+                f = _npz_array(z, "faces")
+                if f.ndim != 2 or f.shape[1] < 3 or not np.issubdtype(f.dtype, np.integer):
+                    raise _MalformedError(
+                        f"'faces' must be an (F, 3) integer array; got {f.shape}"
+                    )
+                return pts, _fan(f)
+            if "elevation" in keys:
+                return _dem_points({k: _npz_array(z, k) for k in keys}), None
+    except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+        raise _MalformedError(f"the zip archive is damaged or truncated ({exc})") from None
     raise _MalformedError(
         f"expected key 'points' (and optional 'faces') or a DEM with 'elevation'; found keys "
         f"{sorted(keys)}"

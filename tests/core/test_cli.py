@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from core import TCBSurface
-from core.meshio import read_geometry
+from core.meshio import read_geometry, write_mesh
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -131,3 +131,83 @@ def test_a_stalled_fit_says_which_iteration_and_why_the_smoothness_was_chosen(tm
     assert "(the error stopped falling)" in r.stdout, r.stdout
     assert re.search(r"the surface is iteration \d+'s, of lowest estimated error", r.stdout)
     assert "(cross-validated: the error stopped falling)" in r.stdout, r.stdout
+
+
+def test_an_output_that_is_the_input_or_another_output_is_refused(tmp_path):
+    """-o, --net or --spline naming the input (also through a symbolic or a hard link) or
+    another output: one line and exit 2 before the fit, and the input keeps its bytes."""
+    pts = np.random.default_rng(5).random((600, 3)) * [1, 1, 0.1]
+    scan, cloud = tmp_path / "scan.ply", tmp_path / "c.npz"
+    write_mesh(scan, pts, np.empty((0, 3), dtype=np.int64))
+    np.savez(cloud, points=pts)
+    (tmp_path / "link.ply").symlink_to(scan)
+    (tmp_path / "hard.ply").hardlink_to(scan)
+    before = {p: p.read_bytes() for p in (scan, cloud)}
+    quick = ["--quiet", "--max-iterations", "1", "--max-control-points", "100"]
+    cases = [
+        ([scan, "-o", scan], "-o", "the input"),
+        ([cloud, "-o", tmp_path / "c.obj", "--spline", cloud], "--spline", "the input"),
+        ([scan, "-o", tmp_path / "same.obj", "--net", tmp_path / "same.obj"], "--net", "-o"),
+        ([scan, "-o", tmp_path / "sub" / ".." / "scan.ply"], "-o", "the input"),
+        ([scan, "-o", tmp_path / "link.ply"], "-o", "the input"),
+        ([tmp_path / "hard.ply", "-o", tmp_path / "s.obj", "--net", scan], "--net", "the input"),
+    ]
+    (tmp_path / "sub").mkdir()
+    for options, option, other in cases:
+        r = run("fit", *options, *quick)
+        assert r.returncode == 2, r.stderr
+        assert r.stderr.strip().count("\n") == 0, r.stderr
+        assert f"error: {option} " in r.stderr and f"is the same file as {other}" in r.stderr
+    assert {p: p.read_bytes() for p in (scan, cloud)} == before
+    assert not (tmp_path / "same.obj").exists() and not (tmp_path / "c.obj").exists()
+
+
+def test_an_output_path_that_cannot_be_written_is_refused_before_the_fit(tmp_path):
+    """A folder in the output's place, or a folder that accepts no new files (/proc, even for
+    root): one line and exit 2 before the input is read (it does not exist here)."""
+    missing_input = tmp_path / "never-read.ply"
+    (tmp_path / "x.obj").mkdir()
+    cases = [
+        (["-o", tmp_path / "x.obj"], "it is a folder"),
+        (["-o", tmp_path / "s.obj", "--net", tmp_path / "x.obj"], "it is a folder"),
+    ]
+    if Path("/proc/self").is_dir():
+        cases.append((["-o", "/proc/a.obj"], "the folder /proc does not accept new files"))
+    for options, words in cases:
+        r = run("fit", missing_input, *options)
+        assert r.returncode == 2, r.stderr
+        assert r.stderr.strip().count("\n") == 0 and words in r.stderr, r.stderr
+    assert not Path("/proc/a.obj").exists()
+    assert list(tmp_path.iterdir()) == [tmp_path / "x.obj"]  # no probe file left behind
+
+
+def test_drop_outliers_on_a_mesh_is_refused(tmp_path):
+    """--drop-outliers applies to point clouds (a mesh's faces hold its vertices): given for a
+    mesh it is refused with one line instead of being ignored."""
+    r = run("fit", ROOT / "data" / "nefertiti.off", "-o", tmp_path / "s.obj", "--quiet",
+            "--drop-outliers", "--max-iterations", "1", "--max-control-points", "100")
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.strip().count("\n") == 0
+    assert "--drop-outliers applies to point clouds" in r.stderr and "is a mesh" in r.stderr
+    assert not (tmp_path / "s.obj").exists()
+
+
+def test_corrupt_input_files_give_one_line_and_exit_2(tmp_path):
+    """An empty .npy, a damaged .npz and a PLY announcing 10**12 faces on a 100-byte body:
+    one line naming the file, exit 2, no traceback (they were EOFError, BadZipFile and
+    MemoryError)."""
+    (tmp_path / "empty.npy").write_bytes(b"")
+    (tmp_path / "garbage.npz").write_bytes(b"PK\x03\x04garbage" * 10)
+    head = (
+        "ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\n"
+        "property float y\nproperty float z\nelement face 1000000000000\n"
+        "property list uchar int vertex_indices\nend_header\n"
+    ).encode()
+    (tmp_path / "huge.ply").write_bytes(head + bytes(60) + b"\x03" + bytes(12))
+    for name, words in [("empty.npy", "the file is empty"),
+                        ("garbage.npz", "damaged or truncated"),
+                        ("huge.ply", "'face' data are truncated")]:
+        r = run("fit", tmp_path / name, "-o", tmp_path / "s.obj", "--quiet")
+        assert r.returncode == 2, r.stderr
+        assert r.stderr.strip().count("\n") == 0 and "Traceback" not in r.stderr, r.stderr
+        assert r.stderr.startswith(f"error: cannot read {name!r}: ") and words in r.stderr

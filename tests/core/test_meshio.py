@@ -3,6 +3,9 @@ and malformed, truncated or missing files raise FileFormatError naming the probl
 
 from __future__ import annotations
 
+import io
+import re
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -288,6 +291,56 @@ def test_malformed_ply_raises_file_format_error(tmp_path: Path, data: bytes, pro
         read_geometry(tmp_path / "bad.ply")
 
 
+def binary_ply(n_vertices: int | str, n_faces: int | str, count_type: str = "uchar") -> bytes:
+    """A little-endian PLY header announcing the given counts, then VERTS as floats and one
+    triangle: a 103-byte body whatever the counts say."""
+    head = (
+        f"ply\nformat binary_little_endian 1.0\nelement vertex {n_vertices}\n"
+        "property float x\nproperty float y\nproperty float z\n"
+        f"element face {n_faces}\nproperty list {count_type} int vertex_indices\nend_header\n"
+    ).encode()
+    count = np.array([3], {"uchar": "u1", "int": "<i4"}[count_type]).tobytes()
+    return head + VERTS.astype("<f4").tobytes() + count + np.array([0, 1, 2], "<i4").tobytes()
+
+
+@pytest.mark.parametrize(
+    ("name", "data", "problem"),
+    [
+        ("f.ply", binary_ply(5, 10**12), r"'face' data are truncated: 1000000000000 records"),
+        ("f.ply", binary_ply(5, 10**12, "int"), r"'face' data are truncated"),
+        ("v.ply", binary_ply(10**12, 1), r"'vertex' data are truncated"),
+        ("n.ply", binary_ply(-5, 1), "'element vertex -5': an element count cannot be negative"),
+        ("n.ply", binary_ply(5, -1), "'element face -1': an element count cannot be negative"),
+        (
+            "l.ply",
+            binary_ply(5, 1, "int").replace(np.array([3], "<i4").tobytes() + b"\0" * 4,
+                                            np.array([-3], "<i4").tobytes() + b"\0" * 4),
+            "negative list length -3",
+        ),
+        (
+            "a.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+            b"property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+            b"end_header\n0 0 0\n1 0 0\n0 1 0\n1000000000000 0 1 2\n",
+            "announces 1000000000000 vertices but lists fewer",
+        ),
+        ("a.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n1000000000000 0 1 2\n", "lists fewer"),
+    ],
+    ids=["faces-count-uchar", "faces-count-int", "vertex-count", "negative-vertex-count",
+         "negative-face-count", "negative-list-length", "ascii-ply-polygon", "off-polygon"],
+)
+def test_counts_beyond_the_data_are_refused_before_allocating(
+    tmp_path: Path, name: str, data: bytes, problem: str
+) -> None:
+    """Element counts and polygon sizes are checked against the bytes or columns present
+    before anything of that size is allocated (a huge count was a MemoryError), and negative
+    counts are refused (np.frombuffer took -1 as 'all')."""
+    (tmp_path / name).write_bytes(data)
+    with pytest.raises(FileFormatError, match=problem) as info:
+        read_geometry(tmp_path / name)
+    assert str(info.value).startswith(f"cannot read {name!r}: ")
+
+
 # ---------------------------------------------------------------------------------------------
 # point clouds: text, npy, npz (points / DEM)
 # ---------------------------------------------------------------------------------------------
@@ -307,6 +360,58 @@ def test_text_point_clouds(tmp_path: Path, name: str, text: str) -> None:
     pts, faces = read_geometry(tmp_path / name)
     np.testing.assert_array_equal(pts, VERTS)
     assert faces is None
+
+
+BOM_TEXTS = {
+    "p.obj": "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in ROWS) + "f 1 2 3 4\nf 2 5 3\n",
+    "p.csv": "".join(f"{x!r},{y!r},{z!r}\n" for x, y, z in ROWS),
+    "p.xyz": "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in ROWS),
+    "p.off": "OFF\n5 2 0\n" + "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in ROWS)
+    + "4 0 1 2 3\n3 1 4 2\n",
+    "p.ply": "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+    "property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n"
+    + "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in ROWS) + "4 0 1 2 3\n3 1 4 2\n",
+}
+
+
+@pytest.mark.parametrize("name", list(BOM_TEXTS))
+def test_a_utf8_byte_order_mark_is_skipped(tmp_path: Path, name: str) -> None:
+    """A leading UTF-8 byte-order mark (Windows editors write one): every point is read, the
+    first one too (it was skipped in an OBJ, and taken for a header in a headerless CSV)."""
+    (tmp_path / name).write_bytes(b"\xef\xbb\xbf" + BOM_TEXTS[name].encode())
+    pts, faces = read_geometry(tmp_path / name)
+    np.testing.assert_array_equal(pts, VERTS)
+    if name.endswith((".obj", ".off", ".ply")):
+        np.testing.assert_array_equal(faces, TRIS)
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be"])
+@pytest.mark.parametrize("name", ["p.xyz", "p.obj", "p.off", "p.ply"])
+def test_utf16_text_is_refused_with_a_message(tmp_path: Path, name: str, encoding: str) -> None:
+    """UTF-16 text (with its byte-order mark) is refused with a message saying what to do."""
+    text = BOM_TEXTS[name]
+    data = text.encode(encoding)
+    if encoding != "utf-16":  # the -le/-be codecs write no mark: add the usual one
+        data = "\ufeff".encode(encoding) + data
+    (tmp_path / name).write_bytes(data)
+    with pytest.raises(FileFormatError, match="UTF-16 .*save it as UTF-8 or ASCII") as info:
+        read_geometry(tmp_path / name)
+    assert name in str(info.value)
+
+
+def test_leica_pts_point_counts_are_skipped(tmp_path: Path) -> None:
+    """Leica .pts: a point count line (before each scan), then 'x y z intensity r g b' lines;
+    the points are read, the counts are not taken for points or refused as short lines."""
+    rows = [f"{x!r} {y!r} {z!r} -1200 10 20 30\n" for x, y, z in ROWS]
+    (tmp_path / "one.pts").write_text("5\n" + "".join(rows))
+    (tmp_path / "two.pts").write_text("3\n" + "".join(rows[:3]) + "2\n" + "".join(rows[3:]))
+    for name in ("one.pts", "two.pts"):
+        pts, faces = read_geometry(tmp_path / name)
+        np.testing.assert_array_equal(pts, VERTS)
+        assert faces is None
+    (tmp_path / "cut.pts").write_text("8\n" + "".join(rows))
+    with pytest.raises(FileFormatError, match="says 8 points but 5 lines follow .*truncated"):
+        read_geometry(tmp_path / "cut.pts")
 
 
 def test_text_in_a_number_column_raises_file_format_error(tmp_path: Path) -> None:
@@ -332,6 +437,99 @@ def test_npy_and_npz_points_and_faces(tmp_path: Path) -> None:
     np.savez(tmp_path / "other.npz", stuff=VERTS)
     with pytest.raises(FileFormatError, match="'stuff'"):
         read_geometry(tmp_path / "other.npz")
+
+
+@pytest.mark.parametrize("shape", [(3, 2000), (4, 50), (2, 50)])
+def test_a_transposed_array_is_refused_as_transposed(tmp_path: Path, shape: tuple) -> None:
+    """An array with points as columns, (3, N): refused as transposed (it was read as 3
+    points, and the fit said 'at least 10 points are needed; got 3')."""
+    arr = np.random.default_rng(0).random(shape)
+    np.save(tmp_path / "t.npy", arr)
+    np.savez(tmp_path / "t.npz", points=arr)
+    for name in ("t.npy", "t.npz"):
+        with pytest.raises(FileFormatError, match=rf"{re.escape(str(shape))}: it looks transposed"):
+            read_geometry(tmp_path / name)
+    np.save(tmp_path / "ok.npy", arr.T)  # the transpose is read, its first three columns
+    if shape[0] >= 3:
+        np.testing.assert_array_equal(read_geometry(tmp_path / "ok.npy")[0], arr.T[:, :3])
+
+
+def test_a_complex_array_is_refused(tmp_path: Path) -> None:
+    """Complex coordinates are refused, not read with their imaginary parts dropped."""
+    arr = VERTS + 1j
+    np.save(tmp_path / "c.npy", arr)
+    np.savez(tmp_path / "c.npz", points=arr)
+    for name in ("c.npy", "c.npz"):
+        with pytest.raises(FileFormatError, match="complex numbers .*must be real"):
+            read_geometry(tmp_path / name)
+
+
+def npy_bytes(arr: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, arr)
+    return buf.getvalue()
+
+
+def npz_bytes(**arrays: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return buf.getvalue()
+
+
+def huge_npy_header() -> bytes:
+    """A .npy header announcing 10**12 x 3 doubles, followed by 24 bytes."""
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        buf, {"descr": "<f8", "fortran_order": False, "shape": (10**12, 3)}
+    )
+    return buf.getvalue() + bytes(24)
+
+
+def zip_bytes(members: dict[str, bytes]) -> bytes:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    return buf.getvalue()
+
+
+def damaged_member() -> bytes:
+    """An uncompressed .npz whose last coordinate byte is changed: its CRC no longer fits."""
+    data = bytearray(npz_bytes(points=VERTS))
+    at = bytes(data).index(VERTS.tobytes()) + VERTS.nbytes - 1
+    data[at] ^= 0xFF
+    return bytes(data)
+
+
+@pytest.mark.parametrize(
+    ("name", "data", "problem"),
+    [
+        ("p.npy", b"", "the file is empty"),
+        ("p.npy", npy_bytes(VERTS)[:-7], r"truncated: .*shape \(5, 3\) of float64"),
+        ("p.npy", huge_npy_header(), r"truncated: .*\(1000000000000, 3\)"),
+        ("p.npy", b"x y z\n0 0 0\n", "not a NumPy .npy file"),
+        ("p.npy", npz_bytes(points=VERTS), "zip archive: name it .npz"),
+        ("m.npz", b"", "the file is empty"),
+        ("m.npz", b"PK\x03\x04garbage" * 10, "damaged or truncated"),
+        ("m.npz", npz_bytes(points=VERTS)[:200], "damaged or truncated"),
+        ("m.npz", damaged_member(), "damaged or truncated"),
+        ("m.npz", npy_bytes(VERTS), "single array: name it .npy"),
+        ("m.npz", zip_bytes({"points.npy": huge_npy_header()}), r"'points' is truncated"),
+        ("m.npz", zip_bytes({"points": VERTS.tobytes()}), "'points' is not a NumPy array"),
+    ],
+    ids=["npy-empty", "npy-truncated", "npy-huge-shape", "npy-text", "npy-is-zip", "npz-empty",
+         "npz-garbage", "npz-truncated", "npz-bad-crc", "npz-is-npy", "npz-huge-shape",
+         "npz-raw-member"],
+)
+def test_corrupt_npy_and_npz_raise_file_format_error(
+    tmp_path: Path, name: str, data: bytes, problem: str
+) -> None:
+    """Empty, truncated, damaged or foreign .npy/.npz files: FileFormatError naming the file
+    and the problem (not numpy's EOFError, BadZipFile or MemoryError)."""
+    (tmp_path / name).write_bytes(data)
+    with pytest.raises(FileFormatError, match=problem) as info:
+        read_geometry(tmp_path / name)
+    assert str(info.value).startswith(f"cannot read {name!r}: ")
 
 
 def test_dem_npz_becomes_grid_points_in_metres() -> None:
