@@ -849,6 +849,17 @@ def parameterize_points(points: np.ndarray, drop_outliers: bool | None = False) 
 # --------------------------------------------------------------------------------------------
 
 
+def _welded_pieces(points: np.ndarray, tris: np.ndarray) -> int:
+    """Connected pieces of the triangles once vertices at exactly equal positions are one."""
+    _, first = np.unique(points, axis=0, return_inverse=True)
+    t = first.reshape(-1)[tris]
+    m = int(first.max()) + 1
+    a, b = t.reshape(-1), np.roll(t, -1, axis=1).reshape(-1)
+    graph = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m))
+    _, label = connected_components(graph, directed=False)
+    return len(np.unique(label[t.reshape(-1)]))
+
+
 def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """Validate ``faces`` (``(f, k)`` integer, ``k >= 3``) and split polygons into fans.
 
@@ -1104,6 +1115,13 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
     _, label = connected_components(graph, directed=False)
     n_pieces = len(np.unique(label[used]))
     if n_pieces > 1:
+        if _welded_pieces(p, tris) < n_pieces / 2:  # STL-style: corners not shared
+            raise TopologyError(
+                f"the mesh has {n_pieces} separate pieces because its faces do not share "
+                "vertices: each corner is its own vertex at the same position as its "
+                "neighbours' (as in STL files); merge vertices at equal positions (Blender: "
+                "Mesh > Clean Up > Merge by Distance) and fit again"
+            )
         raise TopologyError(
             f"the mesh has {n_pieces} separate pieces (connected components); one connected "
             "disk-like patch is needed: keep the largest piece or fit each piece separately"

@@ -452,6 +452,19 @@ def test_two_components_are_a_topology_error() -> None:
         parameterize(two, np.concatenate([faces, faces + len(pts)]))
 
 
+def test_a_mesh_whose_faces_share_no_vertices_is_told_to_merge_them() -> None:
+    """STL files repeat each corner for every triangle: 32 "separate pieces", and the advice to
+    keep the largest was wrong; two real pieces keep that advice."""
+    pts, faces = grid_mesh(5)
+    soup = pts[faces].reshape(-1, 3)
+    with pytest.raises(TopologyError, match=r"32 separate pieces because its faces do not share "
+                       r"vertices.*Merge by Distance"):
+        parameterize(soup, np.arange(len(soup)).reshape(-1, 3))
+    two = np.concatenate([pts, pts + [3.0, 0, 0]])
+    with pytest.raises(TopologyError, match="keep the largest piece"):
+        parameterize(two, np.concatenate([faces, faces + len(pts)]))
+
+
 def test_bowtie_vertex_is_a_topology_error() -> None:
     pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]], float)
     with pytest.raises(TopologyError, match="non-manifold vertices"):
