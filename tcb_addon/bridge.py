@@ -114,12 +114,58 @@ def read_positions(data) -> np.ndarray:
 
 
 def read_triangles(mesh) -> np.ndarray:
-    """(t, 3) int32 vertex indices of the mesh's triangulated faces."""
+    """(t, 3) int32 vertex indices of the mesh's triangulated faces (Blender's triangulation,
+    with n-gons that cut the same diagonal triangulated again: :func:`_untangle_diagonals`)."""
     tris = mesh.loop_triangles
     buf = np.empty(len(tris) * 3, dtype=np.int32)
     if len(tris):
         tris.foreach_get("vertices", buf)
-    return buf.reshape(-1, 3)
+    return _untangle_diagonals(mesh, buf.reshape(-1, 3))
+
+
+def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
+    """Blender triangulates each n-gon on its own: two bent n-gons that share a chain through a
+    vertex of no other face (Limited Dissolve leaves these) can both cut the diagonal across
+    that vertex, which then has four triangles, and a disk read as non-manifold. Those n-gons
+    are triangulated again as fans from a corner whose diagonals no other face uses (a loop over
+    the few n-gons concerned). Edges of the mesh itself in more than two faces are left for the
+    engine to name."""
+    n = len(mesh.vertices)
+    if not len(tris):
+        return tris
+    t = tris.astype(np.int64)
+    ends = np.sort(np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1), axis=2)
+    key = ends[..., 0] * n + ends[..., 1]  # (t, 3)
+    uniq, count = np.unique(key, return_counts=True)
+    crowded = uniq[count > 2]
+    if not len(crowded):
+        return tris
+    ev = np.empty(len(mesh.edges) * 2, dtype=np.int32)
+    if len(mesh.edges):
+        mesh.edges.foreach_get("vertices", ev)
+    ev = np.sort(ev.reshape(-1, 2).astype(np.int64), axis=1)
+    real = ev[:, 0] * n + ev[:, 1]
+    diagonals = np.setdiff1d(crowded, real)
+    if not len(diagonals):
+        return tris
+    poly = np.empty(len(tris), dtype=np.int32)
+    mesh.loop_triangles.foreach_get("polygon_index", poly)
+    redo = np.unique(poly[np.isin(key, diagonals).any(axis=1)])
+    keep = ~np.isin(poly, redo)
+    used = set(key[keep].ravel().tolist()) | set(real.tolist())
+    out = [tris[keep]]
+    for p in redo.tolist():
+        vs = list(mesh.polygons[p].vertices)
+        m = len(vs)
+        for i in list(range(m)) + [0]:  # the first corner whose fan is free, else corner 0
+            cut = {min(vs[i], vs[(i + k) % m]) * n + max(vs[i], vs[(i + k) % m])
+                   for k in range(2, m - 1)}
+            if not cut & used:
+                break
+        used |= cut
+        out.append(np.array([(vs[i], vs[(i + k) % m], vs[(i + k + 1) % m])
+                             for k in range(1, m - 1)], dtype=np.int32))
+    return np.vstack(out)
 
 
 def read_selection(context, objects=None) -> InputData:

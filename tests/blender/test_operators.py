@@ -606,6 +606,42 @@ def test_export_in_edit_mode_saves_the_drag_on_screen(clean_scene, addon, tmp_pa
     assert saved[4, 2] - before[4, 2] == pytest.approx(0.5, abs=1e-5)
 
 
+def test_bent_ngons_that_blender_cuts_along_the_same_diagonal_are_fitted(clean_scene, addon):
+    """Dissolving inner edges of a curved grid leaves non-planar n-gons; where two of them share
+    a chain through a vertex of no other face, Blender's triangulation of each cuts the same
+    diagonal, in four triangles: the disk was refused as "non-manifold" (Select Non Manifold
+    found nothing). Such n-gons are triangulated again (bridge._untangle_diagonals)."""
+    import bmesh
+
+    bpy = clean_scene
+    verts, quads = grid(12, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(y))
+    mesh = bpy.data.meshes.new("Dissolved")
+    bm = bmesh.new()
+    for p in verts:
+        bm.verts.new(p)
+    bm.verts.ensure_lookup_table()
+    for q in quads:
+        bm.faces.new([bm.verts[i] for i in q])
+    bm.edges.ensure_lookup_table()
+    bmesh.ops.dissolve_edges(bm, edges=[e for e in bm.edges if not e.is_boundary][::7][:30])
+    bm.to_mesh(mesh)
+    bm.free()
+    mesh.calc_loop_triangles()
+    loop = np.array([t.vertices[:] for t in mesh.loop_triangles])
+    _, uses = np.unique(np.sort(loop[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0,
+                        return_counts=True)
+    assert uses.max() > 2  # the case: Blender's own triangles share a diagonal four times
+    obj = bpy.data.objects.new("Dissolved", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    tris = addon.tcb_addon.bridge.read_triangles(mesh)
+    _, uses = np.unique(np.sort(tris[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0,
+                        return_counts=True)
+    assert uses.max() == 2 and len(tris) == len(loop)
+    assert fit(bpy, obj, tolerance=1e-2, max_control_points=200) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    assert surface.tcb.role == "SURFACE" and surface.tcb.rms_rel < 1e-2
+
+
 def test_refine_removes_deviation_points_of_the_old_surface(clean_scene, capfd):
     """The Deviation Points hold the distances to the surface they were computed for: after
     Refine they described the old one (max 0.0107 against 0.0032), with nothing saying so."""
