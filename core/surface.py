@@ -55,8 +55,8 @@ MAX_FIT_POINTS = 2_000_000
 MIN_ASPECT = 1e-3
 # tessellation: rounds of edge splits where the data parameters are denser than on average
 TESSELLATION_SPLITS = 4
-# the edge-split rounds look the compression up on a grid of at most this many cells along the
-# longer side (the tessellation's own grid up to that resolution)
+# the edge-split rounds look a mesh's compression up on a grid of at most this many cells along
+# the longer side (4x finer than the tessellation's grid up to resolution 128)
 TESSELLATION_STRETCH_CELLS = 512
 # grid steps across the shorter side of the domain at least (a road strip 250 times longer than
 # wide had 143 triangles in one row at resolution 64, up to 0.34 m off an 8 m wide road)
@@ -236,8 +236,9 @@ class TCBSurface:
         steep slopes), edges are split until their length times the local compression is at
         most two grid steps (conforming red-green splits, :func:`_split_edges`;
         :data:`TESSELLATION_SPLITS` rounds at most; the compression is looked up at the nearest
-        centre of a grid of at most :data:`TESSELLATION_STRETCH_CELLS` cells along the longer
-        side), so the surface mesh does not coarsen in 3D where the parameters are crowded.
+        centre of a grid 4x finer than the tessellation's, of at most
+        :data:`TESSELLATION_STRETCH_CELLS` cells along the longer side for a mesh and 128 for a
+        cloud), so the surface mesh does not coarsen in 3D where the parameters are crowded.
         Meshes measure the compression by the vertex
         ``stretch`` of their parameterization (3D over uv edge length), clouds (and files
         without it) by the density of the data parameters. The parameters depend only on the
@@ -301,10 +302,10 @@ class TCBSurface:
         stretch = self._local_stretch(data, full, np.asarray(self._param.stretch)[ok]
                                       if self._param.stretch is not None else None)
         if stretch is not None:
-            # evaluated once, on a grid 4x finer than the tessellation's (at most
-            # TESSELLATION_STRETCH_CELLS): at every edge of every round it took 11 of the 14 s
-            # of resolution 1024 on the DEM
-            stretch = _gridded(stretch, lo, hi, min(4 * resolution, TESSELLATION_STRETCH_CELLS))
+            # evaluated once, on a grid 4x finer than the tessellation's (at most what the
+            # compression resolves): at every edge of every round it took 11 of the 14 s of
+            # resolution 1024 on the DEM
+            stretch = _gridded(stretch, lo, hi, min(4 * resolution, stretch.cells))
         # the rounds split the marked edges in place (red-green): a new Delaunay triangulation
         # per round cost seconds at resolution ~250, and the rounds were skipped above it, so a
         # steep mesh got a coarser surface at 251 than at 250 (three_peaks: longest 3D edge
@@ -337,11 +338,16 @@ class TCBSurface:
         vertex) or else from the density of the data parameters (median spacing of the 16th
         nearest neighbour over the local one, of at most 20 000 of them: a scanner samples the
         surface evenly, so the data lie denser in uv where the map compresses). None with too
-        few data."""
+        few data. ``f.cells``: the lookup grid that resolves it (:func:`_gridded`): the density
+        of 20 000 points varies over ~1/35 of the extent, a mesh's vertices are finer."""
         if stretch is not None and np.isfinite(stretch).all() and len(stretch):
             typical = float(np.median(stretch))
             if typical > 0:
-                return lambda x: stretch[tree.query(x)[1]] / typical
+                def by_vertex(x):
+                    return stretch[tree.query(x)[1]] / typical
+
+                by_vertex.cells = TESSELLATION_STRETCH_CELLS
+                return by_vertex
         # distinct parameters only: duplicated points would read as density (+14-31% vertices
         # for doubled clouds; with most points doubled the median spacing was 0)
         data = np.unique(data[:: max(1, len(data) // 20_000)], axis=0)
@@ -350,7 +356,12 @@ class TCBSurface:
             return None
         sample = cKDTree(data)
         typical = float(np.median(sample.query(data, k=k + 1)[0][:, k]))
-        return lambda x: typical / np.maximum(sample.query(x, k=k)[0][:, k - 1], 1e-300)
+
+        def by_density(x):
+            return typical / np.maximum(sample.query(x, k=k)[0][:, k - 1], 1e-300)
+
+        by_density.cells = 128
+        return by_density
 
     def _domain_triangles(self, uv, d, tree, trim, lattice=None) -> np.ndarray:
         """CCW Delaunay triangles of ``uv`` inside the domain (and, for clouds, within ``trim``
