@@ -185,6 +185,12 @@ def _fit(args) -> int:
         )
     given = points
     bad = ~np.isfinite(points).all(axis=1)
+    if bad.any() and faces is not None:  # the engine's advice is Python; this is the CLI's
+        raise TCBError(
+            f"{int(bad.sum())} of the {len(points)} vertices of the mesh {args.input} have NaN "
+            "or infinite coordinates; repair or delete them in a mesh editor (--drop-invalid "
+            "applies to point clouds: a mesh's faces hold its vertices)"
+        )
     if bad.any() and faces is None:
         if not args.drop_invalid:
             raise TCBError(

@@ -117,6 +117,23 @@ def test_nan_rows_name_the_option_that_drops_them(tmp_path):
     assert "597 points" in r.stdout
 
 
+def test_a_mesh_with_a_nan_vertex_gets_command_line_advice(tmp_path):
+    """A mesh's NaN vertex was refused with the engine's advice, Python code
+    ("points[np.isfinite(points).all(axis=1)]"); --drop-invalid does not apply to a mesh."""
+    verts, faces = read_geometry(ROOT / "data" / "nefertiti.off")
+    verts[5] = np.nan
+    src = tmp_path / "nan.off"
+    with open(src, "w") as fh:
+        fh.write(f"OFF\n{len(verts)} {len(faces)} 0\n")
+        np.savetxt(fh, verts)
+        np.savetxt(fh, np.c_[np.full(len(faces), 3), faces], fmt="%d")
+    for extra in ((), ("--drop-invalid",)):
+        r = run("fit", src, "-o", tmp_path / "s.obj", "--quiet", *extra)
+        assert r.returncode == 2 and r.stderr.strip().count("\n") == 0
+        assert "1 of the" in r.stderr and "repair or delete them in a mesh editor" in r.stderr
+        assert "np." not in r.stderr
+
+
 def test_a_stalled_fit_says_which_iteration_and_why_the_smoothness_was_chosen(tmp_path):
     """A noisy cloud with a tolerance below its noise stops because the error stopped falling;
     the table names the iteration returned (an earlier, smaller fit) and why the default
