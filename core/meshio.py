@@ -881,7 +881,31 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
     keep = np.isfinite(pts[:, 2])
     if "nodata" in z:
         keep &= pts[:, 2] != float(z["nodata"])
+    else:
+        _refuse_fill_values(pts[keep, 2])
     return pts[keep]
+
+
+# fill values of DEM formats (GDAL/ESRI -9999, SRTM -32768, float32 lowest) for cells without data
+_FILL_VALUES = (-9999.0, -99999.0, -32767.0, -32768.0, float(np.finfo(np.float32).min))
+
+
+def _refuse_fill_values(h: np.ndarray) -> None:
+    """A DEM without a ``nodata`` key whose lowest elevation is a common fill value far (over
+    1000 units) below all others: its cells have no data, and fitted as terrain they would pull
+    the surface down and set the diagonal a relative tolerance is measured against."""
+    if not h.size:
+        return
+    low = float(h.min())
+    if low not in _FILL_VALUES:
+        return
+    rest = h[h != low]
+    if rest.size and float(rest.min()) > low + 1000.0:
+        raise _MalformedError(
+            f"{int(np.count_nonzero(h == low))} of the DEM's {h.size} cells are {low:g}, far "
+            f"below all others (lowest {float(rest.min()):g}): a no-data fill value; store it as "
+            f"the key 'nodata' (np.savez(..., nodata={low:g})) or set those cells to NaN"
+        )
 
 
 _READERS = {

@@ -564,6 +564,22 @@ def test_small_dem_in_metres_with_nodata(tmp_path: Path) -> None:
     )
 
 
+def test_a_dem_fill_value_without_a_nodata_key_is_refused(tmp_path: Path) -> None:
+    """-9999 cells of a DEM saved without its 'nodata' key were fitted as terrain 10 km deep
+    ("tolerance reached" on a garbage surface); a real low elevation is kept."""
+    elev = np.array([[101.0, 102.0, -9999.0], [104.0, -9999.0, 106.0]])
+    bounds = dict(xmin=1000.0, xmax=1020.0, ymin=500.0, ymax=510.0)
+    np.savez(tmp_path / "d.npz", elevation=elev, **bounds)
+    with pytest.raises(FileFormatError, match=r"2 of the DEM's 6 cells are -9999, far below all "
+                       r"others \(lowest 101\): a no-data fill value; store it as the key "
+                       r"'nodata'"):
+        read_geometry(tmp_path / "d.npz")
+    np.savez(tmp_path / "ok.npz", elevation=np.where(elev < 0, 50.0, elev), **bounds)
+    assert len(read_geometry(tmp_path / "ok.npz")[0]) == 6
+    np.savez(tmp_path / "deep.npz", elevation=np.where(elev < 0, -9999.0, -9000.0), **bounds)
+    assert len(read_geometry(tmp_path / "deep.npz")[0]) == 6  # a trench, not a fill value
+
+
 # ---------------------------------------------------------------------------------------------
 # paths
 # ---------------------------------------------------------------------------------------------
