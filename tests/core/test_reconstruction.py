@@ -952,8 +952,12 @@ def test_edge_splits_keep_a_conforming_ccw_mesh_of_the_same_area():
 
     ends = np.unique(np.sort(tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
     marked = mark(None, 0.5 * (uv[ends[:, 0]] + uv[ends[:, 1]]))
-    new_uv, new_tri, more = _split_edges(uv, tri, mark)
-    assert more and 0.2 < marked.mean() < 0.6
+    new_uv, same, new = _split_edges(uv, tri, mark)
+    new_tri = np.vstack([same, new])
+    assert len(new) and 0.2 < marked.mean() < 0.6
+    # the triangles kept have no marked edge, and no later round would mark one of theirs
+    kept = np.sort(same[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    assert not mark(None, 0.5 * (uv[kept[:, 0]] + uv[kept[:, 1]])).any()
     assert len(new_uv) == len(uv) + marked.sum()
     np.testing.assert_array_equal(new_uv[: len(uv)], uv)
     doubled = orient2d(*(new_uv[new_tri[:, k]] for k in range(3)))
@@ -969,7 +973,7 @@ def test_edge_splits_keep_a_conforming_ccw_mesh_of_the_same_area():
     for (a, b) in ends[marked]:
         m = mids[tuple(0.5 * (uv[a] + uv[b]))]
         assert (a, b) not in have and (min(a, m), max(a, m)) in have and (min(b, m), max(b, m)) in have
-    assert _split_edges(uv, tri, lambda length, mid: np.zeros(len(mid), bool))[2] is False
+    assert len(_split_edges(uv, tri, lambda length, mid: np.zeros(len(mid), bool))[2]) == 0
 
 
 def test_a_long_thin_strip_is_tessellated_several_triangles_wide():
