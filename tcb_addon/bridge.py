@@ -127,9 +127,11 @@ def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
     """Blender triangulates each n-gon on its own: two bent n-gons that share a chain through a
     vertex of no other face (Limited Dissolve leaves these) can both cut the diagonal across
     that vertex, which then has four triangles, and a disk read as non-manifold. Those n-gons
-    are triangulated again as fans from a corner whose diagonals no other face uses (a loop over
-    the few n-gons concerned). Edges of the mesh itself in more than two faces are left for the
-    engine to name."""
+    are triangulated again as fans from a corner whose diagonals no other face uses and whose
+    triangles all face the polygon's way (a fan from a corner of a concave n-gon can leave it:
+    overlapping triangles); an n-gon without such a corner keeps Blender's triangles (a loop
+    over the few n-gons concerned). Edges of the mesh itself in more than two faces, and
+    crowded diagonals that no fan resolves, are left for the engine to name."""
     n = len(mesh.vertices)
     if not len(tris):
         return tris
@@ -153,18 +155,28 @@ def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
     redo = np.unique(poly[np.isin(key, diagonals).any(axis=1)])
     keep = ~np.isin(poly, redo)
     used = set(key[keep].ravel().tolist()) | set(real.tolist())
+    pos = read_positions(mesh).astype(np.float64)
     out = [tris[keep]]
     for p in redo.tolist():
-        vs = list(mesh.polygons[p].vertices)
+        vs = np.array(mesh.polygons[p].vertices)
         m = len(vs)
-        for i in list(range(m)) + [0]:  # the first corner whose fan is free, else corner 0
-            cut = {min(vs[i], vs[(i + k) % m]) * n + max(vs[i], vs[(i + k) % m])
-                   for k in range(2, m - 1)}
-            if not cut & used:
+        corners = pos[vs]
+        # the polygon's normal (Newell): the way every triangle of a valid fan faces
+        normal = np.cross(corners, np.roll(corners, -1, axis=0)).sum(axis=0)
+        for i in range(m):
+            j = (i + np.arange(1, m - 1)) % m
+            fan = np.c_[np.full(m - 2, vs[i]), vs[j], vs[(j + 1) % m]]
+            cut = set((np.minimum(vs[i], vs[j[1:]]) * n + np.maximum(vs[i], vs[j[1:]])).tolist())
+            a, b, c = pos[fan[:, 0]], pos[fan[:, 1]], pos[fan[:, 2]]
+            facing = np.cross(b - a, c - a)
+            # every triangle faces the polygon's way, none flat (three corners in a row)
+            if not cut & used and (facing @ normal > 1e-3 * np.linalg.norm(facing, axis=1)
+                                   * np.linalg.norm(normal)).all():
+                used |= cut
+                out.append(fan.astype(np.int32))
                 break
-        used |= cut
-        out.append(np.array([(vs[i], vs[(i + k) % m], vs[(i + k + 1) % m])
-                             for k in range(1, m - 1)], dtype=np.int32))
+        else:  # no corner works: Blender's triangles stay (the engine names the edge)
+            out.append(tris[poly == p])
     return np.vstack(out)
 
 
