@@ -606,16 +606,12 @@ def test_export_in_edit_mode_saves_the_drag_on_screen(clean_scene, addon, tmp_pa
     assert saved[4, 2] - before[4, 2] == pytest.approx(0.5, abs=1e-5)
 
 
-def test_bent_ngons_that_blender_cuts_along_the_same_diagonal_are_fitted(clean_scene, addon):
-    """Dissolving inner edges of a curved grid leaves non-planar n-gons; where two of them share
-    a chain through a vertex of no other face, Blender's triangulation of each cuts the same
-    diagonal, in four triangles: the disk was refused as "non-manifold" (Select Non Manifold
-    found nothing). Such n-gons are triangulated again (bridge._untangle_diagonals)."""
+def dissolved_grid(bpy, f, choose):
+    """A 12 x 12 grid mesh of heights ``f`` with the inner edges ``choose(inner edges)``
+    dissolved into n-gons (as Limited Dissolve leaves them), its loop triangles computed."""
     import bmesh
 
-    bpy = clean_scene
-    verts, quads = grid(12, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(y))
-    mesh = bpy.data.meshes.new("Dissolved")
+    verts, quads = grid(12, f=f)
     bm = bmesh.new()
     for p in verts:
         bm.verts.new(p)
@@ -623,10 +619,23 @@ def test_bent_ngons_that_blender_cuts_along_the_same_diagonal_are_fitted(clean_s
     for q in quads:
         bm.faces.new([bm.verts[i] for i in q])
     bm.edges.ensure_lookup_table()
-    bmesh.ops.dissolve_edges(bm, edges=[e for e in bm.edges if not e.is_boundary][::7][:30])
+    inner = [e for e in bm.edges if not e.is_boundary]
+    bmesh.ops.dissolve_edges(bm, edges=choose(inner), use_verts=False)
+    mesh = bpy.data.meshes.new("Dissolved")
     bm.to_mesh(mesh)
     bm.free()
     mesh.calc_loop_triangles()
+    return mesh
+
+
+def test_bent_ngons_that_blender_cuts_along_the_same_diagonal_are_fitted(clean_scene, addon):
+    """Dissolving inner edges of a curved grid leaves non-planar n-gons; where two of them share
+    a chain through a vertex of no other face, Blender's triangulation of each cuts the same
+    diagonal, in four triangles: the disk was refused as "non-manifold" (Select Non Manifold
+    found nothing). Such n-gons are triangulated again (bridge._untangle_diagonals)."""
+    bpy = clean_scene
+    mesh = dissolved_grid(bpy, lambda x, y: 0.3 * np.sin(2 * x) * np.cos(y),
+                          lambda inner: inner[::7][:30])
     loop = np.array([t.vertices[:] for t in mesh.loop_triangles])
     _, uses = np.unique(np.sort(loop[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0,
                         return_counts=True)
@@ -647,28 +656,18 @@ def test_untangled_ngons_keep_every_triangle_facing_the_mesh_way(clean_scene, ad
     the n-gons are triangulated again without a triangle that faces the other way (a fan from
     a corner of a concave n-gon left it: overlapping triangles, found by review), and most
     crowded diagonals are resolved."""
-    import bmesh
-
     bpy = clean_scene
     untangle = addon.tcb_addon.bridge.read_triangles
     cases = resolved = 0
     for seed in range(40):
         rng = np.random.default_rng(seed)
-        verts, quads = grid(12, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(y) + 0.2 * np.sin(3 * y))
-        bm = bmesh.new()
-        for p in verts:
-            bm.verts.new(p)
-        bm.verts.ensure_lookup_table()
-        for q in quads:
-            bm.faces.new([bm.verts[i] for i in q])
-        bm.edges.ensure_lookup_table()
-        inner = [e for e in bm.edges if not e.is_boundary]
-        pick = rng.choice(len(inner), size=int(rng.integers(20, 70)), replace=False)
-        bmesh.ops.dissolve_edges(bm, edges=[inner[i] for i in pick], use_verts=False)
-        mesh = bpy.data.meshes.new("dissolved")
-        bm.to_mesh(mesh)
-        bm.free()
-        mesh.calc_loop_triangles()
+
+        def pick(inner):
+            chosen = rng.choice(len(inner), size=int(rng.integers(20, 70)), replace=False)
+            return [inner[i] for i in chosen]
+
+        mesh = dissolved_grid(
+            bpy, lambda x, y: 0.3 * np.sin(2 * x) * np.cos(y) + 0.2 * np.sin(3 * y), pick)
         loop = np.array([t.vertices[:] for t in mesh.loop_triangles])
         verts = np.array([v.co[:] for v in mesh.vertices])  # dissolving removes some
 
