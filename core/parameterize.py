@@ -598,7 +598,7 @@ def _fold_fraction(
       projection put points of another layer next to ``i``: their order flipped. (The earlier
       test, ``d`` at more than 60 degrees to the local plane, missed layers under a sheet
       tilted to the projection: a spiral sheet and rotated steep height fields passed with
-      8-48% of their triangles flipped.)
+      7-49% of their triangles flipped.)
 
     Only points with a reliable local normal are suspects, and a point counts as flagged only
     when at least half of its 3D neighbourhood are suspects (folds are regions; noise makes

@@ -287,11 +287,9 @@ class TCBSurface:
         uv = np.vstack([boundary, grid[inside]])
         number = np.full(len(grid), -1)
         number[inside] = len(boundary) + np.arange(np.count_nonzero(inside))
-        deep = deep.reshape(len(gv), len(gu))
-        number = number.reshape(len(gv), len(gu))
-        origin = np.array([gu[0], gv[0]]) if len(gu) and len(gv) else None
-        cells, rest, in_cells = _lattice(deep, number, origin, d)
-        lattice = (cells, np.concatenate([np.arange(len(boundary)), rest]), in_cells)
+        lattice = _lattice(deep.reshape(len(gv), len(gu)), number.reshape(len(gv), len(gu)),
+                           np.array([gu[0], gv[0]]) if len(gu) and len(gv) else None, d)
+        lattice = (lattice[0], np.concatenate([np.arange(len(boundary)), lattice[1]]), lattice[2])
         data, ok = self._data_parameters()
         full = cKDTree(data)
         trim = None
