@@ -133,7 +133,7 @@ def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
     over the few n-gons concerned). Edges of the mesh itself in more than two faces, and
     crowded diagonals that no fan resolves, are left for the engine to name."""
     n = len(mesh.vertices)
-    if not len(tris):
+    if len(tris) == len(mesh.polygons):  # all triangles: no diagonals (most scans; no sort)
         return tris
     t = tris.astype(np.int64)
     ends = np.sort(np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1), axis=2)
