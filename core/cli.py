@@ -20,6 +20,7 @@ import numpy as np
 from .errors import InvalidInputError, OutlierError, TCBError
 from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
+from .parameterize import projection_direction
 from .refine import STALLED, replaced_default_reason
 
 __all__ = ["main"]
@@ -63,8 +64,30 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--drop-outliers", action="store_true",
                    help="leave out points far from all others instead of refusing the cloud "
                    "(point clouds only: refused for a mesh)")
+    f.add_argument("--projection", type=_projection, default=None, metavar="x|y|z|DX,DY,DZ",
+                   help="point clouds: project along this direction (a height field over the "
+                   "plane across it) instead of choosing it; still checked for folds. Its sign "
+                   "does not matter (a leading minus needs the form --projection=-1,0,0)")
     f.add_argument("--quiet", action="store_true", help="no progress output")
     return p
+
+
+def _projection(text: str):
+    """``--projection``: an axis name, or three comma-separated numbers."""
+    if text.strip().lower() in ("x", "y", "z"):
+        return text.strip().lower()
+    try:
+        d = [float(t) for t in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected x, y, z or three numbers such as 0,0,1; got {text!r}") from None
+    try:
+        projection_direction(d)
+    except InvalidInputError:
+        raise argparse.ArgumentTypeError(
+            f"expected x, y, z or three numbers, not all zero, such as 0,0,1; got {text!r}"
+        ) from None
+    return d
 
 
 def _smoothness(text: str):
@@ -178,6 +201,11 @@ def _fit(args) -> int:
         raise TCBError(f"--resolution must be at least 2, got {args.resolution}")
     t0 = time.perf_counter()
     points, faces = read_geometry(args.input)
+    if faces is not None and args.projection is not None:
+        raise TCBError(
+            f"--projection applies to point clouds; {args.input} is a mesh, which is "
+            "parameterized by its faces: leave the option out"
+        )
     if faces is not None and args.drop_outliers:
         raise TCBError(
             f"--drop-outliers applies to point clouds; {args.input} is a mesh, whose faces "
@@ -210,7 +238,7 @@ def _fit(args) -> int:
             relative=args.relative, max_control_points=args.max_control_points,
             max_iterations=args.max_iterations, smoothness=args.smoothness,
             criterion=args.criterion, callback=_progress(args.quiet),
-            drop_outliers=args.drop_outliers,
+            drop_outliers=args.drop_outliers, projection=args.projection,
         )
     except OutlierError as exc:
         # number the outliers as in the file (not among the points left after --drop-invalid),
@@ -229,6 +257,13 @@ def _fit(args) -> int:
         ("input", f"{args.input} ({r['points']} points"
                   + (f", {r['outliers']} outliers left out)" if r.get("outliers") else ")")),
         ("mode / degree", f"{r['mode']} / {r['degree']}"),
+    ]
+    param = surf.parameterization
+    if param.kind == "plane":  # the direction used, to pass as --projection another time
+        chosen = "given" if args.projection is not None else "chosen"
+        rows.append(("projection", ",".join(f"{x:.4g}" for x in param.axes[2])
+                     + f" ({chosen})"))
+    rows += [
         ("knots (interior)", f"{r['knots']} ({r['interior_knots']})"),
         ("control points", f"{r['control_points']}"),
         ("iterations", f"{r['iterations']} ({r['stop_reason']})" + _returned(r)),

@@ -42,6 +42,7 @@ __all__ = [
     "parameterize",
     "parameterize_mesh",
     "parameterize_points",
+    "projection_direction",
 ]
 
 MIN_POINTS = 10
@@ -60,6 +61,12 @@ _FOLD_MAX_FRACTION = 0.02  # fraction of flagged points above which the cloud is
 _FOLD_RIM = 0.05  # "at the rim": within this fraction of the extent from the convex hull
 _FOLD_RIM_SHARE = 0.6  # steep points count as a fold when this share of them is at the rim
 _FOLD_MAX_SAMPLE = 40_000  # larger clouds are checked on a seeded random subset of this size
+# noise: when fewer than this share of the local planes are reliable, coarser samples (a
+# quarter of the points each, down to _COARSE_MIN) are tried and the most reliable one kept
+_MIN_RELIABLE = 0.5
+_COARSE_MIN = 250
+_MIN_CHECKABLE = 0.3  # below this share of reliable planes at every scale: fold check blind,
+_MAX_THICKNESS = 0.5  # and a cloud thicker than this (s_2 / s_1 of its PCA) is refused
 _THIN_NEIGHBOURHOOD = 0.25  # lambda_0 / lambda_1 above this: local normal unreliable
 _COLLINEAR_RTOL = 1e-9  # RMS distance from the best line, relative to the scale
 _OUTLIER_NEIGHBOURS = 8  # d_i: distance to the 8th nearest distinct neighbour (local spacing)
@@ -576,8 +583,60 @@ def _project(q: np.ndarray, m: np.ndarray, vt: np.ndarray, n: np.ndarray):
     return axes, c, s, (proj - c) / s
 
 
+def _reliable_scale(q: np.ndarray, sample: np.ndarray, planes, k: int):
+    """The sample of ``q`` and its local planes (:func:`_local_planes`, ``k`` neighbours) at the
+    scale where the most local planes are reliable, and that share.
+
+    Noise of the order of the point spacing makes the neighbourhoods of ``k`` points noise
+    blobs: their normals are random, the fold tests see no suspects and let a folded
+    projection through (a turned Franke cloud of 30 000 points with noise as large as its
+    spacing was accepted with 8% of its triangles flipped). A neighbourhood of ``k`` points of
+    a quarter of the sample is twice as wide, so noise weighs half as much against it; curvature
+    weighs more. While fewer than half the planes are reliable, coarser samples (seeded, each a
+    quarter of the last, down to 250 points) are tried, and one is kept when its share of
+    reliable planes is 0.1 higher than the best so far (for a steep, curved cloud without noise,
+    such as Renka's F7, the share falls as the sample thins, and the full sample stays)."""
+    rng = np.random.default_rng(1)
+    share = float(planes[2].mean())
+    coarse = sample
+    while share < _MIN_RELIABLE and len(coarse) >= 4 * _COARSE_MIN:
+        coarse = np.sort(rng.choice(coarse, len(coarse) // 4, replace=False))
+        trial = _local_planes(q[coarse], k)
+        if trial[2].mean() > share + 0.1:
+            sample, planes, share = coarse, trial, float(trial[2].mean())
+    return sample, planes, share
+
+
+def projection_direction(projection) -> np.ndarray | None:
+    """The unit projection direction named by ``projection``: None (automatic), ``"x"``,
+    ``"y"``, ``"z"`` (any case) or three numbers, not all zero (the data's own coordinates).
+
+    Raises:
+        InvalidInputError: anything else.
+    """
+    if projection is None:
+        return None
+    if isinstance(projection, str):
+        axis = {"x": 0, "y": 1, "z": 2}.get(projection.strip().lower())
+        if axis is None:
+            raise InvalidInputError(
+                f"projection must be \"x\", \"y\", \"z\" or three numbers, got {projection!r}"
+            )
+        return np.eye(3)[axis]
+    try:
+        d = np.asarray(projection, dtype=np.float64)
+    except (TypeError, ValueError):
+        d = np.zeros(0)
+    if d.shape != (3,) or not np.isfinite(d).all() or not np.linalg.norm(d) > 0:
+        raise InvalidInputError(
+            "projection must be \"x\", \"y\", \"z\" or three finite numbers, not all zero "
+            f"(a direction), got {projection!r}"
+        )
+    return d / np.linalg.norm(d)
+
+
 def _fold_fraction(
-    q: np.ndarray, uv: np.ndarray, normal: np.ndarray, planes=None
+    q: np.ndarray, uv: np.ndarray, normal: np.ndarray, planes=None, sample=None
 ) -> float:
     """Fraction of points where the cloud is not a height field over its best-fit plane.
 
@@ -606,7 +665,7 @@ def _fold_fraction(
     Clouds of more than 40 000 points are checked on a seeded (deterministic) random subset of
     that size; ``planes`` are the local planes of that subset when already computed.
     """
-    sample = _fold_sample(q)
+    sample = _fold_sample(q) if sample is None else sample
     q, uv = q[sample], uv[sample]
     normals, sigma, reliable, idx = planes if planes is not None else _local_planes(
         q, min(_FOLD_NEIGHBOURS, len(q) - 1)
@@ -751,7 +810,9 @@ def outlier_error(points: np.ndarray, isolated, label=None, advice: str = _DROP_
     )
 
 
-def parameterize_points(points: np.ndarray, drop_outliers: bool | None = False) -> Parameterization:
+def parameterize_points(
+    points: np.ndarray, drop_outliers: bool | None = False, projection=None
+) -> Parameterization:
     """Parameterize a point cloud by orthogonal projection on its best-fit plane.
 
     The projection normal ``n`` is the PCA normal (SVD of the centred points) unless another
@@ -767,8 +828,13 @@ def parameterize_points(points: np.ndarray, drop_outliers: bool | None = False) 
     at 0 and scale its longer side to ``[-1, 1]`` (method.md section 4). On a plane the map is an
     isometry up to the factor ``s``.
 
-    Folds are detected as in :func:`_fold_fraction`; more than 2 % flagged points over every
-    candidate plane is an error (reported for the first one).
+    Folds are detected as in :func:`_fold_fraction`, at the scale of :func:`_reliable_scale`
+    (noise); more than 2 % flagged points over every candidate plane is an error (reported for
+    the first one). So is a cloud whose local planes are reliable at fewer than 30% of the
+    points at every scale, unless it is thin across its best-fit plane (``s_2 < 0.5 s_1``, a
+    noisy slab): the check would be blind (noisy turned steep fields were accepted with 47-49%
+    of their triangles flipped; their ``s_2 / s_1`` is 0.90-0.98). A ``projection`` given
+    replaces the candidates and is trusted on such clouds (it is still checked).
 
     Outliers (:func:`isolated_points`) are an error unless ``drop_outliers`` is True: then the
     cloud without them is parameterized, their ``uv`` rows are NaN and ``used`` is False
@@ -777,14 +843,17 @@ def parameterize_points(points: np.ndarray, drop_outliers: bool | None = False) 
     Args:
         points: ``(n, 3)`` points, ``n >= 10`` distinct, not all on a line.
         drop_outliers: leave outliers out instead of refusing the cloud.
+        projection: the direction to project along (:func:`projection_direction`), or None.
 
     Returns:
         A ``"plane"`` :class:`Parameterization` with ``domain_polygon`` the convex hull of uv.
 
     Raises:
         InvalidInputError: bad input (see :func:`normalize`).
-        ParameterizationError: the cloud folds over every candidate plane.
+        ParameterizationError: the cloud folds over every candidate plane (or the one given),
+            or is too noisy to be checked for folds (with no ``projection``).
     """
+    direction = projection_direction(projection)
     q, norm = normalize(points)
     sample = _fold_sample(q)
     k = min(_FOLD_NEIGHBOURS, len(sample) - 1)
@@ -797,7 +866,9 @@ def parameterize_points(points: np.ndarray, drop_outliers: bool | None = False) 
             kept = np.ones(len(q), dtype=bool)
             kept[isolated] = False
             try:
-                sub = parameterize_points(np.asarray(points, dtype=np.float64)[kept], None)
+                sub = parameterize_points(
+                    np.asarray(points, dtype=np.float64)[kept], None, projection
+                )
             except TCBError as exc:  # say that its numbers are those of the points kept
                 raise type(exc)(
                     f"{exc} (after leaving out {len(isolated)} outliers of the {len(q)} points)"
@@ -806,18 +877,39 @@ def parameterize_points(points: np.ndarray, drop_outliers: bool | None = False) 
             uv[kept] = sub.uv
             return replace(sub, uv=_readonly(uv), used=_readonly(kept))
     m = q.mean(axis=0)
-    _, vt = principal_axes(q - m)
+    sv, vt = principal_axes(q - m)
     planes = _local_planes(q[sample], k, knn[1][:, : k + 1])
+    sample, planes, share = _reliable_scale(q, sample, planes, k)
+    # a cloud thin across its best-fit plane cannot hide layers farther apart than its noise
+    if direction is None and share < _MIN_CHECKABLE and sv[2] > _MAX_THICKNESS * sv[1]:
+        raise ParameterizationError(
+            f"the point cloud is too noisy, or too sparse for how much it curves, to be checked "
+            f"for folds: the points' neighbourhoods are flat discs at only {100 * share:.0f}% "
+            "of them, at every scale tried, and the cloud is too thick to be one layer (its "
+            f"thickness across its best-fit plane is {100 * sv[2] / sv[1]:.0f}% of its width). If the surface is a height field over a known "
+            "direction, give it (fit_surface(..., projection=\"z\"), on the command line "
+            "--projection z, in Blender the Projection option); otherwise smooth the scan "
+            "or supply a mesh of disk topology (with faces)"
+        )
     # the most height-field-like direction first; if the cloud folds over that plane, the
     # other candidates (a steep height field far taller than wide, Renka's F7, has a vertical
     # PCA plane and folds over it, but not over the horizontal one)
     fractions = []
-    for n in _projection_normals(q[sample], np.cross(vt[0], vt[1]), planes):
+    normals = (_projection_normals(q[sample], np.cross(vt[0], vt[1]), planes)
+               if direction is None else [direction])
+    for n in normals:
         axes, c, s, uv = _project(q, m, vt, n)
-        fractions.append(_fold_fraction(q, uv, axes[2], planes))
+        fractions.append(_fold_fraction(q, uv, axes[2], planes, sample))
         if fractions[-1] <= _FOLD_MAX_FRACTION:
             break
     frac = fractions[-1] if fractions[-1] <= _FOLD_MAX_FRACTION else fractions[0]
+    if frac > _FOLD_MAX_FRACTION and direction is not None:
+        raise ParameterizationError(
+            f"the point cloud folds over the plane across the projection direction "
+            f"({', '.join(f'{x:.3g}' for x in direction)}): at {100 * frac:.1f}% of the points "
+            "the surface is nearly parallel to that direction or overlaps itself along it; give "
+            "another direction, or leave the projection automatic"
+        )
     if frac > _FOLD_MAX_FRACTION:
         raise ParameterizationError(
             f"the point cloud folds over its best-fit plane: at {100 * frac:.1f}% of the points "
@@ -1233,7 +1325,8 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
 
 
 def parameterize(
-    points: np.ndarray, faces: np.ndarray | None = None, drop_outliers: bool = False
+    points: np.ndarray, faces: np.ndarray | None = None, drop_outliers: bool = False,
+    projection=None,
 ) -> Parameterization:
     """Parameterize a point cloud (``faces is None``) or a disk-like mesh (method.md section 4).
 
@@ -1242,5 +1335,10 @@ def parameterize(
     disk; a mesh's vertices are held by its faces and are not checked for outliers).
     """
     if faces is None:
-        return parameterize_points(points, bool(drop_outliers))
+        return parameterize_points(points, bool(drop_outliers), projection)
+    if projection is not None:
+        raise InvalidInputError(
+            "a projection direction applies to point clouds; a mesh is parameterized by its "
+            "faces (over the unit disk): leave the projection automatic (in Blender: Auto)"
+        )
     return parameterize_mesh(points, faces)

@@ -1129,6 +1129,7 @@ def fit_surface(
     feature_sensitive: bool = True,
     seed: int = 0,
     drop_outliers: bool = False,
+    projection=None,
 ) -> TCBSurface:
     """Fit a TCB-spline surface to a point cloud or a disk-like mesh (method.md sections 4-6).
 
@@ -1192,6 +1193,12 @@ def fit_surface(
         ``core.parameterize.isolated_points``) are refused with an error that names them
         (default), or, with True, left out of the fit: their ``errors`` are NaN and
         ``report["outliers"]`` counts them.
+    projection : None, "x", "y", "z" or three numbers
+        Point clouds only: the direction to project the cloud along (a height field over the
+        plane across it). None (default) chooses it (the best-fit plane, or a direction over
+        which the cloud is less steep; ``core.parameterize.parameterize_points``). A given
+        direction is still checked for folds; it also lets through clouds too noisy for the
+        check to be trusted, which are otherwise refused.
 
     Counts (``degree``, ``max_control_points``, ...) are whole numbers (``2.0`` is 2), flags
     (``relative``, ``feature_sensitive``) Python or numpy bools; anything else is refused.
@@ -1219,7 +1226,7 @@ def fit_surface(
     except (TypeError, ValueError):
         raise InvalidInputError("points must be an (N, 3) array of numbers") from None
     try:
-        param = parameterize(points, faces, drop_outliers=drop_outliers)
+        param = parameterize(points, faces, drop_outliers=drop_outliers, projection=projection)
     except TCBError as exc:
         if coarse is None:
             raise

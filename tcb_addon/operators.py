@@ -439,6 +439,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
             relative=self.relative, max_control_points=self.max_control_points,
             max_iterations=self.max_iterations, smoothness=smoothness,
             criterion=self.criterion.lower(), drop_outliers=self.drop_outliers,
+            projection=None if self.projection == "AUTO" else self.projection.lower(),
         )  # fmt: skip
 
     def prepare(self, context):

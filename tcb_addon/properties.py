@@ -105,6 +105,19 @@ class FitSettings:
         ),
         default=False,
     )  # fmt: skip
+    projection: EnumProperty(
+        name="Projection",
+        description=(
+            "Direction a point cloud is projected along (a height field over the plane across "
+            "it): chosen from the data, or a world axis. Still checked for folds; a cloud too "
+            "noisy for that check is fitted only along a given axis (meshes: Auto)"
+        ),
+        items=(("AUTO", "Auto", "The best-fit plane, or a direction the cloud is less steep over"),
+               ("X", "World X", "Project along the world X axis"),
+               ("Y", "World Y", "Project along the world Y axis"),
+               ("Z", "World Z", "Project along the world Z axis (terrain, height maps)")),
+        default="AUTO",
+    )  # fmt: skip
     resolution: IntProperty(
         name="Resolution",
         description=(
@@ -117,7 +130,7 @@ class FitSettings:
 
 FIT_KEYS = (
     "tolerance", "relative", "criterion", "max_control_points", "max_iterations", "degree", "mode",
-    "smoothness", "auto_smoothness", "drop_outliers", "resolution",
+    "smoothness", "auto_smoothness", "drop_outliers", "projection", "resolution",
 )  # fmt: skip
 
 
@@ -202,7 +215,7 @@ def draw_fit_settings(layout, owner, short_labels: bool = False) -> None:
     row.prop(owner, "tolerance")
     row.prop(owner, "relative", text="", icon="DRIVER_DISTANCE")
     for key in ("criterion", "max_control_points", "max_iterations", "degree", "mode",
-                "smoothness", "drop_outliers", "resolution", "show_net",
+                "smoothness", "drop_outliers", "projection", "resolution", "show_net",
                 "live_net"):  # fmt: skip
         if short_labels and key == "max_control_points":
             col.prop(owner, key, text="Max Control Pts")

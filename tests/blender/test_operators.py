@@ -1063,3 +1063,29 @@ def test_live_net_moves_the_surface_locally_and_survives_reopen(clean_scene, add
     moved = move_net_vertex(bpy, net, j, (0.0, 0.0, -0.4))
     again = evaluated_positions(bpy, surface)
     assert np.allclose(again, surf.with_control_points(moved).tessellate(res)[0], atol=1e-4)
+
+
+def test_a_cloud_too_noisy_to_check_needs_a_world_axis_projection(clean_scene, addon):
+    """A steep height field with noise (Renka's F7 x3): refused with the Projection setting
+    named and nothing built; with Projection World Z it is fitted along the world's Z axis,
+    which is the object's local Y (the object is turned 90 degrees about X). A mesh with a
+    projection is refused."""
+    bpy = clean_scene
+    rng = np.random.default_rng(5)
+    xy = rng.random((3000, 2))
+    h = 3 * (2 * np.cos(10 * xy[:, 0]) * np.sin(10 * xy[:, 1]) + np.sin(10 * xy[:, 0] * xy[:, 1]))
+    local = np.c_[xy[:, 0], h, -xy[:, 1]]  # world (x, y, z) = (x, -local z, local y)
+    local += 0.005 * np.ptp(local, axis=0).max() * rng.normal(size=local.shape)
+    cloud = add_point_cloud(bpy, "Steep", local)
+    cloud.rotation_euler = (np.pi / 2, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    before = snapshot(cloud)
+    _expect_error(bpy, [cloud], r"too noisy.*Projection")
+    assert fit(bpy, cloud, projection="Z", max_iterations=2) == {"FINISHED"}
+    surf = spline_of(bpy.context.view_layer.objects.active)
+    np.testing.assert_allclose(np.abs(surf.parameterization.axes[2]), [0, 0, 1], atol=1e-12)
+    assert snapshot(cloud) == before
+    verts, _ = grid(10)
+    mesh = add_mesh(bpy, "Sheet", verts, grid(10)[1])
+    with pytest.raises(RuntimeError, match="projection direction applies to point clouds"):
+        fit(bpy, mesh, projection="X")

@@ -47,6 +47,39 @@ def test_point_cloud_input_with_absolute_tolerance(tmp_path):
     assert r.returncode == 0, r.stderr
     assert r.stderr == ""
     assert len(read_geometry(tmp_path / "s.ply")[0]) > 100
+    # the table names the direction the cloud was projected along, to pass as --projection
+    row = re.search(r"^projection\s+(\S+),(\S+),(\S+) \(chosen\)$", r.stdout, re.M)
+    assert row and abs(np.linalg.norm([float(x) for x in row.groups()]) - 1) < 1e-3
+
+
+def test_projection_option(tmp_path):
+    """A steep height field (Renka's F7 x3), turned, with noise: refused as too noisy to check
+    for folds, with the option named; fitted along its height direction when given as
+    numbers; bad directions and a mesh are refused with one line."""
+    rng = np.random.default_rng(5)
+    xy = rng.random((3000, 2))
+    z = 3 * (2 * np.cos(10 * xy[:, 0]) * np.sin(10 * xy[:, 1]) + np.sin(10 * xy[:, 0] * xy[:, 1]))
+    rot, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    pts = np.c_[xy, z] @ rot.T
+    pts += 0.005 * np.ptp(pts, axis=0).max() * rng.normal(size=pts.shape)
+    cloud = tmp_path / "steep.xyz"
+    np.savetxt(cloud, pts)
+    fast = ["--quiet", "--max-iterations", "1", "--max-control-points", "150"]
+    r = run("fit", cloud, "-o", tmp_path / "s.obj", *fast)
+    assert r.returncode == 2 and "too noisy" in r.stderr and "--projection z" in r.stderr
+    up = ",".join(f"{x:.17g}" for x in rot[:, 2])
+    r = run("fit", cloud, "-o", tmp_path / "s.obj", f"--projection={up}", *fast)
+    assert r.returncode == 0, r.stderr
+    row = re.search(r"^projection\s+(\S+),(\S+),(\S+) \(given\)$", r.stdout, re.M)
+    assert row and abs(abs(np.array([float(x) for x in row.groups()]) @ rot[:, 2]) - 1) < 1e-4
+    for bad in ("w", "0,0,0", "1,2", "1,nan,0"):
+        r = run("fit", cloud, "-o", tmp_path / "t.obj", f"--projection={bad}", *fast)
+        last = r.stderr.strip().splitlines()[-1]  # argparse: the usage, then the error
+        assert r.returncode == 2 and "--projection" in last and "expected x, y, z" in last
+    r = run("fit", ROOT / "data" / "nefertiti.off", "-o", tmp_path / "t.obj", "--projection",
+            "z", *fast)
+    assert r.returncode == 2 and "--projection applies to point clouds" in r.stderr
+    assert not (tmp_path / "t.obj").exists()
 
 
 def test_bad_path_and_malformed_file_give_one_line_and_exit_2(tmp_path):
