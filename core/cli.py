@@ -276,6 +276,10 @@ def _fit(args) -> int:
     rows += [
         ("RMS error", f"{r['rms']:.4g} ({r['rms_rel']:.2e} of the diagonal)"),
         ("max error", f"{r['max']:.4g} ({r['max_rel']:.2e} of the diagonal)"),
+    ]
+    if "rms_area" in r:  # a cloud: the RMS over its area (uneven density)
+        rows.append(("RMS over area", f"{r['rms_area']:.4g} ({r['rms_area_rel']:.2e} of the diagonal)"))
+    rows += [
         ("surface", f"{args.output} ({len(verts)} vertices, {len(tris)} triangles)"),
     ]
     if args.net:

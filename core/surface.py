@@ -39,7 +39,7 @@ from .geometry import column_bounds
 from .parameterize import (
     Parameterization, _as_points, _check_finite, box_normalization, normalize, parameterize,
 )
-from .refine import RefineOptions, adaptive_fit, check_callback
+from .refine import RefineOptions, adaptive_fit, area_weights, check_callback
 from .spline_space import SplineSpace, _whole, derivative_order, frozen
 from .simplex import orient2d
 
@@ -1037,6 +1037,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         fit_uv, fit_q, options, diagonal=diag_norm, start_knots=start, ring_knots=rings,
         callback=callback, history_offset=len(history), unit=norm.scale,
         n_measured=None if subsampled else len(uv), domain=domain,
+        balance=param.faces is None,
     )
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)
@@ -1080,6 +1081,12 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # refine() checks that it is given the same points (values and order)
         "data_digest": data_digest(points),
     }
+    if param.faces is None:
+        # the RMS over the parameter area (core.refine.area_weights): a cloud of uneven density
+        # meets the tolerance by it too; equal to "rms" within ~10% for an even one
+        e2 = errors[used] ** 2
+        report["rms_area"] = float(np.sqrt(np.dot(area_weights(uv), e2) / len(e2)))
+        report["rms_area_rel"] = report["rms_area"] / diagonal
     if report["loose_vertices"]:
         warnings.warn(
             f"{report['loose_vertices']} of the {len(used)} vertices "
@@ -1144,7 +1151,9 @@ def fit_surface(
     mode : "tcb" (feature-sensitive configurations) or "dcb" (Delaunay configurations); any case
     tolerance : float
         Stop when the RMS (or max, see ``criterion``) error is at most this; relative to the
-        bounding-box diagonal when ``relative`` is True, else in the data's units.
+        bounding-box diagonal when ``relative`` is True, else in the data's units. A point
+        cloud of uneven density (a scanner that dwelt in one place) must also meet an RMS
+        tolerance over its area (``report["rms_area"]``, ``core.refine.area_weights``).
     max_control_points : int
         Budget of control points; knot insertion stops before exceeding it.
     max_iterations : int

@@ -223,7 +223,11 @@ def _summary(surf) -> str:
     return (
         f"TCB: {n} control points, RMS {rep.get('rms', float('nan')):.4g}, "
         f"max {rep.get('max', float('nan')):.4g} ({100 * rep.get('max_rel', float('nan')):.3g}% "
-        f"of the diagonal), smoothness {rep.get('smoothness', float('nan')):.3g}{how}, "
+        f"of the diagonal)"
+        # a cloud of uneven density: its error over the area, when it tells more than the RMS
+        + (f", RMS over area {rep['rms_area']:.4g}"
+           if rep.get("rms_area", 0.0) > 1.1 * rep.get("rms", np.inf) else "")
+        + f", smoothness {rep.get('smoothness', float('nan')):.3g}{how}, "
         f"{rep.get('seconds', 0.0):.2f} s"
         + (f", {rep['outliers']} outliers left out" if rep.get("outliers") else "")
         + (f", {rep['loose_vertices']} loose vertices (in no face) left out"
@@ -561,6 +565,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         # when it is in the same units)
         key = ("max" if is_max(st) else "rms") + ("_rel" if rel else "")
         current = float(rep.get(key, 0.0))
+        if key.startswith("rms") and "rms_area" in rep:  # uneven clouds meet both (fit_surface)
+            current = max(current, float(rep[key.replace("rms", "rms_area")]))
         previous = st.tolerance if rel == st.relative else np.inf
         tol = self.tolerance or 0.5 * (min(previous, current) if current > 0 else st.tolerance)
         budget = self.max_control_points or max(st.max_control_points, 2 * st.control_points)
