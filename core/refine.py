@@ -607,12 +607,14 @@ def adaptive_fit(
     n_measured: int | None = None,
     domain: np.ndarray | None = None,
     balance: bool = False,
+    start_degree: int | None = None,
 ) -> tuple[IterationState, list[dict], str]:
     """Run the loop of method.md section 6 on parameters ``uv`` and (normalized) ``points``.
 
     ``diagonal`` is the bounding-box diagonal in the units of ``points`` (for relative
     tolerances and reports); ``unit`` converts those units to the user's (reports and absolute
-    tolerances are in the user's units). ``start_knots``/``ring_knots`` continue an earlier run.
+    tolerances are in the user's units). ``start_knots``/``ring_knots`` continue an earlier run
+    (fitted at ``start_degree``, for messages).
     Only the first ``n_measured`` points (default: all) count for the tolerance, the reports
     and the choice of the best iteration: the rest (e.g. samples on a mesh's faces) are fitted
     and guide the knot insertion. With more than :data:`ITERATION_POINTS` points and the RMS
@@ -897,7 +899,9 @@ def adaptive_fit(
         quiet.fit.basis = None
     if best.n_control > options.max_control_points:  # only the first fit was made or kept
         what = ("even the coarsest surface needs" if start_knots is None
-                else "the surface to refine already has")
+                else "the surface to refine already has" if start_degree in (None, options.degree)
+                else f"the surface to refine has, at degree {options.degree} (it was fitted at "
+                     f"degree {start_degree}),")
         raise InvalidInputError(
             f"{what} {best.n_control} control points, more than the maximum of "
             f"{options.max_control_points}; allow more control points"

@@ -659,7 +659,7 @@ class TCBSurface:
         check_callback(callback)
         return _run(points, self._param, options, callback,
                     start=self.knots[: self._n_interior], rings=self.knots[self._n_interior:],
-                    history=self._report.get("history", []))
+                    history=self._report.get("history", []), start_degree=self.degree)
 
     # ---- files -------------------------------------------------------------------------
     def to_bytes(self) -> bytes:
@@ -995,7 +995,8 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0):
     return p, x
 
 
-def _run(points, param, options, callback, start=None, rings=None, history=(), checked=False):
+def _run(points, param, options, callback, start=None, rings=None, history=(), checked=False,
+         start_degree=None):
     """Fit ``points`` over ``param``; ``checked``: ``parameterize_points`` has just accepted
     these very points (a cloud), so :func:`normalize` need not check them again."""
     t0 = time.perf_counter()
@@ -1037,7 +1038,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         fit_uv, fit_q, options, diagonal=diag_norm, start_knots=start, ring_knots=rings,
         callback=callback, history_offset=len(history), unit=norm.scale,
         n_measured=None if subsampled else len(uv), domain=domain,
-        balance=param.faces is None,
+        balance=param.faces is None, start_degree=start_degree,
     )
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)

@@ -124,6 +124,10 @@ def test_refine_below_the_surface_budget_is_refused_and_a_far_tolerance_grows_fa
     n = coarse.report["control_points"]
     with pytest.raises(InvalidInputError, match=f"already has {n} control points"):
         coarse.refine(P, max_control_points=n - 1)
+    # at another degree the same knots make another count: the message names the degrees
+    with pytest.raises(InvalidInputError, match=r"has, at degree 3 \(it was fitted at degree 2\), "
+                       r"\d+ control points, more than the maximum of " + str(n)):
+        coarse.refine(P, degree=3, max_control_points=n)
     fine = coarse.refine(P, tolerance=1e-4, max_iterations=3)
     h = fine.report["history"][len(coarse.report["history"]):]
     assert [x["knots_placed"] for x in h] == ["continued", "inserted", "inserted"]
