@@ -36,6 +36,7 @@ def test_fit_writes_surface_net_and_spline(tmp_path):
     assert len(net_pts) < surf.space.n_basis
     np.testing.assert_allclose(net_pts, surf.control_points)
     assert surf.report["rms_rel"] <= 2e-3
+    assert "RMS over area" not in r.stdout  # a mesh is fitted over its faces' area already
 
 
 def test_point_cloud_input_with_absolute_tolerance(tmp_path):
@@ -50,6 +51,10 @@ def test_point_cloud_input_with_absolute_tolerance(tmp_path):
     # the table names the direction the cloud was projected along, to pass as --projection
     row = re.search(r"^projection\s+(\S+),(\S+),(\S+) \(chosen\)$", r.stdout, re.M)
     assert row and abs(np.linalg.norm([float(x) for x in row.groups()]) - 1) < 1e-3
+    # a cloud's table gives its RMS over the area (uneven density), next to the RMS over points
+    rms = float(re.search(r"^RMS error\s+(\S+) ", r.stdout, re.M).group(1))
+    area = float(re.search(r"^RMS over area\s+(\S+) \(\S+ of the diagonal\)$", r.stdout, re.M).group(1))
+    assert 0.8 * rms < area < 1.25 * rms  # an even cloud: about the same
 
 
 def test_projection_option(tmp_path):
