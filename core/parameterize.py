@@ -561,10 +561,11 @@ def _least_steep_direction(
     600 directions spread over the hemisphere (a Fibonacci lattice), then ``rounds`` of 48
     directions around the best within shrinking angles (3.5 down to 0.4 degrees). A cloud
     that is a height field over some plane has a positive score there; a sheet that turns
-    over has none. At most 5000 of the normals (evenly strided) are scored.
+    over has none. Every ``len // 5000``-th of the normals is scored (5000 to 10 000 of them).
 
     ``signed``: the 2nd percentile of ``n_i . n`` for consistently oriented normals
-    (:func:`_oriented_normals`; at most 2000 of them), over 1200 directions of the whole sphere. Positive only over
+    (:func:`_oriented_normals`; every ``len // 2000``-th, 2000 to 4000 of them), over 1200
+    directions of the whole sphere. Positive only over
     a plane the whole surface faces: a fold's layers face opposite ways along every direction
     (``|n_i . n|`` cannot tell them from one layer)."""
     sub = normals[:: max(1, len(normals) // (2000 if signed else 5000))]
@@ -610,8 +611,15 @@ def _oriented_normals(
     of the flips on each point's path to its root is found by pointer jumping (``log2 n``
     vectorized rounds). A virtual root joins the trees of separate pieces; each piece is then
     oriented so that its normals sum to a positive component along ``towards``.
+
+    Not a proof against folds: two layers closer than the neighbour reach have nearly
+    parallel planes, so the tree can cross between them at no cost and give both the same
+    sign. The directions these normals suggest are only tried first; each one is still checked
+    for folds (:func:`_fold_fraction`) before it is used.
     """
     n = len(q)
+    if n < 2:  # nothing to agree with
+        return normals * np.where(normals @ towards < 0, -1.0, 1.0)[:, None]
     k = min(k, n - 1)
     _, idx = cKDTree(q).query(q, k=k + 1, workers=-1)
     rows, cols = np.repeat(np.arange(n), k), idx[:, 1:].ravel()

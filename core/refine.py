@@ -392,23 +392,31 @@ def area_weights(uv: np.ndarray) -> np.ndarray:
     """The parameter area each point stands for, relative to the mean (mean 1): for the RMS
     of a surface's error over its area rather than over its points.
 
-    Points are counted on a grid of square cells of about 64 points each; a cell's area is
+    Points are counted on a grid of about square cells of 64 points each on average (an
+    elongated domain too: a strip gets one row of them); a cell's area is
     the number of its occupied sub-cells (4 x 4 per cell), so a cell the domain's border cuts,
     or a cell half of which holds no data, is given the area its data covers, not the cell's.
     A point's weight is its cell's area over its cell's count: the RMS weighted by it is
     ``sqrt(sum_c A_c mean_{j in c} e_j^2 / sum_c A_c)``, each cell's mean square error weighted
     by its area. A cell of few points leaves some sub-cells empty and so counts a little less
-    area than it covers (a 1:4 density step gets weights 3.4:1). Uniformly dense clouds get
-    weights near 1 (the weighted RMS was 0.99-1.10
-    times the plain one on 9 sample clouds); a 1 m cluster of 1e5 points in a 100 m tile with
-    2000 points gives the tile's points weights about 2500 times the cluster's.
+    area than it covers (``m`` points occupy ``16 (1 - (15/16)^m)`` of 16 on average: a 1:4
+    density step, cells of 26 and 104 points, gets weights 3.1-3.25:1 instead of 4:1, for
+    aspect ratios 1 to 1000; inverting that formula per cell was tried and overshoots on the
+    few points of cells the border cuts). Uniformly dense clouds get weights near 1 (the
+    weighted RMS was 0.99-1.10 times the plain one on 9 sample clouds); a cluster of 1e5 points
+    N(50, 0.5) in a 100 x 100 tile with 2000 points gives the tile's points weights about 2000
+    times the cluster's (median; 3 seeds 1954-2031).
     O(n) (bincounts): 10 ms at 1e5 points, 0.2 s at 1e6. Not in method.md (its section 6 says "RMS").
     """
     uv = np.asarray(uv, dtype=np.float64)
     lo, hi = column_bounds(uv)
     ext = np.maximum(hi - lo, 1e-300)
-    g = max(1, int(np.sqrt(len(uv) / AREA_POINTS_PER_CELL)))
-    cells = np.maximum(1, np.round(g * ext / ext.max())).astype(np.int64)  # square cells
+    # about square cells of AREA_POINTS_PER_CELL points on average (a strip: one row of them)
+    want = max(len(uv) / AREA_POINTS_PER_CELL, 1.0)
+    short = int(np.argmin(ext))
+    across = max(1, int(round(ext[short] / np.sqrt(np.prod(ext) / want))))
+    cells = np.ones(2, dtype=np.int64)
+    cells[short], cells[1 - short] = across, max(1, int(round(want / across)))
     fine_cells = cells * AREA_FINE
     fine = np.minimum(((uv - lo) / ext * fine_cells).astype(np.int64), fine_cells - 1)
     coarse = fine // AREA_FINE
@@ -552,7 +560,8 @@ def new_point_factor(control_points, points):
     return np.sqrt((1 + share) / (1 - share))
 
 
-def _stalled(history: list[dict], n_points: int | None = None) -> bool:
+def _stalled(history: list[dict], n_points: int | None = None,
+             estimates: list[float] | None = None) -> bool:
     """The error has stopped falling: the best RMS so far fell like ``knots^-r`` with ``r <
     STALL_RATE`` since the fit ``j`` of the current chain of insertions (after its fresh start)
     that has at most 2/3 of today's knots and at least STALL_WINDOW insertions after it. Best
@@ -570,7 +579,10 @@ def _stalled(history: list[dict], n_points: int | None = None) -> bool:
 
     Both ends are the best since the chain's first fit (its fresh start, or the refit of a
     continued net), not since the run's start: a small probe has the smallest ``p/n`` and
-    would make any chain look stalled on clean data."""
+    would make any chain look stalled on clean data.
+
+    ``estimates`` (one per fit of ``history``) replaces those estimates: a cloud of uneven
+    density, whose RMS over its area has its own estimate (:func:`adaptive_fit`)."""
     n = history[-1]["interior_knots"]
     chain = 0  # fits of the current insertion chain, the last one included
     while chain < len(history) and history[-1 - chain]["knots_placed"] == "inserted":
@@ -578,7 +590,9 @@ def _stalled(history: list[dict], n_points: int | None = None) -> bool:
     if chain < 1:
         return False
     rms = np.array([h["rms"] for h in history])
-    if n_points and STALL_DOF:
+    if estimates is not None:
+        rms = np.asarray(estimates, dtype=np.float64)
+    elif n_points and STALL_DOF:
         rms = rms * new_point_factor(np.array([h["control_points"] for h in history]), n_points)
     start = max(len(history) - 1 - chain, 0)  # the chain's first fit (not an insertion)
     best_now = float(rms[start:].min())
@@ -631,15 +645,17 @@ def adaptive_fit(
     :func:`predicted_knots` says are missing, up to doubling them. Reports say whether an
     iteration's knots were placed ``"afresh"``, ``"continued"`` or ``"inserted"``
     (``knots_placed``). The best iteration is the one that meets the tolerance, else the one of
-    lowest RMS within the budget. With ``balance`` (point clouds), the criterion "rms" and a
-    cloud of uneven density (mean square area weight over :data:`UNEVEN_DENSITY`), the
+    lowest RMS within the budget (uneven density: the larger of the two RMS). With ``balance``
+    (point clouds), the criterion "rms" and a cloud of uneven density (mean square area weight over :data:`UNEVEN_DENSITY`), the
     tolerance must also be met by the RMS over the area (:func:`area_weights`; reports
     ``rms_area``), and where that one is the larger the knots go where it is: a dense part
     of a cloud of very uneven density met the tolerance for the whole, 98% of the domain
     missing it 3x (user test). A run with a tolerance also stops when the error has stopped
     falling (:func:`_stalled`: noise below the tolerance; reason :data:`STALLED`); it returns
     the fit of the lowest estimated RMS at new points (the RMS times
-    :func:`new_point_factor`), and a default smoothness is then cross-validated.
+    :func:`new_point_factor`; for a cloud of uneven density the larger of that and the same
+    estimate of the RMS over the area, with the area weights' effective number of points),
+    and a default smoothness is then cross-validated.
     Returns the best iteration, the per-iteration reports and why the loop stopped.
     """
     options.validate()
@@ -712,19 +728,37 @@ def adaptive_fit(
         uv, points = uv[pick], points[pick]
         weights = None if weights is None else weights[pick]
 
-    # the RMS over the area (point clouds): weights of the points fitted, made when first needed
+    # the RMS over the area (point clouds): weights of the points fitted (the iterations' and,
+    # after sampled iterations, all), made when first needed
     balance = balance and options.criterion == "rms" and tol > 0
     area: dict = {}
 
     def area_rms(at: np.ndarray, e: np.ndarray) -> float | None:
         """None for a cloud of even density (its points stand for equal areas)."""
-        if len(e) not in area:  # the measured points come first
+        key = (id(at), len(e))  # the measured points come first
+        if key not in area:
             w = area_weights(at[: len(e)])
-            area[len(e)] = w if np.mean(w * w) > UNEVEN_DENSITY else None
-        w = area[len(e)]
+            area[key] = w if np.mean(w * w) > UNEVEN_DENSITY else None
+        w = area[key]
         return None if w is None else float(np.sqrt(np.dot(w, e * e) / len(e)))
 
+    def new_point_estimate(rms: float, rms_area: float | None, n_ctrl: int, e: np.ndarray) -> float:
+        """The error at new points (:func:`new_point_factor`), to stop on and to choose by: of
+        the RMS over the points, and over the area (if any) with ``n / mean(w^2)`` points
+        (the area weights' effective count: with the control points spread by area, a
+        point's leverage is about ``w p / n``, and ``p / n_eff`` its mean over the area;
+        the dwell cloud: 1000 of 21 000). A sparse part's noise is otherwise fitted unseen:
+        the tile's noisy points took 1000 control points and ended 6x the tolerance off the
+        true shape (before: 2.7x with 150)."""
+        est = rms * float(new_point_factor(n_ctrl, len(uv)))
+        if rms_area is not None:
+            w = area[(id(uv), len(e))]
+            n_eff = len(e) / float(np.mean(w * w))
+            est = max(est, rms_area * float(new_point_factor(n_ctrl, n_eff)))
+        return est
+
     history: list[dict] = []
+    estimates: list[float] = []  # new_point_estimate of each fit
     best: IterationState | None = None  # the lowest RMS (or the fit meeting the tolerance)
     quiet: IterationState | None = None  # the lowest estimate at new points (for a stall)
     best_rms = quiet_score = np.inf
@@ -781,9 +815,8 @@ def adaptive_fit(
         e = fit.errors[:n_measured]
         rms, emax = float(np.sqrt(np.mean(e**2))), float(e.max(initial=0.0))
         value = rms if options.criterion == "rms" else emax
-        # the RMS over the area: needed to stop, or to size and steer a next iteration
-        rms_area = (area_rms(uv, e) if balance and (rms <= tol or it + 1 < options.max_iterations)
-                    else None)
+        # the RMS over the area: to stop, to size and steer a next iteration, and to choose
+        rms_area = area_rms(uv, e) if balance else None
         if rms_area is not None:
             value = max(value, rms_area)
         # the best: the lowest RMS within the budget, or the fit that meets the tolerance (a
@@ -798,10 +831,12 @@ def adaptive_fit(
                                                    or key < current_key or value <= tol))
 
         held = [best, quiet]
-        if better(best, rms, best_rms):
-            best, best_rms = state, rms
+        key = rms if rms_area is None else max(rms, rms_area)  # (uneven density: the larger)
+        if better(best, key, best_rms):
+            best, best_rms = state, key
+        score = new_point_estimate(rms, rms_area, n_ctrl, e)
+        estimates.append(score)
         if tol > 0 and BEST_BY_NEW_POINTS:
-            score = rms * float(new_point_factor(n_ctrl, len(uv)))
             if better(quiet, score, quiet_score):
                 quiet, quiet_score = state, score
         # only the auto refit of the returned space reuses a basis: free the others'
@@ -843,7 +878,7 @@ def adaptive_fit(
             break
         # the error has stopped falling (noise in the data; a tolerance below its level): more
         # knots fit the noise, so stop rather than spend the budget on it
-        if tol > 0 and _stalled(history, len(uv)):
+        if tol > 0 and _stalled(history, len(uv), estimates if balance and STALL_DOF else None):
             reason = STALLED
             if quiet is not None and quiet is not best:
                 best.fit.basis = None
@@ -885,7 +920,7 @@ def adaptive_fit(
         steer = fit.errors
         if rms_area is not None and rms_area > rms:  # the sparse parts miss the tolerance
             steer = fit.errors.copy()
-            steer[: len(e)] *= np.sqrt(area[len(e)])
+            steer[: len(e)] *= np.sqrt(area[(id(uv), len(e))])
         new = insertion_points(knots, space.configurations.triangles[0], uv, steer, count,
                                options.criterion)
         if len(new) == 0:
