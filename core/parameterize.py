@@ -561,10 +561,10 @@ def _least_steep_direction(
     600 directions spread over the hemisphere (a Fibonacci lattice), then ``rounds`` of 48
     directions around the best within shrinking angles (3.5 down to 0.4 degrees). A cloud
     that is a height field over some plane has a positive score there; a sheet that turns
-    over has none. Every ``len // 5000``-th of the normals is scored (5000 to 10 000 of them).
+    over has none. Every ``len // 5000``-th of the normals is scored (all below 5000; up to 10 000).
 
     ``signed``: the 2nd percentile of ``n_i . n`` for consistently oriented normals
-    (:func:`_oriented_normals`; every ``len // 2000``-th, 2000 to 4000 of them), over 1200
+    (:func:`_oriented_normals`; every ``len // 2000``-th: all below 2000, up to 4000), over 1200
     directions of the whole sphere. Positive only over
     a plane the whole surface faces: a fold's layers face opposite ways along every direction
     (``|n_i . n|`` cannot tell them from one layer)."""

@@ -511,8 +511,9 @@ def test_area_weights_are_one_for_even_clouds_and_follow_the_density_for_uneven_
     everywhere for random, grid and disk samples (the border cells are cut to what the data
     covers), and near 4:1 across a 1:4 density step (3.25 expected: the sparse side's cells of
     ~26 points occupy 13.0 of their 16 sub-cells on average, and so count a little less area),
-    on a square and on domains 20 and 1000 times as long as wide (the cells stay square: they
-    were 20 times as long on the 20:1 domain, weights 3.95:1 and even clouds 1.53)."""
+    on a square and on domains 20 and 1000 times as long as wide (about n / 64 square cells on
+    each: the 20:1 domain had 17 x 1 cells of about 1200 points before), and for degenerate
+    extents (one point, identical points) weights of 1."""
     rng = np.random.default_rng(0)
     g = np.linspace(0, 1, 120)
     angle, radius = rng.random(20_000) * 2 * np.pi, np.sqrt(rng.random(20_000))
@@ -529,6 +530,8 @@ def test_area_weights_are_one_for_even_clouds_and_follow_the_density_for_uneven_
         inner = np.abs(step[:, 0] / length - 0.5) > 0.1  # away from the step
         ratio = np.median(w[:4000][inner[:4000]]) / np.median(w[4000:][inner[4000:]])
         assert 2.9 < ratio < 3.7 and UNEVEN_DENSITY < np.mean(w * w) < 1.5
+    for degenerate in (np.zeros((1, 2)), np.ones((5, 2)), rng.random((50, 2)) * 1e-200):
+        assert np.allclose(area_weights(degenerate), 1.0)
 
 
 def test_a_cloud_of_uneven_density_meets_the_tolerance_over_its_area_too():
