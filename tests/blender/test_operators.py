@@ -223,6 +223,31 @@ def test_a_tolerance_below_the_noise_says_the_data_look_noisy(clean_scene, capfd
     assert state.smoothness > 1e-4
 
 
+def test_a_cloud_of_uneven_density_is_reported_with_its_rms_over_the_area(clean_scene, capfd):
+    """A scanner that dwelt in one place: 8000 points in a 1 m cluster and 400 over a 100 m
+    tile. The fit meets the tolerance over the area too (fit_surface), and the summary gives
+    that RMS next to the RMS over points, which the cluster makes far smaller; an even cloud's
+    summary has no such entry."""
+    bpy = clean_scene
+    rng = np.random.default_rng(0)
+    xy = np.vstack([rng.normal(50, 0.5, (8000, 2)), rng.uniform(0, 100, (400, 2))])
+    cloud = add_mesh(bpy, "Dwell", np.c_[xy, 3 * np.sin(xy[:, 0] / 8)])
+    capfd.readouterr()
+    assert fit(bpy, cloud, tolerance=1e-3) == {"FINISHED"}
+    text = capfd.readouterr().out
+    found = re.search(r"Info: TCB: .*RMS ([0-9.e+-]+), .*RMS over area ([0-9.e+-]+),", text)
+    assert found, text
+    rms, area = map(float, found.groups())
+    diagonal = np.linalg.norm([100, 100, 6])
+    assert area > 2 * rms and area <= 1e-3 * diagonal * 1.01  # the area RMS met the tolerance
+    xy = rng.uniform(0, 100, (3000, 2))
+    even = add_mesh(bpy, "Even", np.c_[xy, 3 * np.sin(xy[:, 0] / 8)])
+    even.location.x = 500
+    assert fit(bpy, even, tolerance=1e-3) == {"FINISHED"}
+    text = capfd.readouterr().out
+    assert "Info: TCB:" in text and "RMS over area" not in text, text
+
+
 def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
     bpy = clean_scene
     verts, faces = grid(16)
