@@ -54,7 +54,8 @@ def dwell(n: int, seed: int, noise: float = 0.0):
     points = np.c_[xy, dwell_shape(*xy.T)]
     if noise:  # noise * the diagonal on the sparse points' heights
         diagonal = np.linalg.norm(np.ptp(points, axis=0))
-        points[sparse, 2] += np.random.default_rng(seed + 7).normal(0, noise * diagonal, sparse.sum())
+        rng = np.random.default_rng(seed + 7)
+        points[sparse, 2] += rng.normal(0, noise * diagonal, sparse.sum())
     places = np.random.default_rng(3).uniform(5, 95, (5000, 2))
     return points, sparse, dwell_shape, places
 
@@ -70,7 +71,8 @@ def lidar(seed: int):
     x, y = r * np.cos(a), r * np.sin(a)
     g = np.random.default_rng(3)
     rr, aa = np.sqrt(g.uniform(2.5**2, 39.5**2, 5000)), g.uniform(0.02, np.pi / 2 - 0.02, 5000)
-    return np.c_[x, y, lidar_shape(x, y)], r > 20, lidar_shape, np.c_[rr * np.cos(aa), rr * np.sin(aa)]
+    places = np.c_[rr * np.cos(aa), rr * np.sin(aa)]
+    return np.c_[x, y, lidar_shape(x, y)], r > 20, lidar_shape, places
 
 
 def step(seed: int):
@@ -100,8 +102,8 @@ def run(case, tol, uneven):
     s = surf(surf.parameterization.project(np.c_[places, shape(*places.T)]))
     off = float(np.sqrt(np.mean((s[:, 2] - shape(s[:, 0], s[:, 1])) ** 2)))
     return (r["control_points"], r["iterations"], r["rms"] / unit,
-            float(np.sqrt(np.mean(w * e * e))) / unit, float(np.sqrt(np.mean(e[sparse] ** 2))) / unit,
-            off / unit, dt)
+            float(np.sqrt(np.mean(w * e * e))) / unit,
+            float(np.sqrt(np.mean(e[sparse] ** 2))) / unit, off / unit, dt)
 
 
 def main() -> None:
@@ -128,7 +130,8 @@ def main() -> None:
             cols = []
             for variant, uneven in (("points", np.inf), ("area", default)):
                 cp, fits, rp, ra, rs, off, dt = run(case, tol, uneven)
-                cols.append(f"{variant:<6} {cp:5d} {fits:4d} {rp:5.2f} {ra:5.2f} {rs:6.2f} {off:5.2f} {dt:5.1f}")
+                cols.append(f"{variant:<6} {cp:5d} {fits:4d} {rp:5.2f} {ra:5.2f} {rs:6.2f} "
+                            f"{off:5.2f} {dt:5.1f}")
             print(f"{name:<16} {tol:6.0e} {seed:4d} | " + " | ".join(cols), flush=True)
     refine.UNEVEN_DENSITY = default
 

@@ -646,11 +646,11 @@ def adaptive_fit(
     iteration's knots were placed ``"afresh"``, ``"continued"`` or ``"inserted"``
     (``knots_placed``). The best iteration is the one that meets the tolerance, else the one of
     lowest RMS within the budget (uneven density: the larger of the two RMS). With ``balance``
-    (point clouds), the criterion "rms" and a cloud of uneven density (mean square area weight over :data:`UNEVEN_DENSITY`), the
-    tolerance must also be met by the RMS over the area (:func:`area_weights`; reports
-    ``rms_area``), and where that one is the larger the knots go where it is: a dense part
-    of a cloud of very uneven density met the tolerance for the whole, 98% of the domain
-    missing it 3x (user test). A run with a tolerance also stops when the error has stopped
+    (point clouds), the criterion "rms" and a cloud of uneven density (mean square area weight
+    over :data:`UNEVEN_DENSITY`), the tolerance must also be met by the RMS over the area
+    (:func:`area_weights`; reports ``rms_area``), and where that one is the larger the knots
+    go where it is: a dense part of a cloud of very uneven density met the tolerance for the
+    whole, 98% of the domain missing it 3x (user test). A run with a tolerance also stops when the error has stopped
     falling (:func:`_stalled`: noise below the tolerance; reason :data:`STALLED`); it returns
     the fit of the lowest estimated RMS at new points (the RMS times
     :func:`new_point_factor`; for a cloud of uneven density the larger of that and the same
@@ -747,11 +747,11 @@ def adaptive_fit(
         the RMS over the points, and over the area (if any) with ``n / mean(w^2)`` points
         (the area weights' effective count: with the control points spread by area, a
         point's leverage is about ``w p / n``, and ``p / n_eff`` its mean over the area;
-        the dwell cloud: 1000 of 21 000). A sparse part's noise is otherwise fitted unseen:
-        the tile's noisy points took 1000 control points and ended 6x the tolerance off the
-        true shape (before: 2.7x with 150). Blind once the control points pass 0.9 ``n_eff``
-        (:func:`new_point_factor`'s cap): a sparse part of fewer points than the net has
-        control points is interpolated, and its noise is then fitted unseen."""
+        the dwell cloud: 1000 of 21 000). Without it a sparse part's noise was fitted: the
+        tile's noisy points took 1000 control points and ended 6x the tolerance off the true
+        shape (2.7x with 150 when the area RMS is not asked for). Blind once the control
+        points pass 0.9 ``n_eff`` (:func:`new_point_factor`'s cap): a sparse part of fewer
+        points than the net has control points is interpolated, noise and all."""
         est = rms * float(new_point_factor(n_ctrl, len(uv)))
         if rms_area is not None:
             w = area[(id(uv), len(e))]
