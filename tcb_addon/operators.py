@@ -153,6 +153,22 @@ def is_max(tcb) -> bool:
     return str(tcb.criterion).lower() == "max"
 
 
+def uneven_density(rms: float, rms_area: float) -> bool:
+    """A cloud's RMS over its area tells more than its RMS over points (uneven density: the
+    fit met the tolerance by both, core.refine.adaptive_fit)."""
+    return rms_area > 1.1 * rms
+
+
+def net_copy_note(obj) -> str | None:
+    """For a copy of a control net (Shift+D of the net alone): that its surface follows the
+    original, so its edits change nothing; None for any other object."""
+    surface, net = result_objects(obj)
+    if surface is None or obj.tcb.role != "NET" or net is None or net == obj:
+        return None
+    return (f"'{obj.name}' is a copy of the control net: '{surface.name}' follows "
+            f"'{net.name}', so edits here change nothing")
+
+
 def net_vertex_problem(surface_obj) -> str | None:
     """Why the edits of the surface's control net are ignored, or None: a vertex was added to
     or deleted from the net, so its vertices no longer match the control points one to one
@@ -188,7 +204,7 @@ def store_stats(tcb, surf, settings: dict) -> None:
     tcb.control_points = int(rep.get("control_points", len(surf.control_points)))
     tcb.iterations = int(rep.get("iterations", 0))
     tcb.stop_reason = str(rep.get("stop_reason", ""))
-    for key in ("rms", "max", "rms_rel", "max_rel", "seconds"):
+    for key in ("rms", "max", "rms_rel", "max_rel", "rms_area", "seconds"):
         setattr(tcb, key, float(rep.get(key, 0.0)))
     for key, value in settings.items():
         if hasattr(tcb, key):
@@ -226,7 +242,7 @@ def _summary(surf) -> str:
         f"of the diagonal)"
         # a cloud of uneven density: its error over the area, when it tells more than the RMS
         + (f", RMS over area {rep['rms_area']:.4g}"
-           if rep.get("rms_area", 0.0) > 1.1 * rep.get("rms", np.inf) else "")
+           if uneven_density(rep.get("rms", np.inf), rep.get("rms_area", 0.0)) else "")
         + f", smoothness {rep.get('smoothness', float('nan')):.3g}{how}, "
         f"{rep.get('seconds', 0.0):.2f} s"
         + (f", {rep['outliers']} outliers left out" if rep.get("outliers") else "")

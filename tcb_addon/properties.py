@@ -172,6 +172,8 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     max: FloatProperty(name="Max", precision=6)
     rms_rel: FloatProperty(name="RMS (relative)", precision=6)
     max_rel: FloatProperty(name="Max (relative)", precision=6)
+    # a point cloud's RMS over its area (core.refine.area_weights; 0 for a mesh)
+    rms_area: FloatProperty(name="RMS over area", precision=6)
     seconds: FloatProperty(name="Seconds", precision=2)
     stop_reason: StringProperty(name="Stopped")  # why the adaptive loop stopped
     # settings of the last fit / refine

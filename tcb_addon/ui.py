@@ -7,7 +7,8 @@ selected (nothing, a camera, a result object, ...).
 import bpy
 
 from . import bridge
-from .operators import NO_DATA_KEY, SPLINE_KEY, is_max, net_vertex_problem, result_objects
+from .operators import (NO_DATA_KEY, SPLINE_KEY, is_max, net_copy_note, net_vertex_problem,
+                        result_objects, uneven_density)
 from .properties import FIT_KEYS, draw_fit_settings
 
 
@@ -64,6 +65,8 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
             ("Control Points", f"{st.control_points}"),
             ("Iterations", f"{st.iterations}"),
             ("RMS", f"{st.rms:.4g}"),
+            *((("RMS over Area", f"{st.rms_area:.4g}"),) if uneven_density(st.rms, st.rms_area)
+              else ()),
             ("Max", f"{st.max:.4g}"),
             ("RMS (of diagonal)", f"{100 * st.rms_rel:.3g} %"),
             ("Max (of diagonal)", f"{100 * st.max_rel:.3g} %"),
@@ -83,6 +86,9 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
         problem = net_vertex_problem(surface)
         if problem:
             col.label(text=problem[0].upper() + problem[1:], icon="ERROR")
+        copy = net_copy_note(context.active_object)
+        if copy:
+            col.label(text=copy, icon="INFO")
 
         layout.separator()
         row = layout.row(align=True)

@@ -240,12 +240,42 @@ def test_a_cloud_of_uneven_density_is_reported_with_its_rms_over_the_area(clean_
     rms, area = map(float, found.groups())
     diagonal = np.linalg.norm([100, 100, 6])
     assert area > 2 * rms and area <= 1e-3 * diagonal * 1.01  # the area RMS met the tolerance
+    # the Result panel has it too, after the RMS
+    surface = bpy.context.view_layer.objects.active
+    labels = [e[1] for e in draw_panels(bpy, [surface]) if e[0] == "label"]
+    at = labels.index("RMS over Area")
+    assert labels[at - 2] == "RMS" and float(labels[at + 1]) == pytest.approx(area, rel=1e-3)
     xy = rng.uniform(0, 100, (3000, 2))
     even = add_mesh(bpy, "Even", np.c_[xy, 3 * np.sin(xy[:, 0] / 8)])
     even.location.x = 500
     assert fit(bpy, even, tolerance=1e-3) == {"FINISHED"}
     text = capfd.readouterr().out
     assert "Info: TCB:" in text and "RMS over area" not in text, text
+    surface = bpy.context.view_layer.objects.active
+    labels = [e[1] for e in draw_panels(bpy, [surface]) if e[0] == "label"]
+    assert "RMS" in labels and "RMS over Area" not in labels
+
+
+def test_a_copy_of_a_control_net_says_that_the_surface_follows_the_original(clean_scene):
+    """Shift+D of the net alone makes a net that no surface follows: dragging its vertices
+    changes nothing. Its Result panel says so and names the net that counts; the original's
+    panel does not."""
+    bpy = clean_scene
+    verts, faces = grid(12)
+    assert fit(bpy, add_mesh(bpy, "Patch", verts, faces), tolerance=5e-3) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    select(bpy, net)  # as in the viewport: the view layer's selection
+    assert bpy.ops.object.duplicate() == {"FINISHED"}
+    copy = bpy.context.view_layer.objects.active
+    assert copy != net and copy.tcb.role == "NET" and surface.tcb.net == net
+
+    def notes(obj):
+        return [e[1] for e in draw_panels(bpy, [obj]) if e[0] == "label" and "copy" in e[1]]
+
+    assert notes(copy) == [f"'{copy.name}' is a copy of the control net: '{surface.name}' "
+                           f"follows '{net.name}', so edits here change nothing"]
+    assert notes(net) == [] and notes(surface) == []
 
 
 def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
