@@ -24,6 +24,8 @@ from .properties import DEFAULT_SMOOTHNESS, FIT_KEYS, FitSettings, draw_fit_sett
 # Custom property of the surface object: TCBSurface.to_bytes() as base64 text. (Raw bytes
 # ID properties lose everything after the first NUL byte when an existing one is reassigned.)
 SPLINE_KEY = "tcb_spline"
+# the surface object's world matrix when its mesh was last written from the spline (16 floats)
+PLACED_KEY = "tcb_placed_at"
 DEVIATION_ATTR = "tcb_deviation"
 
 
@@ -215,6 +217,29 @@ def store_stats(tcb, surf, settings: dict) -> None:
     tcb.smoothness_cross_validated = "why" in (rep.get("smoothness_selection") or {})
 
 
+def remember_placement(surface_obj) -> None:
+    """Store the surface object's world matrix: its mesh was just written from the spline."""
+    surface_obj[PLACED_KEY] = [float(x) for row in surface_obj.matrix_world for x in row]
+
+
+def moved_note(surface_obj) -> str | None:
+    """Why a rewrite of the mesh puts the surface back, or None: without a live net the
+    surface object can be moved (G) away from its spline; the spline stays with the data and
+    the net, so Re-tessellate and Refine write it where it was (with a live net the surface
+    follows the net wherever its object is)."""
+    placed = surface_obj.get(PLACED_KEY)
+    if placed is None or surface_obj.modifiers.get(live.MODIFIER_NAME) is not None:
+        return None
+    now = np.array(surface_obj.matrix_world, dtype=np.float64).ravel()
+    then = np.asarray(list(placed), dtype=np.float64)
+    if then.shape != now.shape or np.allclose(now, then, rtol=1e-9, atol=1e-9 * (1 + np.abs(then).max())):
+        return None
+    return (f"'{surface_obj.name}' had been moved as an object, away from its spline: it was "
+            "written back where the spline is (the spline stays with the data and the control "
+            "net; to move the surface, move the net, or apply the move to the source and fit "
+            "again)")
+
+
 def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = None):
     verts, faces = surf.tessellate(resolution)
     local = bridge.to_local(surface_obj, verts)
@@ -222,6 +247,7 @@ def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = No
     mesh.shade_smooth()
     bridge.replace_mesh(surface_obj, mesh)
     surface_obj.tcb.has_deviation = False
+    remember_placement(surface_obj)
 
 
 def write_net_mesh(net_obj, surf, name: str | None = None):
@@ -494,6 +520,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         smesh = bridge.new_mesh(f"{name} TCB Surface", verts - origin, faces)
         smesh.shade_smooth()
         surface = bridge.link_new_object(coll, f"{name} TCB Surface", smesh, origin)
+        remember_placement(surface)
         pts, nfaces = surf.control_net()  # same origin: the live net needs no transform
         nmesh = bridge.new_mesh(f"{name} TCB Net", pts - origin, nfaces)
         net = bridge.link_new_object(coll, f"{name} TCB Net", nmesh, origin)
@@ -611,13 +638,14 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
     def finish(self, context, surf):
         surface = self._surface
         st = surface.tcb
+        moved = moved_note(surface)
         write_surface_mesh(surface, surf, st.resolution)
         if st.net is not None:
             write_net_mesh(live.own_net(surface), surf)
         live.relink(surface, surf, st.resolution, self.report)
         store_spline(surface, surf)
         store_stats(st, surf, self._settings)
-        warnings = list(getattr(self, "_warnings", ()))
+        warnings = list(getattr(self, "_warnings", ())) + ([moved] if moved else [])
         notes = list(getattr(self, "_notes", ()))
         if drop_deviation_points(surface):
             notes.append("the Deviation Points of the previous surface were removed (run "
@@ -662,6 +690,7 @@ class TCB_OT_retessellate(bpy.types.Operator):
             if surface is None:
                 raise bridge.SelectionError("Select a TCB surface (or its control net)")
             surf = stored_surface(surface)
+            moved = moved_note(surface)
             write_surface_mesh(surface, surf, self.resolution)
             if live.relink(surface, surf, self.resolution, self.report):
                 store_spline(surface, surf)  # the net was dropped: its edits are kept
@@ -669,9 +698,9 @@ class TCB_OT_retessellate(bpy.types.Operator):
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
         surface.tcb.resolution = self.resolution
-        problem = net_vertex_problem(surface)
-        if problem:
-            self.report({"WARNING"}, f"TCB: {problem}")
+        for problem in (moved, net_vertex_problem(surface)):
+            if problem:
+                self.report({"WARNING"}, f"TCB: {problem}")
         return {"FINISHED"}
 
 

@@ -278,6 +278,34 @@ def test_a_copy_of_a_control_net_says_that_the_surface_follows_the_original(clea
     assert notes(net) == [] and notes(surface) == []
 
 
+@pytest.mark.parametrize("live_net", [False, True], ids=["static", "live"])
+def test_re_tessellating_a_moved_surface_says_that_it_goes_back_to_its_spline(
+        clean_scene, capfd, live_net):
+    """Without a live net the surface object can be moved (G) away from its spline; the
+    spline stays with the data and the net, so Re-tessellate writes it back where the spline
+    is. That used to happen silently (user test): it is now a warning that says what to move
+    instead. With a live net the surface follows the net wherever its object is: no warning."""
+    bpy = clean_scene
+    verts, faces = grid(12)
+    assert fit(bpy, add_mesh(bpy, "Patch", verts, faces), tolerance=5e-3, live_net=live_net,
+               resolution=8) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    spline_at = positions(surface) @ np.array(surface.matrix_world)[:3, :3].T + np.array(
+        surface.matrix_world)[:3, 3]
+    surface.location.x += 5.0
+    bpy.context.view_layer.update()
+    capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.retessellate(resolution=8) == {"FINISHED"}
+    text = capfd.readouterr().out
+    world = positions(surface) + np.array(surface.matrix_world)[:3, 3]
+    assert np.allclose(world, spline_at, atol=1e-5)  # back on the spline either way
+    assert ("had been moved as an object" in text) == (not live_net), text
+    with bpy.context.temp_override(**select(bpy, surface)):  # nothing moved since
+        assert bpy.ops.tcb.retessellate(resolution=8) == {"FINISHED"}
+    assert "had been moved" not in capfd.readouterr().out
+
+
 def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
     bpy = clean_scene
     verts, faces = grid(16)
