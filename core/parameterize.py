@@ -644,6 +644,15 @@ def _oriented_normals(
     return oriented * np.where(facing[label] < 0, -1.0, 1.0)[:, None]
 
 
+def _on_a_line(uv: np.ndarray) -> bool:
+    """The projected points (normalized coordinates) lie on one line: the RMS distance from
+    their best line is at most ``_COLLINEAR_RTOL`` of their extent (a wall projected along a
+    direction in its plane; qhull cannot take them)."""
+    d = uv - uv.mean(axis=0)
+    ev = np.linalg.eigvalsh(d.T @ d / len(d))
+    return bool(np.sqrt(max(ev[0], 0.0)) <= _COLLINEAR_RTOL * max(float(np.ptp(uv, axis=0).max()), 1e-300))
+
+
 def _project(q: np.ndarray, m: np.ndarray, vt: np.ndarray, n: np.ndarray):
     """Axes ``(a_u, a_v, n)`` (3, 3), centre ``c`` and scale ``s`` of the projection of the
     centred cloud along ``n``, and the parameters ``uv = ((q - m) . [a_u, a_v] - c) / s``."""
@@ -988,7 +997,11 @@ def parameterize_points(
                if direction is None else [direction])
     for n in normals:
         tried.append(n)
-        fractions.append(_fold_fraction(q, _project(q, m, vt, n)[3], n, planes, sample))
+        uv_n = _project(q, m, vt, n)[3]
+        if _on_a_line(uv_n):  # the surface is parallel to n: no height field over its plane
+            fractions.append(np.inf)
+            continue
+        fractions.append(_fold_fraction(q, uv_n, n, planes, sample))
         if fractions[-1] <= _FOLD_CLEAR * _FOLD_MAX_FRACTION:
             break
     # a clear pass ends the search; after a narrow one (flags at 0.5-2% of the points: a
@@ -996,6 +1009,13 @@ def parameterize_points(
     best = int(np.argmin(fractions))
     frac = fractions[best] if fractions[best] <= _FOLD_MAX_FRACTION else fractions[0]
     axes, c, s, uv = _project(q, m, vt, tried[best])
+    if not np.isfinite(frac) and direction is not None:
+        raise ParameterizationError(
+            f"projected along the direction given ({', '.join(f'{x:.3g}' for x in direction)}) "
+            "the points fall on one line: the surface is parallel to that direction; give a "
+            "direction across the surface (e.g. the axis it faces), or leave the projection "
+            "automatic"
+        )
     if frac > _FOLD_MAX_FRACTION and direction is not None:
         raise ParameterizationError(
             f"the point cloud folds over the plane across the projection direction "

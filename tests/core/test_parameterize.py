@@ -371,6 +371,21 @@ def test_a_given_projection_is_still_checked_for_folds() -> None:
         parameterize_points(cap, projection="x")
 
 
+def test_a_projection_along_a_flat_cloud_is_refused_with_advice() -> None:
+    """A wall (the plane y = 0) projected along z or x falls on a line: that was qhull's
+    "initial simplex is flat" dump as a traceback (Blender user test); now a
+    ParameterizationError that says to project across the surface. Along y, or automatic, it
+    is fine."""
+    rng = np.random.default_rng(0)
+    wall = np.c_[rng.random(200), np.zeros(200), rng.random(200)]
+    for along in ("z", "x", [1.0, 0.0, 1.0]):
+        with pytest.raises(ParameterizationError, match="the points fall on one line: the "
+                                                        "surface is parallel to that direction"):
+            parameterize_points(wall, projection=along)
+    for along in ("y", None):
+        assert abs(parameterize_points(wall, projection=along).axes[2] @ [0, 1, 0]) > 1 - 1e-12
+
+
 @pytest.mark.parametrize("bad", ["w", "", [0, 0, 0], [np.nan, 0, 1], [1, 2], "1,2,3", [[0, 0, 1]]])
 def test_a_projection_that_is_no_direction_is_refused(bad) -> None:
     with pytest.raises(InvalidInputError, match="projection must be"):
