@@ -222,7 +222,10 @@ def remember_placement(surface_obj) -> None:
     surface_obj[PLACED_KEY] = [float(x) for row in surface_obj.matrix_world for x in row]
 
 
-def moved_note(surface_obj) -> str | None:
+WRITTEN_BACK = "it was written back where the spline is"
+
+
+def moved_note(surface_obj, what: str = WRITTEN_BACK) -> str | None:
     """Why a rewrite of the mesh puts the surface back, or None: without a live net the
     surface object can be moved (G) away from its spline; the spline stays with the data and
     the net, so Re-tessellate and Refine write it where it was (with a live net the surface
@@ -234,10 +237,9 @@ def moved_note(surface_obj) -> str | None:
     then = np.asarray(list(placed), dtype=np.float64)
     if then.shape != now.shape or np.allclose(now, then, rtol=1e-9, atol=1e-9 * (1 + np.abs(then).max())):
         return None
-    return (f"'{surface_obj.name}' had been moved as an object, away from its spline: it was "
-            "written back where the spline is (the spline stays with the data and the control "
-            "net; to move the surface, move the net, or apply the move to the source and fit "
-            "again)")
+    return (f"'{surface_obj.name}' had been moved as an object, away from its spline: {what} "
+            "(the spline stays with the data and the control net; to move the surface, move "
+            "the net, or apply the move to the source and fit again)")
 
 
 def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = None):
@@ -749,6 +751,8 @@ class TCB_OT_deviation_map(bpy.types.Operator):
         except _user_errors() as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
+        moved = moved_note(surface, "the colors are painted on it where it is now, the "
+                                    "distances are those to the spline (Re-tessellate puts it back)")
         # a live net whose weights were deleted is linked again, so the colors show the net
         live.relink(surface, surf, surface.tcb.resolution, rewrite=False)
 
@@ -803,16 +807,19 @@ class TCB_OT_deviation_map(bpy.types.Operator):
             else:
                 bridge.replace_mesh(pts_obj, mesh)
 
+        # the deviation's own statistics (the fit's stay: they are what the fit reached, and a
+        # closest-point distance is another measure than the fit's error at the data's own
+        # parameters; the panel showed these under the fit's "RMS" beside its tolerance)
         st.has_deviation = True
         st.deviation_max = vmax
         st.deviation_rms = float(np.sqrt(np.mean(fitted_dist**2))) if len(fitted_dist) else 0.0
-        st.rms = st.deviation_rms
-        st.max = float(fitted_dist.max(initial=0.0))
+        st.deviation_data_max = float(fitted_dist.max(initial=0.0))
         # relative to the data's bounding-box diagonal, as the fit's numbers are
         fitted_points = data.points[counted]
         diagonal = float(np.linalg.norm(np.ptp(fitted_points, axis=0))) if len(fitted_points) else 0.0
         scale = 1.0 / diagonal if diagonal > 0 else 0.0
-        st.rms_rel, st.max_rel = st.rms * scale, st.max * scale
+        st.deviation_rms_rel = st.deviation_rms * scale
+        st.deviation_data_max_rel = st.deviation_data_max * scale
         no_data = int(len(has_data) - has_data.sum())
         surface[NO_DATA_KEY] = no_data  # the panel's legend shows grey when there are any
         _show_attribute_colors(context)
@@ -821,8 +828,10 @@ class TCB_OT_deviation_map(bpy.types.Operator):
         if no_data:
             note += f"; {no_data} surface vertices with no data near them are grey"
         note += "".join(f"; {n}" for n in data.notes)  # e.g. a hidden source read without modifiers
-        self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.rms:.4g}, max {st.max:.4g}; "
-                              f"color range 0 - {vmax:.4g}{note}")  # fmt: skip
+        self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.deviation_rms:.4g}, max "
+                              f"{st.deviation_data_max:.4g}; color range 0 - {vmax:.4g}{note}")  # fmt: skip
+        if moved:
+            self.report({"WARNING"}, f"TCB: {moved}")
         return {"FINISHED"}
 
 

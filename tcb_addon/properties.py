@@ -191,8 +191,11 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     resolution: IntProperty()
     # deviation map (distance of the surface vertices to the data)
     has_deviation: BoolProperty()
-    deviation_max: FloatProperty(precision=6)
-    deviation_rms: FloatProperty(precision=6)
+    deviation_max: FloatProperty(precision=6)  # top of the color range
+    deviation_rms: FloatProperty(precision=6)  # of the fitted data points' distances
+    deviation_data_max: FloatProperty(precision=6)  # the largest of those distances
+    deviation_rms_rel: FloatProperty(precision=6)  # both over the data's diagonal
+    deviation_data_max_rel: FloatProperty(precision=6)
 
 
 classes = (TCB_PG_settings, TCB_PG_source, TCB_PG_object)

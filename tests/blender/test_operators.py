@@ -284,7 +284,9 @@ def test_re_tessellating_a_moved_surface_says_that_it_goes_back_to_its_spline(
     """Without a live net the surface object can be moved (G) away from its spline; the
     spline stays with the data and the net, so Re-tessellate writes it back where the spline
     is. That used to happen silently (user test): it is now a warning that says what to move
-    instead. With a live net the surface follows the net wherever its object is: no warning."""
+    instead; Deviation Map, which paints the surface where it is but measures the data to the
+    spline, says so too. With a live net the surface follows the net wherever its object is:
+    no warning."""
     bpy = clean_scene
     verts, faces = grid(12)
     assert fit(bpy, add_mesh(bpy, "Patch", verts, faces), tolerance=5e-3, live_net=live_net,
@@ -295,6 +297,10 @@ def test_re_tessellating_a_moved_surface_says_that_it_goes_back_to_its_spline(
     surface.location.x += 5.0
     bpy.context.view_layer.update()
     capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.deviation_map(points_copy=False) == {"FINISHED"}
+    text = capfd.readouterr().out  # its colors are where the surface is, its numbers are not
+    assert ("the colors are painted on it where it is now" in text) == (not live_net), text
     with bpy.context.temp_override(**select(bpy, surface)):
         assert bpy.ops.tcb.retessellate(resolution=8) == {"FINISHED"}
     text = capfd.readouterr().out
@@ -927,7 +933,7 @@ def test_an_outlier_is_refused_by_name_or_dropped_with_the_option(clean_scene, a
     surface = bpy.context.view_layer.objects.active
     with bpy.context.temp_override(**select(bpy, surface)):
         assert bpy.ops.tcb.deviation_map(points_copy=True) == {"FINISHED"}
-    assert surface.tcb.deviation_max < 0.1 and surface.tcb.max < 0.1
+    assert surface.tcb.deviation_max < 0.1 and surface.tcb.deviation_data_max < 0.1
     pts = surface.tcb.deviation_points
     assert len(pts.data.vertices) == 400
     dev = np.empty(400, np.float32)
@@ -963,11 +969,12 @@ def test_deviation_map_of_a_cloud_shows_the_data_to_surface_distances(clean_scen
     cloud = add_mesh(bpy, "Cloud", points)  # vertices only: a point cloud
     assert fit(bpy, cloud, tolerance=2e-4) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
+    st = surface.tcb
+    fitted = (st.rms, st.max, st.rms_rel, st.max_rel)
     with bpy.context.temp_override(**select(bpy, surface)):
         assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
     surf = spline_of(surface)
     data_dist = surf.distances(points)
-    st = surface.tcb
 
     verts = positions(surface)
     true = np.abs(verts[:, 2] - f(verts[:, 0], verts[:, 1]))  # each vertex's real error
@@ -978,11 +985,16 @@ def test_deviation_map_of_a_cloud_shows_the_data_to_surface_distances(clean_scen
 
     # the legend: the data's distances, the same range on the point copy (its top is red)
     assert st.deviation_max == pytest.approx(data_dist.max(), rel=1e-5)
-    assert st.max == pytest.approx(data_dist.max(), rel=1e-5)
+    assert st.deviation_data_max == pytest.approx(data_dist.max(), rel=1e-5)
     assert st.deviation_rms == pytest.approx(np.sqrt(np.mean(data_dist**2)), rel=1e-5)
-    diagonal = np.linalg.norm(np.ptp(points, axis=0))  # the panel's relative numbers follow
-    assert st.max_rel == pytest.approx(st.max / diagonal, rel=1e-5)
-    assert st.rms_rel == pytest.approx(st.rms / diagonal, rel=1e-5)
+    diagonal = np.linalg.norm(np.ptp(points, axis=0))  # and relative to the diagonal
+    assert st.deviation_data_max_rel == pytest.approx(st.deviation_data_max / diagonal, rel=1e-5)
+    assert st.deviation_rms_rel == pytest.approx(st.deviation_rms / diagonal, rel=1e-5)
+    # the fit's statistics stay: the panel showed the deviation's under the fit's "RMS", next
+    # to its tolerance (user test); the deviation box has its own
+    assert (st.rms, st.max, st.rms_rel, st.max_rel) == fitted
+    labels = [e[1] for e in draw_panels(bpy, [surface]) if e[0] == "label"]
+    assert f"Data to surface: RMS {st.deviation_rms:.4g}, max {st.deviation_data_max:.4g}" in labels
     pdev, prgba = _deviation_of(st.deviation_points)
     assert np.allclose(pdev, data_dist, atol=1e-6)
     top = np.argmax(pdev)
