@@ -618,12 +618,26 @@ class TCBSurface:
     def fitted_to(self, points) -> bool:
         """Whether ``points`` are the data this surface was fitted to: the same count and (for
         surfaces that keep ``report["data_digest"]``; older files do not) the same values in
-        the same order. :meth:`refine` needs them."""
+        the same order, or values that differ from them only by rounding. :meth:`refine` needs
+        them.
+
+        Rounding: each point's distance to the surface at its own parameters is its fitted
+        error within :data:`ROUNDING_RTOL` of the diagonal (float32 coordinates rounded again:
+        Blender's Apply Rotation & Scale on the source was refused, user test). A point that
+        moved by more changes that distance unless it moved on a sphere around its surface
+        point; another order of the points does not pass."""
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or len(points) != len(self._param.uv):
             return False
         stored = self._report.get("data_digest")
-        return stored is None or data_digest(points) == stored
+        if stored is None or data_digest(points) == stored:
+            return True
+        if points.shape[1] != 3 or not np.isfinite(points).all():
+            return False
+        used = np.asarray(self._param.used, dtype=bool)
+        tol = ROUNDING_RTOL * float(self._report.get("diagonal", 0.0))
+        far = np.linalg.norm(self(np.asarray(self._param.uv)[used]) - points[used], axis=1)
+        return bool(tol > 0 and np.all(np.abs(far - self._errors[used]) <= tol))
 
     def refine(self, points, faces=None, callback=None, **changes) -> "TCBSurface":
         """Continue the adaptive loop from this surface on the same data.
@@ -644,8 +658,8 @@ class TCBSurface:
             _check_finite(points)  # the more specific message first
             raise InvalidInputError(
                 f"refine() needs the {len(points)} points this surface was fitted to, in the "
-                "same order; these differ from them (other values or another order). To fit "
-                "other data, call fit_surface()"
+                "same order; these differ from them (other values, by more than rounding, or "
+                "another order). To fit other data, call fit_surface()"
             )
         unknown = sorted(set(changes) - set(_OPTION_NAMES))
         if unknown:
@@ -831,6 +845,12 @@ def _user_path(path) -> Path:
             f"a file name must be a str, bytes or path object, got {path!r}"
         ) from None
     return Path(os.fsdecode(name)).expanduser()
+
+
+# data that differ from the data a surface was fitted to by at most this share of its diagonal
+# (per point, in its distance to the surface) count as the same for refine(): float32 coordinates
+# rounded again (Blender's Apply Rotation & Scale; 8 float32 ulps of the data's extent)
+ROUNDING_RTOL = 1e-6
 
 
 def data_digest(points: np.ndarray) -> str:

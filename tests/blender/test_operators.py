@@ -431,6 +431,30 @@ def test_a_net_with_a_deleted_vertex_is_named_when_its_edits_are_ignored(clean_s
     assert any(e[0] == "label" and "edits are ignored" in e[1] for e in log)
 
 
+def test_refine_after_applying_the_sources_rotation_and_scale(clean_scene):
+    """Apply Rotation & Scale (Ctrl+A) on the source rounds its float32 vertices again: the
+    world coordinates change by rounding only. Refine refused it as a changed source (user
+    test); it now refines, and a source moved for real is still refused."""
+    bpy = clean_scene
+    verts, faces = grid(16)
+    src = add_mesh(bpy, "Patch", verts, faces)
+    src.rotation_euler, src.scale, src.location = (0.4, 0.2, 0.7), (2.0, 1.0, 0.5), (3.0, -1.0, 2.0)
+    bpy.context.view_layer.update()
+    assert fit(bpy, src, tolerance=2e-3, max_control_points=200) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    n0 = surface.tcb.control_points
+    with bpy.context.temp_override(**select(bpy, src)):
+        assert bpy.ops.object.transform_apply(location=False, rotation=True, scale=True) == {"FINISHED"}
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.refine(tolerance=5e-4) == {"FINISHED"}
+    assert surface.tcb.control_points > n0
+    src.location.x += 0.01
+    bpy.context.view_layer.update()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        with pytest.raises(RuntimeError, match=r"'Patch' changed since .* use Fit Surface"):
+            bpy.ops.tcb.refine(tolerance=2e-4)
+
+
 def test_refine_of_a_changed_source_says_to_fit_again(clean_scene):
     """The scan was edited after the fit: Refine (which continues the fit of the same data)
     is refused in Blender's terms, not with the engine's 'call fit_surface()'."""

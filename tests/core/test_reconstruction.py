@@ -614,13 +614,22 @@ def test_coarse_32_bit_coordinates_are_named_in_the_error_or_a_warning():
 
 def test_refine_refuses_other_points_of_the_same_count(tmp_path):
     """Shuffled points or another scan of the same size gave garbage surfaces (relative RMS
-    0.24) without an error; the digest kept in the report (also in files) refuses them."""
+    0.24) without an error; the digest kept in the report (also in files) refuses them, and a
+    change of a point by 1e-4 of the diagonal. Points rounded again (float32 coordinates
+    through another transform: Blender's Apply Rotation & Scale, user test) are the same data:
+    each point's distance to the surface at its parameters stays its fitted error within 1e-6
+    of the diagonal."""
     points = ridge_cloud(1500)
     surf = fit_surface(points, max_iterations=1, max_control_points=150)
     surf.save(tmp_path / "s.npz")
     loaded = TCBSurface.load(tmp_path / "s.npz")
+    diagonal = surf.report["diagonal"]
+    moved = points.copy()
+    moved[700] += 1e-4 * diagonal
+    rng = np.random.default_rng(2)
+    rounded = points + rng.uniform(-1, 1, points.shape) * 2.0**-24 * np.abs(points).max()
     others = [points[np.random.default_rng(1).permutation(len(points))], ridge_cloud(1500, 5),
-              points + [0.0, 0.0, 1e-9]]
+              moved]
     for s in (surf, loaded):
         for other in others:
             assert not s.fitted_to(other)
@@ -629,6 +638,9 @@ def test_refine_refuses_other_points_of_the_same_count(tmp_path):
         assert s.fitted_to(points.copy()) and not s.fitted_to(points[:-1])
         assert s.refine(points.copy(),
                         max_iterations=1, max_control_points=200).report["iterations"] == 2
+        assert s.fitted_to(rounded) and s.fitted_to(points + [0.0, 0.0, 1e-9])
+        again = s.refine(rounded, max_iterations=1, max_control_points=200)
+        assert again.fitted_to(rounded) and again.report["iterations"] == 2
 
 
 def closed_octahedron():
