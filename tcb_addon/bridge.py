@@ -180,6 +180,26 @@ def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
     return np.vstack(out)
 
 
+def _world_checked(obj, pts: np.ndarray, matrix) -> np.ndarray:
+    """``pts`` of ``obj`` in world space (:func:`_world`); a :class:`SelectionError` when its
+    transform flattens them (a Scale of 0 along an axis: the 3x3 part's determinant below 1e-12
+    of the product of its column lengths) so that distinct vertices coincide: the engine
+    would advise merging coincident vertices, which destroys the mesh (user test). A
+    flattening that keeps the points distinct (a terrain scaled to 0 in z) is data as any."""
+    world = _world(pts, matrix)
+    m = np.array(matrix, dtype=np.float64)[:3, :3]
+    size = float(np.prod(np.linalg.norm(m, axis=0)))
+    if size > 0 and abs(float(np.linalg.det(m))) > 1e-12 * size:
+        return world
+    if len(np.unique(world, axis=0)) < len(np.unique(np.asarray(pts, dtype=np.float64), axis=0)):
+        raise SelectionError(
+            f"'{obj.name}' is flattened by its object transform (a Scale of 0 along an axis, its "
+            "own or a parent's), which makes distinct vertices coincide: give it a non-zero "
+            "Scale and try again"
+        )
+    return world
+
+
 def read_selection(context, objects=None) -> InputData:
     """World-space points (and faces) of the selected objects, after modifiers.
 
@@ -233,7 +253,7 @@ def read_selection(context, objects=None) -> InputData:
         else:
             continue
         if len(pts):
-            parts[key].append((_world(pts, inst.matrix_world), tris))
+            parts[key].append((_world_checked(owner, pts, inst.matrix_world), tris))
     # hidden objects (H, the viewport toggle, an excluded collection) are not evaluated: read
     # their own data (the modifiers cannot be applied without showing them)
     for key, obj in wanted.items():
@@ -244,7 +264,7 @@ def read_selection(context, objects=None) -> InputData:
         tris = read_triangles(data) if obj.type == "MESH" and len(data.polygons) else None
         tris = _faces_or_cloud(obj, pts, tris, notes)
         if len(pts):
-            parts[key].append((_world(pts, obj.matrix_world), tris))
+            parts[key].append((_world_checked(obj, pts, obj.matrix_world), tris))
             if any(m.show_viewport for m in getattr(obj, "modifiers", ())):
                 notes.append(f"'{obj.name}' is hidden: read without its modifiers (show it to "
                              "fit the modified shape)")

@@ -633,8 +633,10 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             )
         # Refine fits the data again: edits of the net are not kept, and the user is told
         moved = np.any(surf.control_points != stored.control_points, axis=1)
-        self._warnings = [f"{int(moved.sum())} edited control points were replaced (Refine fits "
-                          "the data again; Ctrl+Z brings the edits back)"] if moved.any() else []
+        edited = int(moved.sum())
+        self._warnings = [f"{edited} edited control point{' was' if edited == 1 else 's were'} "
+                          "replaced (Refine fits the data again; Ctrl+Z brings the edits back)"
+                          ] if edited else []
         return ("run", surf.refine, dict(points=data.points, faces=data.faces, **self._settings))
 
     def finish(self, context, surf):

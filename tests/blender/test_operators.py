@@ -321,7 +321,12 @@ def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
     with bpy.context.temp_override(**select(bpy, surface)):
         capfd.readouterr()
         assert bpy.ops.tcb.refine(max_iterations=1) == {"FINISHED"}
-        assert "edited control points" not in capfd.readouterr().out
+        assert "edited control point" not in capfd.readouterr().out
+        mesh = surface.tcb.net.data
+        mesh.vertices[2].co.z += 3.0  # one: singular
+        mesh.update()
+        assert bpy.ops.tcb.refine(max_iterations=1) == {"FINISHED"}
+        assert "1 edited control point was replaced" in capfd.readouterr().out
         mesh = surface.tcb.net.data
         for i in range(5, 9):
             mesh.vertices[i].co.z += 3.0
@@ -909,6 +914,24 @@ def test_error_camera_or_light(clean_scene, kind):
 def test_error_empty_mesh(clean_scene):
     bpy = clean_scene
     _expect_error(bpy, [add_mesh(bpy, "Empty", np.zeros((0, 3)))], "'Empty' has no vertices")
+
+
+def test_error_a_source_flattened_by_its_scale_names_the_scale(clean_scene):
+    """A flat grid with Scale x = 0: its columns of vertices coincide. The engine's advice
+    ("merge vertices by distance") would destroy the mesh (user test); the error names the
+    object's Scale. A terrain scaled to 0 in z keeps its points distinct: it is fitted."""
+    bpy = clean_scene
+    verts, faces = grid(10)
+    flat = add_mesh(bpy, "Flat", np.c_[verts[:, :2], np.zeros(len(verts))], faces)
+    flat.scale = (0.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    before = snapshot(flat)
+    _expect_error(bpy, [flat], r"'Flat' is flattened by its object transform \(a Scale of 0")
+    assert snapshot(flat) == before
+    terrain = add_mesh(bpy, "Terrain", verts, faces)
+    terrain.scale = (1.0, 1.0, 0.0)
+    bpy.context.view_layer.update()
+    assert fit(bpy, terrain) == {"FINISHED"}
 
 
 def test_error_closed_mesh(clean_scene):
