@@ -82,7 +82,7 @@ def selection_problem(context) -> str | None:
     if not selected:
         return "Select a mesh or point-cloud object"
     if all(_is_result(o) for o in selected):
-        return f"'{selected[0].name}' is a TCB result: select the scan"
+        return _result_note(selected[0])
     selected = [o for o in selected if not _is_result(o)]
     for obj in selected:
         if obj.type not in GEOMETRY_TYPES:
@@ -217,7 +217,9 @@ def read_selection(context, objects=None) -> InputData:
         results = [o for o in objects if o is not None and _is_result(o)]
         objects = [o for o in objects if o is not None and not _is_result(o)]
         if results and not objects:
+            note = _result_note(results[0])
             raise SelectionError(
+                note if "left over" in note else
                 f"'{results[0].name}' is a TCB result, not input: select the scan to fit (to "
                 "change a surface, use Refine)"
             )
@@ -313,6 +315,16 @@ def _is_result(obj) -> bool:
     """A surface, control net, deviation-points or weights object made by the add-on."""
     tcb = getattr(obj, "tcb", None)
     return tcb is not None and tcb.role != "NONE"
+
+
+def _result_note(obj) -> str:
+    """What to do with a result object selected as if it were input: select the scan; a net
+    (or deviation points) whose surface was deleted is left over (user test: nothing said so)."""
+    surface = obj.tcb.surface if obj.tcb.role != "SURFACE" else obj
+    if surface is None or not surface.users_scene:
+        return (f"'{obj.name}' is left over from a TCB surface that was deleted: delete it too, "
+                "or select the scan to fit")
+    return f"'{obj.name}' is a TCB result: select the scan"
 
 
 # --- writing -------------------------------------------------------------------------------

@@ -171,6 +171,16 @@ def net_copy_note(obj) -> str | None:
             f"'{net.name}', so edits here change nothing")
 
 
+def live_link_problem(surface_obj) -> str | None:
+    """Why the live net does not drive the surface, or None: its hidden weights object was
+    deleted (an outliner clean-up), so drags of the net change nothing until Re-tessellate,
+    Refine or Deviation Map rebuilds it (user test: nothing said so)."""
+    if surface_obj.modifiers.get(live.MODIFIER_NAME) is None or surface_obj.tcb.weights is not None:
+        return None
+    return ("the live link is broken (its hidden weights object was deleted): drags of the net "
+            "do not move the surface; Re-tessellate restores it")
+
+
 def net_vertex_problem(surface_obj) -> str | None:
     """Why the edits of the surface's control net are ignored, or None: a vertex was added to
     or deleted from the net, so its vertices no longer match the control points one to one

@@ -104,6 +104,13 @@ def test_a_deleted_net_leaves_the_surface_on_its_spline(clean_scene, addon, capf
     assert np.array_equal(positions(src), source_before)
 
 
+def panel_labels(bpy, obj) -> list[str]:
+    """The labels the add-on's panels draw with ``obj`` selected (test_operators' mock)."""
+    from test_operators import draw_panels
+
+    return [e[1] for e in draw_panels(bpy, [obj]) if e[0] == "label"]
+
+
 def test_a_deleted_weights_object_is_rebuilt(clean_scene, addon):
     bpy = clean_scene
     src, verts, faces, surface = fitted(bpy)
@@ -114,12 +121,17 @@ def test_a_deleted_weights_object_is_rebuilt(clean_scene, addon):
     bpy.data.objects.remove(surface.tcb.weights)  # e.g. an outliner clean-up
     assert surface.tcb.weights is None
     assert np.allclose(evaluated(bpy, surface), expected, atol=1e-5)
+    # the net no longer drives the surface: the Result panel says so (it was silent)
+    broken = ("The live link is broken (its hidden weights object was deleted): drags of the "
+              "net do not move the surface; Re-tessellate restores it")
+    assert broken in panel_labels(bpy, net) and broken in panel_labels(bpy, surface)
 
     # Re-tessellate links the net again through a new weights object
     assert run(bpy, bpy.ops.tcb.retessellate, surface, resolution=20) == {"FINISHED"}
     weights = surface.tcb.weights
     assert weights is not None and weights.tcb.surface == surface
     assert roles(bpy, "WEIGHTS") == [weights]
+    assert broken not in panel_labels(bpy, surface)
     moved = move_net_vertex(bpy, net, central(surf, 20), (0.0, 0.0, 0.2))
     live = surf.with_control_points(moved).tessellate(20)[0]
     assert np.abs(live - expected).max() > 1e-2

@@ -163,6 +163,13 @@ def test_results_are_not_input_and_a_hidden_source_still_works(clean_scene, addo
     assert again != surface and [s.object for s in again.tcb.sources] == [scan]
     assert spline_of(again).report["points"] == len(verts)
     _expect_error(bpy, [surface], "is a TCB result, not input: select the scan")
+    # the net of a surface deleted from the file is left over: the panel and Fit say so
+    net = again.tcb.net
+    bpy.data.objects.remove(again)
+    _expect_error(bpy, [net], f"'{net.name}' is left over from a TCB surface that was "
+                              "deleted: delete it too, or select the scan to fit")
+    labels = [e[1] for e in draw_panels(bpy, [net]) if e[0] == "label"]
+    assert any("is left over from a TCB surface that was deleted" in t for t in labels), labels
     for hide in ("hide_set", "hide_viewport", "exclude"):
         if hide == "hide_set":
             scan.hide_set(True)
