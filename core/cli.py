@@ -13,6 +13,7 @@ import os
 import sys
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -279,6 +280,10 @@ def _fit(args) -> int:
     ]
     if "rms_area" in r:  # a cloud: the RMS over its area (uneven density)
         rows.append(("RMS over area", f"{r['rms_area']:.4g} ({r['rms_area_rel']:.2e} of the diagonal)"))
+    swings = r.get("swings") or {}
+    if swings.get("places"):  # core.surface.data_swings: the warning above says what to do
+        rows.append(("swings off data", f"up to {swings['largest']:.4g} ({swings['largest_rel']:.2e} "
+                                        f"of the diagonal) at {swings['places']} places"))
     rows += [
         ("surface", f"{args.output} ({len(verts)} vertices, {len(tris)} triangles)"),
     ]
@@ -293,8 +298,15 @@ def _fit(args) -> int:
     return 0
 
 
+def _warning_line(message, category, filename, lineno, line=None) -> str:
+    """A warning of the engine as one line, ``warning: ...`` (not Python's file:line form)."""
+    return f"warning: {message}\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    shown = warnings.formatwarning
+    warnings.formatwarning = _warning_line
     try:
         if args.command == "fit":
             return _fit(args)
@@ -304,4 +316,6 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"error: {exc.strerror or exc}: {getattr(exc, 'filename', '')}", file=sys.stderr)
         return 2
+    finally:
+        warnings.formatwarning = shown
     return 1

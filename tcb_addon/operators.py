@@ -299,6 +299,8 @@ def report_result(op, surf, notes=(), warnings=()) -> None:
     there are ``warnings``."""
     rep = dict(getattr(surf, "report", {}) or {})
     reason = str(rep.get("stop_reason", ""))
+    if (rep.get("swings") or {}).get("places"):  # core.surface.data_swings
+        warnings = list(warnings) + [_core().surface.swing_warning(rep)]
     text = _summary(surf) + "".join(f"; {n}" for n in list(notes) + list(warnings))
     if reason.startswith("tolerance reached") and "misses" not in reason:
         op.report({"WARNING"} if warnings else {"INFO"}, text)

@@ -319,6 +319,24 @@ def test_re_tessellating_a_moved_surface_says_that_it_goes_back_to_its_spline(
     assert "had been moved" not in capfd.readouterr().out
 
 
+def test_a_surface_that_swings_off_the_data_is_a_warning(clean_scene, capfd):
+    """A terrain tile with a 20 m step fitted along World Z: the surface swings far beyond the
+    data between points (core.surface.data_swings). The summary is a WARNING that says so and
+    what to change, although the tolerance was reached."""
+    bpy = clean_scene
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 200, (10_000, 2))
+    z = (0.05 * xy[:, 0] + 5 * np.sin(xy[:, 1] / 30) + 20.0 * (xy[:, 0] + 0.3 * xy[:, 1] > 120)
+         + rng.normal(0, 0.05, len(xy)))
+    tile = add_mesh(bpy, "Tile", np.c_[xy, z])
+    capfd.readouterr()
+    assert fit(bpy, tile, tolerance=0.1, relative=False, projection="Z",
+               max_control_points=1000) == {"FINISHED"}
+    text = capfd.readouterr().out
+    assert "Warning: TCB:" in text and "the surface swings away from the data between" in text, text
+    assert "a looser tolerance, or fewer control points" in text
+
+
 def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
     bpy = clean_scene
     verts, faces = grid(16)
