@@ -810,8 +810,16 @@ def test_isolated_points_keeps_sparse_regions_duplicates_and_tiny_clouds() -> No
     a = np.stack(np.meshgrid(np.arange(0, 1, 0.01), np.arange(0, 1, 0.01)), -1).reshape(-1, 2)
     b = np.stack(np.meshgrid(np.arange(1, 2, 0.2), np.arange(0, 1, 0.2)), -1).reshape(-1, 2)
     cases.append(np.c_[np.vstack([a, b]), np.zeros(len(a) + len(b))])
+    # a scanner that dwelt: 20 000 points in a hard-edged 1 m square, 1000 over the 100 m tile
+    # (user test: the 5 tile points within a few metres of the square were refused: their
+    # nearest non-candidate was in the square, at its tiny spacing)
+    dwell = np.vstack([rng.uniform(-0.5, 0.5, (20_000, 2)) + 50, rng.uniform(0, 100, (1000, 2))])
+    cases.append(np.c_[dwell, 3 * np.sin(dwell[:, 0] / 15)])
     for pts in cases:
         assert len(isolated_points(normalize(pts)[0])) == 0
+    # a stray 200 m above that cloud is still one
+    spiked = np.vstack([cases[-1], [[50.0, 20.0, 200.0]]])
+    np.testing.assert_array_equal(isolated_points(normalize(spiked)[0]), [len(spiked) - 1])
 
 
 def test_a_stray_among_repeated_points_and_a_repeated_stray_are_found() -> None:
