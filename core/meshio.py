@@ -709,12 +709,20 @@ def _skip_point_counts(lines: list[str]) -> list[str]:
 
 
 def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
-    """Text columns: whitespace or comma separated; the first three are x, y, z. A first line
-    holding a lone integer is a point count (Leica ``.pts``) and is skipped."""
+    """Text columns: whitespace, comma or semicolon separated; the first three are x, y, z
+    (with semicolons, a decimal comma is read as a point: a spreadsheet's CSV in many
+    locales). A first line holding a lone integer is a point count (Leica ``.pts``) and is
+    skipped."""
     lines = _skip_point_counts(_text_lines(path))
     if not lines:
         raise _MalformedError("the file has no data lines")
-    delim = "," if "," in lines[0] or (len(lines) > 1 and "," in lines[1]) else None
+    head = lines[:2]
+    if any(";" in ln for ln in head):
+        delim = ";"
+        if any("," in ln for ln in lines[1:3]):  # decimal commas (not in a header line)
+            lines = [ln.replace(",", ".") for ln in lines]
+    else:
+        delim = "," if any("," in ln for ln in head) else None
     try:
         [float(t) for t in (lines[0].split(delim))[:3]]
     except ValueError:

@@ -1376,8 +1376,11 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
     n_loops = len(np.unique(blabel[bf]))
     if n_loops > 1:
         raise TopologyError(
-            f"the mesh has {n_loops} boundary loops (holes); a disk-like patch with exactly one "
-            "boundary is needed: fill the holes or cut the patch"
+            f"the mesh has {n_loops} boundary loops (separate borders: an outer one and "
+            f"{n_loops - 1} hole{'s' if n_loops > 2 else ''}, or the two ends of a tube); a "
+            "disk-like patch with exactly one border is needed: fill the holes or cut the patch "
+            "open, or fit its vertices alone as a point cloud (without the faces) if it is a "
+            "height field"
         )
     euler = int(np.count_nonzero(used)) - len(ekey) + len(tris)
     if euler != 1:

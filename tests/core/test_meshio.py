@@ -414,6 +414,18 @@ def test_leica_pts_point_counts_are_skipped(tmp_path: Path) -> None:
         read_geometry(tmp_path / "cut.pts")
 
 
+def test_semicolon_separated_columns_with_decimal_points_or_commas(tmp_path: Path) -> None:
+    """A spreadsheet's CSV in many locales: 'x;y;z' columns, decimal commas (user test: "each
+    line needs at least three numbers" for lines of three numbers)."""
+    (tmp_path / "dot.csv").write_text("x;y;z\n" + "".join(f"{x!r};{y!r};{z!r}\n" for x, y, z in ROWS))
+    (tmp_path / "comma.csv").write_text(
+        "".join(f"{x!r};{y!r};{z!r}\n".replace(".", ",") for x, y, z in ROWS))
+    for name in ("dot.csv", "comma.csv"):
+        pts, faces = read_geometry(tmp_path / name)
+        np.testing.assert_array_equal(pts, VERTS)
+        assert faces is None
+
+
 def test_text_in_a_number_column_raises_file_format_error(tmp_path: Path) -> None:
     (tmp_path / "p.xyz").write_text("0 0 0\n1 0 0\n1 one 0\n")
     with pytest.raises(FileFormatError, match="p.xyz"):
