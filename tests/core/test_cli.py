@@ -78,6 +78,32 @@ def test_a_surface_swinging_off_the_data_is_a_warning_line_and_a_row(tmp_path):
     assert row and float(row.group(1)) > 5.0 and int(row.group(2)) > 0, r.stdout
 
 
+def test_progress_of_an_uneven_cloud_and_the_automatic_resolution(tmp_path):
+    """A cloud of uneven density goes on while its RMS over the area misses the tolerance:
+    each progress line shows that RMS too (user test: "rms below the tolerance, and it goes
+    on"). The surface's resolution grows with the net (64 up to 1024 control points, then
+    2 sqrt(control points), at most 512) unless given."""
+    from core.cli import default_resolution
+
+    rng = np.random.default_rng(0)
+    xy = np.vstack([rng.uniform(-0.5, 0.5, (8000, 2)) + 50, rng.uniform(0, 100, (400, 2))])
+    cloud = tmp_path / "dwell.xyz"
+    np.savetxt(cloud, np.c_[xy, 3 * np.sin(xy[:, 0] / 15) + 2 * np.cos(xy[:, 1] / 20)])
+    r = run("fit", cloud, "-o", tmp_path / "s.obj", "--tolerance", "1e-3")
+    assert r.returncode == 0, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip().startswith("iteration")]
+    assert lines and all(re.search(r"rms \S+  over area \S+  max", ln) for ln in lines), r.stderr
+    assert re.search(r"^surface\s+.*, resolution 64, automatic\)$", r.stdout, re.M), r.stdout
+    assert [default_resolution(n) for n in (10, 1024, 1100, 5980, 10**6)] == [64, 64, 67, 155, 512]
+    assert "note:" not in r.stderr  # the tolerance was reached
+    # a budget that stops the run first: a note says what to change (the table only why)
+    r = run("fit", cloud, "-o", tmp_path / "s.obj", "--tolerance", "1e-6", "--quiet",
+            "--max-control-points", "60")
+    assert r.returncode == 0, r.stderr
+    assert ("note: the tolerance 1e-06 (a fraction of the bounding-box diagonal) was not "
+            "reached: raise --max-control-points, or loosen --tolerance") in r.stderr, r.stderr
+
+
 def test_projection_option(tmp_path):
     """A steep height field (Renka's F7 x3), turned, with noise: refused as too noisy to check
     for folds, with the option named; fitted along its height direction when given as
