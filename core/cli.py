@@ -118,6 +118,8 @@ def _smoothness_text(report: dict) -> str:
     if sel is not None:
         text += (f" (auto chose {sel['chosen']:.3g}, which misses the tolerance: default kept)"
                  if "kept" in sel else f" (cross-validated: {why})" if why else " (auto)")
+        if "smoother" in sel:  # core.surface._smoother_if_swinging
+            text += f"; {sel['chosen']:.3g} swung away from the data between points"
     return text
 
 

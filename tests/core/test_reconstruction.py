@@ -613,6 +613,33 @@ def test_a_surface_that_swings_away_between_the_data_is_reported():
     assert np.ptp(loose(loose.tessellation_uv(300)[0])[:, 2]) < 42.0  # data: 40
 
 
+def test_a_cross_validated_smoothness_that_swings_off_the_data_is_raised():
+    """30 points of sin(3x): cross-validation chose 1e-5 and the surface swung 1.2 off the
+    function between the points (its height range is 2; 1e-4 gives 0.23): held-out data
+    points cannot see a swing in a gap between them (user test). A chosen smoothness whose
+    surface swings (core.surface.data_swings) is replaced by the next larger candidate that
+    does not; the selection says so. Where the choice does not swing, it stays."""
+    def off(surf):
+        g = np.random.default_rng(9).random((5000, 2))
+        S = surf(surf.parameterization.project(np.c_[g, np.sin(3 * g[:, 0])]))
+        return np.abs(S[:, 2] - np.sin(3 * S[:, 0])).max()
+
+    xy = np.random.default_rng(0).random((30, 2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # sparse data
+        surf = fit_surface(np.c_[xy, np.sin(3 * xy[:, 0])])
+    sel = surf.report["smoothness_selection"]
+    assert sel["chosen"] == 1e-5 and surf.report["smoothness"] == 1e-4
+    assert "1e-05, the cross-validated choice, the surface swung away" in sel["smoother"]
+    assert surf.report["swings"]["places"] == 0 and off(surf) < 0.3
+    xy = np.random.default_rng(1).random((30, 2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        kept = fit_surface(np.c_[xy, np.sin(3 * xy[:, 0])])
+    assert "smoother" not in kept.report["smoothness_selection"]
+    assert kept.report["smoothness"] == kept.report["smoothness_selection"]["chosen"]
+
+
 def test_the_loop_and_the_choice_agree_on_what_sparse_means():
     """400 points of two peaks for 201 control points: sparse for the loop (under 2 per control
     point) though not for a count of the functions that see data; the choice then also tries
