@@ -84,7 +84,7 @@ def test_a_deleted_net_leaves_the_surface_on_its_spline(clean_scene, addon, capf
     surface.data.attributes["tcb_deviation"].data.foreach_get("value", dev)
     bridge = sys.modules[ADDON + ".tcb_addon.bridge"]
     assert np.allclose(dev, bridge.nearest_distances(expected, verts, faces), atol=1e-5)
-    assert surface.tcb.max == pytest.approx(shown.distances(verts).max(), abs=1e-6)
+    assert surface.tcb.deviation_data_max == pytest.approx(shown.distances(verts).max(), abs=1e-6)
 
     # re-tessellating removes the dead live link and the net, with a warning
     capfd.readouterr()
