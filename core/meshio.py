@@ -716,13 +716,15 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
     lines = _skip_point_counts(_text_lines(path))
     if not lines:
         raise _MalformedError("the file has no data lines")
-    head = lines[:2]
-    if any(";" in ln for ln in head):
+    data = lines[1:3] or lines[:1]  # the separator of the data lines (line 0 may be a header)
+    if all(";" in ln for ln in data):
         delim = ";"
-        if any("," in ln for ln in lines[1:3]):  # decimal commas (not in a header line)
-            lines = [ln.replace(",", ".") for ln in lines]
+        if any("," in ln for ln in lines[1:]):  # decimal commas (a header's do not count)
+            lines = lines[:1] + [ln.replace(",", ".") for ln in lines[1:]]
+            if not any(c.isalpha() for c in lines[0]):
+                lines[0] = lines[0].replace(",", ".")
     else:
-        delim = "," if any("," in ln for ln in head) else None
+        delim = "," if any("," in ln for ln in lines[:2]) else None
     try:
         [float(t) for t in (lines[0].split(delim))[:3]]
     except ValueError:

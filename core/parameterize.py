@@ -805,9 +805,10 @@ def isolated_points(
     (``N(i)`` its 8 neighbours, ``q25`` their lower quartile): far above the cloud's spacing
     and above the spacing of its own surroundings, so the inside of a sparsely scanned region
     is not one (its neighbours are as far apart). A candidate is *isolated* when its nearest
-    non-candidate ``j`` is farther than ``20 d_j``, and so is its nearest non-candidate with
-    ``d_j`` above that gap (of a sparse region: beside a hard-edged dense cluster the nearest
-    non-candidate is in the cluster): far from the cloud at the cloud's spacing there. A region scanned more sparsely than the rest therefore stays, also at its border
+    non-candidate ``j`` is farther than ``20 d_j``: far from the cloud at the cloud's spacing
+    there; a candidate that continues the plane of its nearest points (beside a hard-edged
+    dense cluster, whose points are its neighbours) must also be that far from the nearest
+    non-candidate with ``d_j`` above the gap (of a sparse region). A region scanned more sparsely than the rest therefore stays, also at its border
     with a denser one (its nearest non-candidate is a neighbour inside it, or a point of the
     denser part less than 20 of its spacings away: a scan line sampled 20x more sparsely than
     its neighbours 12 dense spacings away, a DEM at 20x the spacing of a lidar inset); so does
@@ -865,14 +866,28 @@ def isolated_points(
     coarse = solid[d[solid] > gap]
     coarse_tree = cKDTree(ref[coarse]) if len(coarse) else None
 
+    def in_plane(x: np.ndarray, near: np.ndarray) -> np.ndarray:
+        """``x`` lies along the cloud's best-fit plane from the points ``near`` (its offset
+        within 27 degrees of the plane), as a sparse point beside a dense cluster does; a
+        spike above the cluster does not (review: a spike above a lidar inset within a coarse
+        DEM escaped a rule without this). The cloud's plane, not its neighbours': a dense
+        cluster's 8 nearest points span less than its noise."""
+        normal = principal_axes(ref - ref.mean(axis=0))[1][2]
+        off = x - near
+        up = np.abs(off @ normal)
+        return up <= 0.5 * np.sqrt(np.maximum(np.einsum("ni,ni->n", off, off) - up * up, 0.0))
+
     def far_from_all(x: np.ndarray) -> np.ndarray:
-        """Farther than 20 d_j from the nearest non-candidate j, and from the nearest one of a
-        sparse region."""
+        """Farther than 20 d_j from the nearest non-candidate j; for a point that continues
+        the surface of its neighbours, also from the nearest one of a sparse region."""
         r, j = tree.query(x, k=1, workers=-1)
         far = r > _OUTLIER_ISOLATION * d[solid[j]]
         if coarse_tree is not None and far.any():
-            r, j = coarse_tree.query(x[far], k=1, workers=-1)
-            far[far] = r > _OUTLIER_ISOLATION * d[coarse[j]]
+            look = np.flatnonzero(far)
+            look = look[in_plane(x[look], ref[solid[j[look]]])]
+            if len(look):
+                r, j = coarse_tree.query(x[look], k=1, workers=-1)
+                far[look] = r > _OUTLIER_ISOLATION * d[coarse[j]]
         return far
 
     isolated = np.zeros(len(ref), dtype=bool)

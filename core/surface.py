@@ -126,6 +126,8 @@ class TCBSurface:
             raise InvalidInputError("control points must be finite")
         self._space = space
         self._c = _readonly(control_points)
+        # the control points of the fit that ``errors`` measure (fitted_to); an edit keeps them
+        self._fitted_c = self._c
         if active is None:
             active = np.flatnonzero(space.meets(parameterization.domain_polygon))
         self._active = _readonly(np.asarray(active, dtype=np.int64))
@@ -425,10 +427,12 @@ class TCBSurface:
             raise InvalidInputError(
                 f"control_points must have shape ({len(self._active)}, 3), got {c.shape}"
             )
-        return TCBSurface(
+        edited = TCBSurface(
             self._space, full, self._param, self._errors, self._report,
             self._n_interior, self._options, active=self._active,
         )
+        edited._fitted_c = self._fitted_c
+        return edited
 
     # ---- distances ---------------------------------------------------------------------
     def closest_parameters(self, points, iterations: int = 8) -> np.ndarray:
@@ -622,11 +626,13 @@ class TCBSurface:
         the same order, or values that differ from them only by rounding. :meth:`refine` needs
         them.
 
-        Rounding: each point's distance to the surface at its own parameters is its fitted
-        error within :data:`ROUNDING_RTOL` of the diagonal (float32 coordinates rounded again:
-        Blender's Apply Rotation & Scale on the source was refused, user test). A point that
-        moved by more changes that distance unless it moved on a sphere around its surface
-        point; another order of the points does not pass."""
+        Rounding: each point's distance to the fitted surface (before any
+        :meth:`with_control_points` edit) at its own parameters is its fitted error within
+        :data:`ROUNDING_RTOL` of the diagonal or 4 float32 steps of the largest coordinate
+        (float32 coordinates rounded again: Blender's Apply Rotation & Scale on the source was
+        refused, user test). A point that moved by more changes that distance unless it moved
+        on a sphere around its surface point; another order of the points does not pass.
+        Points left out of the fit (outliers, loose vertices) are not compared."""
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or len(points) != len(self._param.uv):
             return False
@@ -636,8 +642,10 @@ class TCBSurface:
         if points.shape[1] != 3 or not np.isfinite(points).all():
             return False
         used = np.asarray(self._param.used, dtype=bool)
-        tol = ROUNDING_RTOL * float(self._report.get("diagonal", 0.0))
-        far = np.linalg.norm(self(np.asarray(self._param.uv)[used]) - points[used], axis=1)
+        tol = max(ROUNDING_RTOL * float(self._report.get("diagonal", 0.0)),
+                  4 * 2.0**-24 * float(np.abs(points[used]).max(initial=0.0)))
+        A = self._space.evaluate(np.asarray(self._param.uv)[used])
+        far = np.linalg.norm(A @ self._fitted_c - points[used], axis=1)
         return bool(tol > 0 and np.all(np.abs(far - self._errors[used]) <= tol))
 
     def refine(self, points, faces=None, callback=None, **changes) -> "TCBSurface":
@@ -1062,7 +1070,11 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         balance=param.faces is None, start_degree=start_degree,
     )
     if not subsampled:
-        best = _smoother_if_swinging(best, fit_uv, fit_q, len(uv), options.seed)
+        # what the smoother fit must still meet when the loop reached the tolerance
+        limit = (options.tolerance * (diag_norm if options.relative else 1.0 / norm.scale)
+                 if reason == "tolerance reached" and options.tolerance > 0 else None)
+        best = _smoother_if_swinging(best, fit_uv, fit_q, len(uv), options.seed, limit,
+                                     options.criterion)
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)
     errors = np.full(len(points), np.nan)
@@ -1277,16 +1289,19 @@ def fit_surface(
     return _run(points, param, options, callback, checked=faces is None)
 
 
-def _smoother_if_swinging(best, uv, points, n_measured: int, seed: int):
+def _smoother_if_swinging(best, uv, points, n_measured: int, seed: int, limit=None,
+                          criterion: str = "rms"):
     """``best`` (an IterationState of adaptive_fit), or, when its smoothness was chosen by
     cross-validation and the surface swings away from the data between points
     (:func:`data_swings`), refitted with the next larger candidate that does not (the
     selection says so in ``"smoother"``). Held-out data points cannot see a swing in a gap
     between them: 30 points of sin(3x) got 1e-5, 1.2 off the function, where 1e-4 is 0.21
     off (user test). ``uv``/``points``: what was fitted (normalized), the first
-    ``n_measured`` the user's."""
+    ``n_measured`` the user's. With ``limit`` (the tolerance the loop reached, normalized) a
+    smoother fit must meet it too; a default kept because the choice missed the tolerance
+    (``"kept"``) is left alone."""
     sel = best.selection
-    if not sel or "cross_validated_rms" not in sel:
+    if not sel or "cross_validated_rms" not in sel or "kept" in sel:
         return best
     e = best.fit.errors[:n_measured]
     if data_swings(best.space, best.fit.control_points, uv[:n_measured], points[:n_measured],
@@ -1297,8 +1312,12 @@ def _smoother_if_swinging(best, uv, points, n_measured: int, seed: int):
         if s <= chosen:
             continue
         fit = fit_control_points(best.space, uv, points, None, s)
+        e = fit.errors[:n_measured]
+        value = float(np.sqrt(np.mean(e * e)) if criterion == "rms" else e.max(initial=0.0))
+        if limit is not None and value > limit:
+            break  # smoother ones miss the tolerance the loop reached: keep the choice
         if data_swings(best.space, fit.control_points, uv[:n_measured], points[:n_measured],
-                       fit.errors[:n_measured], seed=seed)[0] == 0:
+                       e, seed=seed)[0] == 0:
             fit.basis = None
             return dataclasses.replace(best, fit=fit, selection={
                 **sel, "smoother": f"{s:g} (with {chosen:g}, the cross-validated choice, the "
@@ -1339,10 +1358,11 @@ def data_swings(space, C, uv, points, errors, seed: int = 0) -> tuple[int, int, 
     k = SWING_NEIGHBOURS
     if n <= k:
         return 0, 0, 0.0
-    rng = np.random.default_rng(seed)
-    sub = rng.choice(n, SWING_SAMPLE, replace=False) if n > SWING_SAMPLE else np.arange(n)
+    # a random order (a scan stored line by line would otherwise be checked at its first
+    # lines only: review); the first SWING_POINTS of it are checked
+    sub = np.random.default_rng(seed).permutation(n)[:SWING_SAMPLE]
     x, p, e = uv[sub], np.asarray(points, dtype=np.float64)[sub], np.asarray(errors)[sub]
-    pick = np.arange(min(len(sub), SWING_POINTS))  # sub is in random order
+    pick = np.arange(min(len(sub), SWING_POINTS))
     dd, nb = cKDTree(x).query(x[pick], k=k + 1, workers=-1)
     dk, _ = cKDTree(space.knots).query(x[pick], workers=-1)
     near = dk < SWING_KNOTS * dd[:, -1]
@@ -1355,7 +1375,8 @@ def data_swings(space, C, uv, points, errors, seed: int = 0) -> tuple[int, int, 
     t = np.clip(np.einsum("ij,ij->i", S - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
     away = np.linalg.norm(S - a - t[:, None] * ab, axis=1)
     excess = away - (np.sqrt(L2) + 3.0 * np.maximum(e[i], e[j]))
-    flagged = excess > 0
+    # above rounding: duplicated points of exact data give zero-length segments (review: 1e-12)
+    flagged = excess > 1e-9 * float(np.ptp(p, axis=0).max())
     return int(flagged.sum()), len(i), float(excess.max()) if flagged.any() else 0.0
 
 

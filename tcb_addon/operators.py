@@ -247,9 +247,10 @@ def moved_note(surface_obj, what: str = WRITTEN_BACK) -> str | None:
     then = np.asarray(list(placed), dtype=np.float64)
     if then.shape != now.shape or np.allclose(now, then, rtol=1e-9, atol=1e-9 * (1 + np.abs(then).max())):
         return None
+    how = "move the net, or " if surface_obj.tcb.net is not None else ""
     return (f"'{surface_obj.name}' had been moved as an object, away from its spline: {what} "
-            "(the spline stays with the data and the control net; to move the surface, move "
-            "the net, or apply the move to the source and fit again)")
+            f"(the spline stays with the data and the control net; to move the surface, {how}"
+            "apply the move to the source and fit again)")
 
 
 def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = None):

@@ -101,10 +101,12 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
         layout.operator("tcb.deviation_map", icon="MOD_VERTEX_WEIGHT")
         if st.has_deviation:
             box = layout.box()
-            box.label(text=f"Data to surface: RMS {st.deviation_rms:.4g}, "
-                           f"max {st.deviation_data_max:.4g}")
-            box.label(text=f"({100 * st.deviation_rms_rel:.3g} %, "
-                           f"{100 * st.deviation_data_max_rel:.3g} % of the diagonal)")
+            # a map made before these statistics had their own properties: the color range
+            top = st.deviation_data_max or st.deviation_max
+            box.label(text=f"Data to surface: RMS {st.deviation_rms:.4g}, max {top:.4g}")
+            if st.deviation_data_max_rel > 0:
+                box.label(text=f"({100 * st.deviation_rms_rel:.3g} %, "
+                               f"{100 * st.deviation_data_max_rel:.3g} % of the diagonal)")
             n = len(bridge.RAMP_STOPS)
             for i in reversed(range(n)):
                 lo = st.deviation_max * bridge.RAMP_STOPS[i]

@@ -424,6 +424,10 @@ def test_semicolon_separated_columns_with_decimal_points_or_commas(tmp_path: Pat
         pts, faces = read_geometry(tmp_path / name)
         np.testing.assert_array_equal(pts, VERTS)
         assert faces is None
+    # a semicolon in a header does not make a whitespace file semicolon-separated (review)
+    rows = "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in ROWS)
+    (tmp_path / "head.xyz").write_text("X Y Z; metres\n" + rows)
+    np.testing.assert_array_equal(read_geometry(tmp_path / "head.xyz")[0], VERTS)
 
 
 def test_text_in_a_number_column_raises_file_format_error(tmp_path: Path) -> None:

@@ -603,6 +603,22 @@ def test_a_surface_that_swings_away_between_the_data_is_reported():
                            max_control_points=1000)
     sw = surf.report["swings"]
     assert sw["places"] > 0 and sw["largest"] > 5.0  # metres beyond the data
+    # the places checked are a random sample, whatever the order of the points (a scan line
+    # by line): the same fit checked with its points sorted along x still shows them
+    from core.surface import data_swings
+
+    order = np.argsort(tile[:, 0])
+    full = np.zeros((surf.space.n_basis, 3))
+    full[surf.active] = surf.control_points
+    assert data_swings(surf.space, full, surf.parameterization.uv[order], tile[order],
+                       surf.errors[order])[0] > 0
+    # exact data with duplicated points (zero-length segments) is no swing
+    xy = np.random.default_rng(1).random((500, 2))
+    plane = np.c_[xy, 0.3 * xy[:, 0] + 0.2 * xy[:, 1]] + 1000.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        flat = fit_surface(np.vstack([plane, plane[:100]]), max_control_points=200)
+    assert flat.report["swings"]["places"] == 0
     uv, _ = surf.tessellation_uv(300)
     assert surf(uv)[:, 2].max() > 35.0 + sw["largest"] / 2  # it is really there (data: <= 35)
     with warnings.catch_warnings():
@@ -710,6 +726,15 @@ def test_refine_refuses_other_points_of_the_same_count(tmp_path):
         assert s.fitted_to(rounded) and s.fitted_to(points + [0.0, 0.0, 1e-9])
         again = s.refine(rounded, max_iterations=1, max_control_points=200)
         assert again.fitted_to(rounded) and again.report["iterations"] == 2
+        # an edited net (with_control_points) is compared as fitted, not as edited
+        edited = s.with_control_points(s.control_points + [0.0, 0.0, 0.05])
+        assert edited.fitted_to(rounded) and not edited.fitted_to(moved)
+    # float32 rounding grows with the coordinates, not the cloud's size (review: a patch 1000
+    # diagonals from the origin was refused): 4 float32 steps of the largest coordinate
+    far = (points + 1000.0).astype(np.float32)
+    surf = fit_surface(far.astype(np.float64), max_iterations=1, max_control_points=150)
+    again = ((far * np.float32(3.0)) / np.float32(3.0)).astype(np.float64)
+    assert not np.array_equal(again, far.astype(np.float64)) and surf.fitted_to(again)
 
 
 def closed_octahedron():
