@@ -858,7 +858,8 @@ def _user_path(path) -> Path:
 
 # data that differ from the data a surface was fitted to by at most this share of its diagonal
 # (per point, in its distance to the surface) count as the same for refine(): float32 coordinates
-# rounded again (Blender's Apply Rotation & Scale; 8 float32 ulps of the data's extent)
+# rounded again (Blender's Apply Rotation & Scale; about 17 float32 steps of the data's extent;
+# fitted_to also allows 4 steps of the largest coordinate, for data far from the origin)
 ROUNDING_RTOL = 1e-6
 
 
@@ -1295,8 +1296,8 @@ def _smoother_if_swinging(best, uv, points, n_measured: int, seed: int, limit=No
     cross-validation and the surface swings away from the data between points
     (:func:`data_swings`), refitted with the next larger candidate that does not (the
     selection says so in ``"smoother"``). Held-out data points cannot see a swing in a gap
-    between them: 30 points of sin(3x) got 1e-5, 1.2 off the function, where 1e-4 is 0.21
-    off (user test). ``uv``/``points``: what was fitted (normalized), the first
+    between them: 30 points of sin(3x) got 1e-5, 1.2 off the function, where 1e-4 is about
+    0.2 off (user test). ``uv``/``points``: what was fitted (normalized), the first
     ``n_measured`` the user's. With ``limit`` (the tolerance the loop reached, normalized) a
     smoother fit must meet it too; a default kept because the choice missed the tolerance
     (``"kept"``) is left alone."""
@@ -1345,9 +1346,9 @@ def data_swings(space, C, uv, points, errors, seed: int = 0) -> tuple[int, int, 
     hold (a 20 m step fitted along the vertical: functions whose supports hold data only at
     their edges), it swung 70-90 m beyond the data between points 1 m apart, while the errors
     at the data stayed under 9 m (user test). Checked at the points with a knot closer than
-    their 3rd neighbour (where functions can be smaller than the data spacing; 0.06 s for a
-    fit of 1e5 points with 1500 knots),
-    among up to 5000 of a sample of up to 20 000 points (seeded). No place was flagged on
+    their 3rd neighbour (where functions can be smaller than the data spacing), among up to
+    5000 of a random sample of up to 20 000 points (seeded; 0.06 s for a fit of 1e5 points
+    with 1500 knots). No place was flagged on
     the 16 datasets of benchmarks/compare.py at three settings each, nor on noisy or sparse
     clouds. A swing inside a gap wider than the data spacing is measured against the far
     points across it, so it shows only when it is larger than the gap (conservative). Returns
