@@ -217,9 +217,8 @@ def read_selection(context, objects=None) -> InputData:
         results = [o for o in objects if o is not None and _is_result(o)]
         objects = [o for o in objects if o is not None and not _is_result(o)]
         if results and not objects:
-            note = _result_note(results[0])
             raise SelectionError(
-                note if "left over" in note else
+                _result_note(results[0]) if _left_over(results[0]) else
                 f"'{results[0].name}' is a TCB result, not input: select the scan to fit (to "
                 "change a surface, use Refine)"
             )
@@ -317,11 +316,15 @@ def _is_result(obj) -> bool:
     return tcb is not None and tcb.role != "NONE"
 
 
-def _result_note(obj) -> str:
-    """What to do with a result object selected as if it were input: select the scan; a net
-    (or deviation points) whose surface was deleted is left over (user test: nothing said so)."""
+def _left_over(obj) -> bool:
+    """A net (or deviation points) whose surface was deleted (user test: nothing said so)."""
     surface = obj.tcb.surface if obj.tcb.role != "SURFACE" else obj
-    if surface is None or not surface.users_scene:
+    return surface is None or not surface.users_scene
+
+
+def _result_note(obj) -> str:
+    """What to do with a result object selected as if it were input."""
+    if _left_over(obj):
         return (f"'{obj.name}' is left over from a TCB surface that was deleted: delete it too, "
                 "or select the scan to fit")
     return f"'{obj.name}' is a TCB result: select the scan"
