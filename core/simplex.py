@@ -179,9 +179,9 @@ class SimplexBatch:
         edge_id = np.full((n, n), -1, dtype=np.int64)
         for i, (p, q) in enumerate(self.edges):
             edge_id[p, q] = i
-        # internal nodes, by depth: lists of (lam (C, 3, 3), mu (C, 3, 2)); lam[:, j] holds
-        # (c0, cu, cv) with lambda_j(x) = c0 + cu y_u + cv y_v, mu[:, j] = grad lambda_j
-        self.nodes: list[list[tuple]] = []
+        # internal nodes, by depth: lists of coefficient tables (9, C); rows 3 j .. 3 j + 2 hold
+        # (c0, cu, cv) with lambda_j(x) = c0 + cu y_u + cv y_v, so (cu, cv) = mu_j = grad lambda_j
+        self.nodes: list[list[np.ndarray]] = []
         level = [np.tile(np.arange(n), (C, 1))]
         for depth in range(k):
             nodes, children = [], []
@@ -205,7 +205,9 @@ class SimplexBatch:
                     axis=1,
                 ) / dsafe[:, None, None]
                 lam = np.where(ok[:, None, None], lam, 0.0)
-                nodes.append((np.ascontiguousarray(lam), np.ascontiguousarray(lam[:, :, 1:])))
+                # one row per coefficient (9, C), row 3 j + (0: c0, 1: cu, 2: cv); the rows
+                # 3 j + 1 + w are mu_j in direction w
+                nodes.append(np.ascontiguousarray(lam.reshape(C, 9).T))
                 for j in range(3):
                     keep = sub != trip[:, j : j + 1]
                     children.append(sub[keep].reshape(C, m - 1))
@@ -229,9 +231,11 @@ class SimplexBatch:
         small = np.int16 if len(self.edges) < 16 else np.int32
         self.leaf_want = self.leaf_want.astype(small)
         self.leaf_masks = self.leaf_masks.astype(small)
-        self.leaf_value = np.ascontiguousarray(self.leaf_value.T)  # (C, L)
-        self.leaf_want = np.ascontiguousarray(self.leaf_want.T)
-        self.leaf_masks = np.ascontiguousarray(self.leaf_masks.T)
+        # per-pair tables are gathered along their last axis (np.take(table, sets, axis=1)):
+        # a row per quantity, so every gather and every later operation runs on contiguous
+        # rows of length P (a gather of (C, 9) rows and its transpose took 6x as long)
+        self.VT = np.ascontiguousarray(V.reshape(C, 2 * n).T)  # row 2 i + c: knot i, coord c
+        self.centerT = np.ascontiguousarray(self.center.T)  # (2, C)
 
     def evaluate(
         self, x: np.ndarray, sets: np.ndarray, derivative: tuple[int, int] = (0, 0)
@@ -273,7 +277,7 @@ class SimplexBatch:
         if len(sets) == 0 or all(sum(d) > k for d in derivatives):
             return outs
         P, n = len(sets), k + 3
-        VT = np.take(self.V, sets, axis=0).reshape(P, 2 * n).T.copy()  # row 2i + c: knot i, coord c
+        VT = np.take(self.VT, sets, axis=1)  # (2n, P)
         xu, xv = x[:, 0].copy(), x[:, 1].copy()
         du_ = [xu - VT[2 * i] for i in range(n)]  # x - V_i, once per knot
         dv_ = [xv - VT[2 * i + 1] for i in range(n)]
@@ -286,19 +290,16 @@ class SimplexBatch:
             left = f > 0
             left |= (f == 0) & (dy <= 0)
             bits |= left.astype(bits.dtype) << e
-        inside = (bits[:, None] & np.take(self.leaf_masks, sets, axis=0)) == np.take(
-            self.leaf_want, sets, axis=0
-        )  # (P, L)
-        anywhere = inside[:, 0].copy()  # column ORs: 4x faster than inside.any(axis=1)
-        for j in range(1, inside.shape[1]):
-            anywhere |= inside[:, j]
-        hit = np.flatnonzero(anywhere)  # pairs inside the support
+        inside = (bits & np.take(self.leaf_masks, sets, axis=1)) == np.take(
+            self.leaf_want, sets, axis=1
+        )  # (L, P)
+        hit = np.flatnonzero(np.logical_or.reduce(inside, axis=0))  # pairs inside the support
         sets = sets[hit]
         H = len(hit)
         # the leaves in tree order, one row each (L, H)
-        values0 = (np.take(inside, hit, axis=0) * np.take(self.leaf_value, sets, axis=0)).T.copy()
-        y = np.take(x, hit, axis=0) - np.take(self.center, sets, axis=0)
-        yu, yv = y[:, 0].copy(), y[:, 1].copy()
+        values0 = np.take(inside, hit, axis=1) * np.take(self.leaf_value, sets, axis=1)
+        yu = np.take(xu, hit) - np.take(self.centerT[0], sets)
+        yv = np.take(xv, hit) - np.take(self.centerT[1], sets)
         # barycentric coordinates of the value levels, shared by all derivative orders
         lam_cache: dict = {}
         for out, (du, dv) in zip(outs, derivatives):
@@ -309,14 +310,15 @@ class SimplexBatch:
             for depth in range(k - 1, -1, -1):
                 degree = k - depth
                 parent = np.empty((len(self.nodes[depth]), H))
-                for i, (lam, mu) in enumerate(self.nodes[depth]):
+                for i, lam in enumerate(self.nodes[depth]):
                     if depth < len(directions):
-                        m = np.take(mu[:, :, directions[depth]], sets, axis=0).T  # (3, H)
+                        w = directions[depth]
+                        m = np.take(lam[[1 + w, 4 + w, 7 + w]], sets, axis=1)  # mu_j (3, H)
                         f = [degree * m[j] for j in range(3)]
                     else:
                         f = lam_cache.get((depth, i))
                         if f is None:
-                            c = np.take(lam, sets, axis=0).reshape(H, 9).T.copy()  # 3 j + coef
+                            c = np.take(lam, sets, axis=1)  # (9, H): row 3 j + coefficient
                             f = [c[3 * j] + c[3 * j + 1] * yu + c[3 * j + 2] * yv
                                  for j in range(3)]
                             lam_cache[(depth, i)] = f

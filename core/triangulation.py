@@ -85,45 +85,65 @@ def grouped_plane_costs(x: np.ndarray, p: np.ndarray, group: np.ndarray, n_group
     p = p - np.take(mp, group, axis=0)
     # row sums of squares with einsum: 4-6x faster than (x * x).sum(axis=1) on (n, 2|3)
     r = np.sqrt(np.bincount(group, np.einsum("ij,ij->i", x, x), n_groups) / safe) + 1e-300
-    xs = x / np.take(r, group)[:, None]
-    cols = [np.ones(len(x)), xs[:, 0], xs[:, 1]]
+    inv = np.take(1.0 / r, group)
+    xu, xv = x[:, 0] * inv, x[:, 1] * inv
+    # the moment sums, one contiguous (G,) array per entry. The basis is the monomials
+    # u^i v^j (i + j <= 1, or <= 2 with quadratic), so M[a][b] is the sum of the monomial of
+    # exponent e_a + e_b: one bincount per distinct monomial (15 for 21 quadratic entries)
+    expo = [(0, 0), (1, 0), (0, 1)] + ([(2, 0), (1, 1), (0, 2)] if quadratic else [])
+    powers = {(0, 0): None, (1, 0): xu, (0, 1): xv}
     if quadratic:
-        cols += [xs[:, 0] ** 2, xs[:, 0] * xs[:, 1], xs[:, 1] ** 2]
-    d = len(cols)
-    M = np.empty((n_groups, d, d))
+        powers.update({(2, 0): xu * xu, (1, 1): xu * xv, (0, 2): xv * xv})
+    d = len(expo)
+    sums: dict = {(0, 0): cnt}
+    M = [[None] * d for _ in range(d)]
     for a in range(d):
         for b in range(a, d):
-            M[:, a, b] = M[:, b, a] = np.bincount(group, cols[a] * cols[b], n_groups)
-    R = np.stack([np.stack([np.bincount(group, cols[a] * p[:, j], n_groups) for j in range(3)], 1)
-                  for a in range(d)], 1)  # (G, d, 3)
+            e = (expo[a][0] + expo[b][0], expo[a][1] + expo[b][1])
+            if e not in sums:
+                fa, fb = powers[expo[a]], powers[expo[b]]
+                sums[e] = np.bincount(group, fb if fa is None else fa * fb, n_groups)
+            M[a][b] = M[b][a] = sums[e]
+    pc = [np.ascontiguousarray(p[:, j]) for j in range(3)]
+    R = [[np.bincount(group, pc[j] if powers[e] is None else powers[e] * pc[j], n_groups)
+          for j in range(3)] for e in expo]
     Q = np.bincount(group, np.einsum("ij,ij->i", p, p), n_groups)
-    explained = np.cumsum(_spd_quadratic_terms(M, R), axis=1)  # by the first 1, 2, ... columns
-    ssr = np.where(cnt > 3, np.maximum(Q - explained[:, 2], 0.0), 0.0)
+    explained = np.cumsum(_spd_quadratic_terms(M, R), axis=0)  # by the first 1, 2, ... columns
+    ssr = np.where(cnt > 3, np.maximum(Q - explained[2], 0.0), 0.0)
     if quadratic:
-        ssr = np.where(cnt > 6, np.maximum(Q - explained[:, 5], 0.0), ssr)
+        ssr = np.where(cnt > 6, np.maximum(Q - explained[5], 0.0), ssr)
     return ssr
 
 
-def _spd_quadratic_terms(M: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Terms ``|(L^-1 R)_i|^2 / d_i`` (G, d) of ``tr(R^T (M + eps I)^-1 R)`` for stacks of
-    symmetric positive semidefinite ``M`` (G, d, d) and ``R`` (G, d, k), with
+def _spd_quadratic_terms(M, R) -> np.ndarray:
+    """Terms ``|(L^-1 R)_i|^2 / d_i`` (d, G) of ``tr(R^T (M + eps I)^-1 R)`` for stacks of
+    symmetric positive semidefinite ``M`` and ``R``, given entry by entry (``M[a][b]`` and
+    ``R[a][j]`` are (G,) arrays; a d x d and a d x k nested list), with
     ``M + eps I = L D L^T`` and ``eps = 1e-12 trace(M)``; the sum of the first ``j`` terms is the
     form of the leading ``j x j`` block (the fit with the first ``j`` columns). ``L D L^T`` is
-    vectorized over the stack (a loop over the d columns). Not ``np.linalg.solve``: a LAPACK
+    vectorized over the stack (a loop over the d columns), each entry a contiguous array: on
+    (G, d, d) stacks the strided columns made it 3x slower. Not ``np.linalg.solve``: a LAPACK
     call per small system, which under OpenBLAS threading on a loaded machine took 0.6-4 s for
     5e4 3x3 systems instead of 0.03 s."""
-    G, d, _ = M.shape
-    eps = 1e-12 * np.trace(M, axis1=1, axis2=2) + 1e-300
-    L = np.zeros((G, d, d))
-    D = np.empty((G, d))
+    d = len(M)
+    eps = sum(M[j][j] for j in range(d)) * 1e-12 + 1e-300
+    L = [[None] * d for _ in range(d)]
+    D = [None] * d
     for j in range(d):
-        D[:, j] = np.maximum(M[:, j, j] + eps - (L[:, j, :j] ** 2 * D[:, :j]).sum(axis=1), eps)
+        acc = M[j][j] + eps
+        for k in range(j):
+            acc = acc - L[j][k] ** 2 * D[k]
+        D[j] = np.maximum(acc, eps)
         for i in range(j + 1, d):
-            L[:, i, j] = (M[:, i, j] - (L[:, i, :j] * L[:, j, :j] * D[:, :j]).sum(axis=1)) / D[:, j]
-    Y = np.array(R, dtype=np.float64)
+            acc = M[i][j]
+            for k in range(j):
+                acc = acc - L[i][k] * L[j][k] * D[k]
+            L[i][j] = acc / D[j]
+    Y = [list(row) for row in R]
     for i in range(1, d):
-        Y[:, i] -= (L[:, i, :i, None] * Y[:, :i]).sum(axis=1)
-    return (Y**2).sum(axis=2) / D
+        for k in range(i):
+            Y[i] = [Y[i][c] - L[i][k] * Y[k][c] for c in range(len(Y[i]))]
+    return np.stack([sum(y * y for y in Y[i]) / D[i] for i in range(d)])
 
 
 def locate(knots: np.ndarray, triangles: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -339,8 +359,12 @@ def _link_sides(P, forms, ii, jj, link: np.ndarray, x: np.ndarray) -> np.ndarray
     side = np.take(A, link, axis=0) * x[:, 0:1]
     side += np.take(B, link, axis=0) * x[:, 1:2]
     side += np.take(C, link, axis=0)
-    at = (x[:, None, :] == np.take(P, link, axis=0)).all(axis=2)  # (b, m): x is vertex k
-    side[at[:, ii] | at[:, jj]] = 0.0
+    # x is vertex k: compared by u first, by v only in the (rare) rows where u matches
+    at = x[:, 0:1] == np.take(P[:, :, 0], link, axis=0)  # (b, m)
+    rows = np.flatnonzero(at.any(axis=1))
+    if len(rows):
+        at = at[rows] & (x[rows, 1:2] == np.take(P[:, :, 1], link[rows], axis=0))
+        side[rows] = np.where(at[:, ii] | at[:, jj], 0.0, side[rows])
     return side
 
 
@@ -483,9 +507,15 @@ class FeatureLinkTriangulator:
                 out[li] = [tuple(polygons[li])]
             elif tris is None:
                 rest.setdefault(len(polygons[li]), []).append(li)
-        for m, members in rest.items():
-            polys = np.array([polygons[li] for li in members], dtype=np.int64).reshape(-1, m)
-            for li, tris in zip(members, constrained_delaunay_many(polys, knots)):
+        batches = [members[s : s + self.OPTIMAL_BATCH] for members in rest.values()
+                   for s in range(0, len(members), self.OPTIMAL_BATCH)]
+
+        def delaunay(members):
+            polys = np.array([polygons[li] for li in members], dtype=np.int64)
+            return constrained_delaunay_many(polys, knots)
+
+        for members, result in zip(batches, pmap(delaunay, batches)):
+            for li, tris in zip(members, result):
                 out[li] = tris if tris is not None else constrained_delaunay(
                     polygons[li], knots, Js[li], level
                 )
