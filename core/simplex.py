@@ -262,12 +262,14 @@ class SimplexBatch:
     def evaluate_many(self, x: np.ndarray, sets: np.ndarray, derivatives) -> list:
         """:meth:`evaluate` for several derivative orders at once (one set of side tests).
 
-        Layout: after one row gather per table (``np.take``: 2.5-7x faster than fancy
-        indexing), every per-pair quantity is a contiguous row of length ``P`` (knot
-        coordinates, leaves, barycentric coordinates): numpy's loops on strided columns of
-        ``(P, 3)`` / ``(P, n, 2)`` arrays were the cost (this layout, a space's evaluation at
-        1e5 points on one thread: 0.79-0.91x the time for values, 0.90-0.98x with first or
-        second derivatives). The side tests are
+        Layout: the tables hold a row per quantity and are gathered along their last axis
+        (``np.take(table, sets, axis=1)``), so every per-pair quantity is a contiguous row of
+        length ``P`` (knot coordinates, leaves, barycentric coordinates) with no transposed
+        copy: numpy's loops on strided columns of ``(P, 3)`` / ``(P, n, 2)`` arrays, and then
+        the transposes of gathered ``(P, 9)`` rows, were the cost. A 3907-function quadratic
+        space at 1e5 points on one thread: 0.66-0.71 s against 0.85-0.93 s with gathered rows
+        and transposes (0.78-0.82x; five derivative orders at 2e4 points 0.77-0.91x). The side
+        tests are
         :func:`_edge_left`'s formula, ``d x (x - lo)`` with ``d = hi - lo``, bit for bit.
         """
         x = np.asarray(x, dtype=np.float64)
