@@ -22,7 +22,7 @@ from .errors import InvalidInputError, OutlierError, TCBError
 from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 from .parameterize import projection_direction
-from .refine import STALLED, replaced_default_reason
+from .refine import STALLED, SWINGS_LEFT, replaced_default_reason
 
 __all__ = ["main"]
 
@@ -195,7 +195,10 @@ def _progress(quiet: bool):
             print(
                 f"  iteration {r['iteration']:3d}  knots {r['knots']:6d}  control points "
                 f"{r['control_points']:6d}  rms {r['rms_rel']:.2e}{area}  max {r['max_rel']:.2e}  "
-                f"({r['seconds']:.1f} s{sampled})",
+                f"({r['seconds']:.1f} s{sampled})"
+                + (f"  swings between the data at {r['swings']} places: the "
+                   f"{r['knots_taken_back']} new knots taken back" if "knots_taken_back" in r
+                   else ""),
                 file=sys.stderr,
                 flush=True,
             )
@@ -312,7 +315,9 @@ def _fit(args) -> int:
     for k, v in rows:
         print(f"{k:<{width}}  {v}")
     advice = {"control-point budget reached": "raise --max-control-points",
-              "iteration limit": "raise --max-iterations"}.get(r["stop_reason"])
+              "iteration limit": "raise --max-iterations",
+              SWINGS_LEFT: "the rest of the error is where more knots made the surface swing "
+                           "between the data points (a sharp step?)"}.get(r["stop_reason"])
     if advice and args.tolerance > 0:  # the table says why it stopped, not what to change
         unit = " (a fraction of the bounding-box diagonal)" if args.relative else ""
         print(f"note: the tolerance {args.tolerance:g}{unit} was not reached: {advice}, or "

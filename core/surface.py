@@ -40,7 +40,7 @@ from .geometry import column_bounds
 from .parameterize import (
     Parameterization, _as_points, _check_finite, box_normalization, normalize, parameterize,
 )
-from .refine import RefineOptions, adaptive_fit, area_weights, check_callback
+from .refine import RefineOptions, adaptive_fit, area_weights, check_callback, swing_places
 from .spline_space import SplineSpace, _whole, derivative_order, frozen
 from .simplex import orient2d
 
@@ -1326,59 +1326,14 @@ def _smoother_if_swinging(best, uv, points, n_measured: int, seed: int, limit=No
     return best
 
 
-# data_swings: data points sampled (the neighbours are searched among them), the points whose
-# midpoints with their neighbours are checked, how many neighbours, and how close a knot must be
-SWING_SAMPLE = 20_000
-SWING_POINTS = 5_000
-SWING_NEIGHBOURS = 3
-SWING_KNOTS = 1.0
-
-
 def data_swings(space, C, uv, points, errors, seed: int = 0) -> tuple[int, int, float]:
     """Where the surface swings away from the data between neighbouring data points: a check
-    after the fit (not in method.md). ``space`` with control points ``C`` (all functions),
-    the data's parameters ``uv``, ``points`` and fit errors ``errors`` (one unit).
-
-    At the parameter midpoint ``m`` of a data point ``i`` and each of its 3 nearest
-    neighbours ``j`` (in uv), the surface point ``S(m)`` should lie within ``|p_i - p_j| + 3
-    max(e_i, e_j)`` of the segment ``p_i p_j``: a surface that follows the data does not
-    move farther between two points than they are apart. Where more knots crowd than the data
-    hold (a 20 m step fitted along the vertical: functions whose supports hold data only at
-    their edges), it swung 70-90 m beyond the data between points 1 m apart, while the errors
-    at the data stayed under 9 m (user test). Checked at the points with a knot closer than
-    their 3rd neighbour (where functions can be smaller than the data spacing), among up to
-    5000 of a random sample of up to 20 000 points (seeded; 0.06 s for a fit of 1e5 points
-    with 1500 knots). No place was flagged on
-    the 16 datasets of benchmarks/compare.py at three settings each, nor on noisy or sparse
-    clouds. A swing inside a gap wider than the data spacing is measured against the far
-    points across it, so it shows only when it is larger than the gap (conservative). Returns
-    (places flagged, places checked, the largest excess).
-    """
-    uv = np.asarray(uv, dtype=np.float64)
-    n = len(uv)
-    k = SWING_NEIGHBOURS
-    if n <= k:
-        return 0, 0, 0.0
-    # a random order (a scan stored line by line would otherwise be checked at its first
-    # lines only: review); the first SWING_POINTS of it are checked
-    sub = np.random.default_rng(seed).permutation(n)[:SWING_SAMPLE]
-    x, p, e = uv[sub], np.asarray(points, dtype=np.float64)[sub], np.asarray(errors)[sub]
-    pick = np.arange(min(len(sub), SWING_POINTS))
-    dd, nb = cKDTree(x).query(x[pick], k=k + 1, workers=-1)
-    dk, _ = cKDTree(space.knots).query(x[pick], workers=-1)
-    near = dk < SWING_KNOTS * dd[:, -1]
-    i, j = np.repeat(pick[near], k), nb[near, 1:].ravel()
-    if len(i) == 0:
-        return 0, 0, 0.0
-    S = space.evaluate(0.5 * (x[i] + x[j])) @ C
-    a, ab = p[i], p[j] - p[i]
-    L2 = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("ij,ij->i", S - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-    away = np.linalg.norm(S - a - t[:, None] * ab, axis=1)
-    excess = away - (np.sqrt(L2) + 3.0 * np.maximum(e[i], e[j]))
-    # above rounding: duplicated points of exact data give zero-length segments (review: 1e-12)
-    flagged = excess > 1e-9 * float(np.ptp(p, axis=0).max())
-    return int(flagged.sum()), len(i), float(excess.max()) if flagged.any() else 0.0
+    after the fit (not in method.md; :func:`core.refine.swing_places`, which says how, gives
+    the places too). ``space`` with control points ``C`` (all functions), the data's
+    parameters ``uv``, ``points`` and fit errors ``errors`` (one unit). Returns (places
+    flagged, places checked, the largest excess)."""
+    where, checked, largest = swing_places(space, C, uv, points, errors, seed)
+    return len(where), checked, largest
 
 
 def swing_warning(report: dict) -> str:

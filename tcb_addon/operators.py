@@ -326,7 +326,10 @@ def report_result(op, surf, notes=(), warnings=()) -> None:
         advice = {"control-point budget reached": "raise Max Control Points",
                   "iteration limit": "raise Max Iterations",
                   "no triangle has enough data to refine": "add points where the error is "
-                  "largest (too few there for more knots)"}.get(reason, "")
+                  "largest (too few there for more knots)",
+                  _core().refine.SWINGS_LEFT: "the rest of the error is where more knots made "
+                  "the surface swing between the points (a sharp step?): add points there"
+                  }.get(reason, "")
         op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason})"
                   + (f": {advice} or loosen the tolerance" if advice else ""))
 
