@@ -861,6 +861,7 @@ def adaptive_fit(
     fresh = start_knots is None  # knots placed afresh (the start, a sizing restart)
     sized = grown = None  # (interior knots, error) of the last sizing / growing fit
     frozen: list = []  # (centres, radii) of the regions where knots made the surface swing
+    last_insertion: tuple = ()  # insert()'s arguments of the last insertion (pending's)
 
     def insert(knots, triangles, steer, count) -> np.ndarray:
         """New knots (insertion_points), none in the regions where they made it swing."""
