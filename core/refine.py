@@ -20,7 +20,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import ConvexHull, cKDTree
+from scipy.spatial import ConvexHull, Delaunay, cKDTree
 
 from .border import border_rings, default_ring_count
 from .configurations import link_triangulation_procedure
@@ -386,6 +386,8 @@ SWING_SAMPLE = 20_000
 SWING_POINTS = 5_000
 SWING_NEIGHBOURS = 3
 SWING_KNOTS = 1.0
+SWING_GAPS = True  # also at the centroids of the sample's Delaunay triangles
+SWING_GAP_SPAN = 4.0  # ... of longest side at most this times the median one
 
 
 def swing_places(space, C, uv, points, errors, seed: int = 0) -> tuple[np.ndarray, int, float]:
@@ -402,11 +404,22 @@ def swing_places(space, C, uv, points, errors, seed: int = 0) -> tuple[np.ndarra
     at the data stayed under 9 m (user test). Checked at the points with a knot closer than
     their 3rd neighbour (where functions can be smaller than the data spacing), among up to
     5000 of a random sample of up to 20 000 points (seeded; 0.06 s for a fit of 1e5 points
-    with 1500 knots). No place was flagged on the 16 datasets of benchmarks/compare.py at
-    three settings each, nor on noisy or sparse clouds. A swing inside a gap wider than the
-    data spacing is measured against the far points across it, so it shows only when it is
-    larger than the gap (conservative). Returns (the midpoints flagged (f, 2), places checked,
-    the largest excess).
+    with 1500 knots).
+
+    Also in the gaps between the data (SWING_GAPS): at the centroid of each Delaunay
+    triangle of the sample (none with a side on its hull, none with a longest side above
+    SWING_GAP_SPAN times the median one) that has a knot closer than its longest side,
+    ``S`` should lie within the triangle's longest side plus 3 times its corners' largest
+    error of the triangle ``p_a p_b p_c``. A spike between points 1-1.4 m apart reaches none
+    of their midpoints: a 20 m cliff in a 200 m tile of 5e4 points dipped 43 m below points
+    fitted within 0.9 m, and only this check sees it (up to 5000 triangles; 0.08 s instead of
+    0.03 on that fit, the sample's triangulation kept between calls).
+
+    No place was flagged on the 16 datasets of benchmarks/compare.py at three settings each
+    (the final surfaces; the loop took back the same 2 of 48 insertions as without the gap
+    check), nor on noisy or sparse clouds. A swing inside a gap wider than the data spacing is
+    measured against the far points across it, so it shows only when it is larger than the gap
+    (conservative). Returns (the places flagged (f, 2), places checked, the largest excess).
     """
     uv = np.asarray(uv, dtype=np.float64)
     n = len(uv)
@@ -422,18 +435,84 @@ def swing_places(space, C, uv, points, errors, seed: int = 0) -> tuple[np.ndarra
     dk, _ = cKDTree(space.knots).query(x[pick], workers=-1)
     near = dk < SWING_KNOTS * dd[:, -1]
     i, j = np.repeat(pick[near], k), nb[near, 1:].ravel()
-    if len(i) == 0:
-        return np.zeros((0, 2)), 0, 0.0
     mid = 0.5 * (x[i] + x[j])
-    S = space.evaluate(mid) @ C
     a, ab = p[i], p[j] - p[i]
-    L2 = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("ij,ij->i", S - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-    away = np.linalg.norm(S - a - t[:, None] * ab, axis=1)
-    excess = away - (np.sqrt(L2) + 3.0 * np.maximum(e[i], e[j]))
+    reach = np.sqrt(np.einsum("ij,ij->i", ab, ab)) + 3.0 * np.maximum(e[i], e[j])
+    # gaps: the centroids of the sample's Delaunay triangles near a knot (a spike between
+    # data points 1-1.4 m apart, none of whose midpoints it reaches: the cliff, 5e4 points)
+    cen, T = np.zeros((0, 2)), np.zeros((0, 3), dtype=np.intp)
+    if SWING_GAPS and len(x) >= 3:
+        T = _gap_triangles(x)
+        if len(T):
+            cen = x[T].mean(axis=1)
+            span = np.max([np.linalg.norm(x[T[:, q]] - x[T[:, q - 1]], axis=1)
+                           for q in range(3)], axis=0)
+            near_t = ((cKDTree(space.knots).query(cen, workers=-1)[0] < SWING_KNOTS * span)
+                      & (span <= SWING_GAP_SPAN * np.median(span)))
+            T, cen = T[near_t], cen[near_t]
+            if len(T) > SWING_POINTS:
+                keep = np.random.default_rng(seed + 1).choice(len(T), SWING_POINTS,
+                                                              replace=False)
+                T, cen = T[keep], cen[keep]
+    places = np.vstack([mid, cen])
+    if len(places) == 0:
+        return np.zeros((0, 2)), 0, 0.0
+    S = space.evaluate(places) @ C
+    away = np.concatenate([_segment_distance(S[: len(mid)], a, ab),
+                           _triangle_distance(S[len(mid):], *(p[T[:, q]] for q in range(3)))])
+    if len(T):
+        P3 = p[T]
+        longest = np.max([np.linalg.norm(P3[:, q] - P3[:, q - 1], axis=1) for q in range(3)],
+                         axis=0)
+        reach = np.concatenate([reach, longest + 3.0 * e[T].max(axis=1)])
+    excess = away - reach
     # above rounding: duplicated points of exact data give zero-length segments (review: 1e-12)
     flagged = excess > 1e-9 * float(np.ptp(p, axis=0).max())
-    return mid[flagged], len(i), float(excess.max()) if flagged.any() else 0.0
+    return places[flagged], len(places), float(excess.max()) if flagged.any() else 0.0
+
+
+_GAP_CACHE: dict = {}  # the last sample's triangles (the loop checks the same sample each time)
+
+
+def _gap_triangles(x: np.ndarray) -> np.ndarray:
+    """The Delaunay triangles of ``x`` that have no side on its hull (slivers along the hull:
+    a flat triangle between points far apart on a curved surface is no measure of it; F7
+    scattered was 0.35 off such a one, 0.07 of its diagonal). The last result is kept (0.09
+    s for 20 000 points; the loop checks the same sample after every insertion)."""
+    key = hash(x.tobytes())
+    if _GAP_CACHE.get("key") == key and _GAP_CACHE["shape"] == x.shape:
+        return _GAP_CACHE["triangles"]
+    try:
+        tri = Delaunay(x)
+        T = tri.simplices[(tri.neighbors >= 0).all(axis=1)]
+    except Exception:  # a degenerate sample (all on a line, or too few): no gaps to check
+        T = np.zeros((0, 3), dtype=np.intp)
+    _GAP_CACHE.update(key=key, shape=x.shape, triangles=T)
+    return T
+
+
+def _segment_distance(S: np.ndarray, a: np.ndarray, ab: np.ndarray) -> np.ndarray:
+    """Distances of the points ``S`` (m, 3) from the segments ``a``, ``a + ab`` (m, 3)."""
+    L2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", S - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    return np.linalg.norm(S - a - t[:, None] * ab, axis=1)
+
+
+def _triangle_distance(S, a, b, c) -> np.ndarray:
+    """Distances of the points ``S`` (m, 3) from the triangles ``a b c`` (each (m, 3)): to
+    the plane where the foot lies inside, else to the nearest edge."""
+    n = np.cross(b - a, c - a)
+    n2 = np.einsum("ij,ij->i", n, n)
+    ok = n2 > 0
+    d = S - a
+    foot = d - (np.einsum("ij,ij->i", d, n) / np.where(ok, n2, 1.0))[:, None] * n
+    # the foot's barycentric signs: inside when it is on the inner side of all three edges
+    inside = ok.copy()
+    for u, v in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(v - u, foot + a - u), n) >= 0
+    plane = np.abs(np.einsum("ij,ij->i", d, n)) / np.sqrt(np.where(ok, n2, 1.0))
+    edge = np.min([_segment_distance(S, u, v - u) for u, v in ((a, b), (b, c), (c, a))], axis=0)
+    return np.where(inside, plane, edge)
 
 
 AREA_POINTS_PER_CELL = 64  # points per counting cell of area_weights (on average)
@@ -862,6 +941,8 @@ def adaptive_fit(
     sized = grown = None  # (interior knots, error) of the last sizing / growing fit
     frozen: list = []  # (centres, radii) of the regions where knots made the surface swing
     last_insertion: tuple = ()  # insert()'s arguments of the last insertion (pending's)
+    known: list = []  # (centres, radii) of where the run's first fit swings
+    settle_restart = False  # the fit is the one a restart that swung was sized from
 
     def insert(knots, triangles, steer, count) -> np.ndarray:
         """New knots (insertion_points), none in the regions where they made it swing."""
@@ -944,10 +1025,38 @@ def adaptive_fit(
             report["sampled_points"] = len(uv)
         # an insertion that made the surface swing between the data (a sharp step: more knots
         # than the data hold) is taken back where it swings, and that region is left alone
+        # a fit after an insertion or a sizing restart that makes the surface swing between
+        # the data (a sharp step: more knots than the data hold) is taken back; the run's
+        # first fit has nothing to go back to: where it swings is known and not held against
+        # the later ones
         swung = np.zeros((0, 2))
-        if REVERT_SWINGS and not fresh and len(pending):
+        restarted = fresh and sized is not None and not settle_restart
+        if REVERT_SWINGS and (it == 0 or restarted or (not fresh and len(pending))):
             swung = swing_places(space, fit.control_points, uv[: len(e)], points[: len(e)], e,
                                  seed=rng_seed)[0]
+            if it == 0:
+                if len(swung):
+                    h = cKDTree(knots).query(swung, k=3, workers=-1)[0][:, -1]
+                    known.append((swung, SWING_FREEZE * h))
+                swung = np.zeros((0, 2))
+            elif known and len(swung):
+                swung = swung[~_in_discs(swung, known)]
+        settle_restart = False
+        if len(swung) and restarted:
+            # a restart with more knots than the data hold: again with fewer, half way back
+            # to the fit it was sized from (and that one itself at last); no more sizing
+            report["swings"] = int(len(swung))
+            report["knots_taken_back"] = int(max(len(interior) - sized[0], 0))
+            history.append(report)
+            fit.basis = None
+            if callback is not None and _cancel_requested(callback, report):
+                reason = "cancelled"
+                break
+            fewer = (sized[0] + len(interior)) // 2
+            settle_restart = fewer - sized[0] < max(2, sized[0] // 8)
+            interior, ring_knots = place(sized[0] if settle_restart else fewer)
+            n_before, pending, prev, sizing = len(interior), np.zeros((0, 2)), None, False
+            continue
         if len(swung):
             # around each place, SWING_FREEZE times its distance to the 3rd nearest knot, and
             # at least to the nearest new knot (so that the next insertion differs)

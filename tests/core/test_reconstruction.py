@@ -674,6 +674,74 @@ def test_an_insertion_that_makes_the_surface_swing_is_taken_back(monkeypatch):
     assert rms < 0.5 * rms_swinging and top < 8.0 < 20.0 < top_swinging  # 0.21/5.1 m, 0.65/39 m
 
 
+def test_a_sizing_restart_that_makes_the_surface_swing_is_taken_back():
+    """A 32 x 32 lattice (6.5 m) of a 200 m tile with a 20 m step ending inside it (user
+    test): the sizing restart took 128 knots, the surface swung 96 m below and 42 m above
+    the data between the lattice points, and every insertion after it was taken back for
+    swings that were the restart's own, until the iteration limit; the swinging restart was
+    returned (heights -123 to 68 m; switching the taking back off altogether gives a surface
+    that does not swing here: the later insertions are then kept). Now the restart is taken
+    back (made again with fewer knots) and the surface stays within the data's heights."""
+    g = np.linspace(0, 200, 32)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    z = 5 * np.sin(x / 40) + 3 * np.cos(y / 30) + 20.0 * ((x > 100) & (y > 80))
+    lattice = np.c_[x, y, z]
+
+    def heights(surf):
+        return surf(surf.tessellation_uv(128)[0])[:, 2]
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        surf = fit_surface(lattice, projection="z")
+    r = surf.report
+    back = [h for h in r["history"] if "knots_taken_back" in h]
+    assert any(h["knots_placed"] == "afresh" for h in back)
+    assert r["returned_iteration"] not in {h["iteration"] for h in back}
+    assert r["swings"]["places"] == 0
+    v = heights(surf)
+    assert v.min() > z.min() - 2.0 and v.max() < z.max() + 2.0  # -8.3, 26.3; data -7.5, 25.7
+
+
+class _SpikedPlane:
+    """A stand-in for a spline space whose ``evaluate(x) @ np.eye(3)`` is the plane z = 0 with
+    a narrow spike of ``height`` at ``centre``: swing_places needs only ``knots`` and that."""
+
+    def __init__(self, centre, height, width, knots):
+        self.centre, self.height, self.width = np.asarray(centre), height, width
+        self.knots = np.asarray(knots, dtype=np.float64)
+
+    def evaluate(self, x):
+        r2 = np.sum((x - self.centre) ** 2, axis=1) / self.width**2
+        return np.c_[x, self.height * np.exp(-r2)]
+
+
+def test_a_spike_in_the_gap_between_data_points_is_a_swing(monkeypatch):
+    """A spike between data points that reaches none of their midpoints (the cliff of 5e4
+    points dipped 43 m below points fitted within 0.9 m, 1-1.4 m away: user test) is found
+    at the centroids of the data's Delaunay triangles (SWING_GAPS), and only there; the same
+    spike over a data point is no swing (the error there shows it)."""
+    g = np.arange(12.0)
+    uv = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)  # a 1 m lattice, z = 0
+    points = np.c_[uv, np.zeros(len(uv))]
+    knots = np.array([[5.5, 5.5], [5.0, 5.0], [6.0, 6.0], [5.0, 6.0]])
+    # 40 m high, 0.2 m wide at the centre of a cell: 10 m at the triangles' centroids (0.24 m
+    # off), 0.08 m at the nearest midpoints (0.5 m off), 0 at the lattice points
+    spike = _SpikedPlane([5.5, 5.5], 40.0, 0.2, knots)
+    where, checked, largest = refine.swing_places(spike, np.eye(3), uv, points,
+                                                  np.zeros(len(uv)))
+    assert len(where) >= 1 and checked > 0 and largest > 5.0
+    assert np.linalg.norm(where - [5.5, 5.5], axis=1).max() < 0.5
+    monkeypatch.setattr(refine, "SWING_GAPS", False)
+    assert len(refine.swing_places(spike, np.eye(3), uv, points, np.zeros(len(uv)))[0]) == 0
+    monkeypatch.setattr(refine, "SWING_GAPS", True)
+    # the same spike over a lattice point, whose error shows it, and the plane without it
+    on_point = _SpikedPlane([5.0, 5.0], 40.0, 0.2, knots)
+    errors = np.where(np.all(uv == 5.0, axis=1), 40.0, 0.0)
+    assert len(refine.swing_places(on_point, np.eye(3), uv, points, errors)[0]) == 0
+    flat = _SpikedPlane([5.5, 5.5], 0.0, 0.2, knots)
+    assert len(refine.swing_places(flat, np.eye(3), uv, points, np.zeros(len(uv)))[0]) == 0
+
+
 def test_a_cross_validated_smoothness_that_swings_off_the_data_is_raised():
     """30 points of sin(3x): cross-validation chose 1e-5 and the surface swung 1.2 off the
     function between the points (its height range is 2; 1e-4 gives 0.23): held-out data
