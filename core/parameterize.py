@@ -1278,6 +1278,52 @@ def _mean_value_weights(p: np.ndarray, tris: np.ndarray, n: int) -> sp.csr_matri
     return w.tocsr()  # duplicates (the two triangles of an edge) are summed
 
 
+# a boundary vertex is a corner when the boundary turns there by more than this (degrees); a
+# loop with exactly four, and no other turn above RECTANGLE_SMOOTH, goes to a rectangle
+RECTANGLE_CORNERS = True
+CORNER_TURN = 50.0
+RECTANGLE_SMOOTH = 25.0
+
+
+def boundary_corners(b: np.ndarray) -> np.ndarray | None:
+    """The four corners of a boundary loop ``b`` (its points in order, (B, 3)) that is a
+    rectangle's (sorted positions in the loop), or None: the loop turns by more than
+    CORNER_TURN degrees at exactly four vertices (the angle between the incoming and the
+    outgoing edge) and by less than RECTANGLE_SMOOTH at all others, with at least one edge
+    between consecutive corners."""
+    if len(b) < 4:
+        return None
+    d_out = np.roll(b, -1, axis=0) - b
+    d_in = b - np.roll(b, 1, axis=0)
+    cos = np.einsum("ij,ij->i", d_in, d_out) / np.maximum(
+        np.linalg.norm(d_in, axis=1) * np.linalg.norm(d_out, axis=1), 1e-300)
+    turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    corners = np.flatnonzero(turn > CORNER_TURN)
+    if len(corners) != 4 or np.any(np.delete(turn, corners) >= RECTANGLE_SMOOTH):
+        return None
+    return corners
+
+
+def _rectangle_boundary(seg: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """Boundary parameters on a rectangle, counter-clockwise from its lower left corner
+    (method.md section 4's chord-length map, side by side): the loop's edges ``seg`` (3D
+    lengths, the loop starting at its first corner), ``corners`` (positions in the loop, the
+    first 0). The rectangle's sides are the mean lengths of the opposite sides, scaled to a
+    half-diagonal of 1 (inside the unit disk)."""
+    B = len(seg)
+    ends = np.append(corners, B)
+    side = np.array([seg[ends[k] : ends[k + 1]].sum() for k in range(4)])
+    w, h = 0.5 * (side[0] + side[2]), 0.5 * (side[1] + side[3])
+    w, h = w / np.hypot(w, h), h / np.hypot(w, h)
+    start = np.array([[-w, -h], [w, -h], [w, h], [-w, h]])
+    out = np.empty((B, 2))
+    for k in range(4):
+        idx = np.arange(ends[k], ends[k + 1])
+        t = np.concatenate([[0.0], np.cumsum(seg[idx[:-1]])]) / max(side[k], 1e-300)
+        out[idx] = start[k] + t[:, None] * (start[(k + 1) % 4] - start[k])
+    return out
+
+
 def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization:
     """Parameterize a triangle (or quad) mesh of disk topology over the unit disk.
 
@@ -1417,9 +1463,15 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
             f"the mesh has {n_zero} zero-length edges (coincident vertices); merge vertices by "
             "distance (Blender: Mesh > Clean Up > Merge by Distance) and try again"
         )
-    t = np.concatenate([[0.0], np.cumsum(seg[:-1])]) / seg.sum()
     uv = np.full((n, 2), np.nan)
-    uv[loop] = np.column_stack([np.cos(2.0 * np.pi * t), np.sin(2.0 * np.pi * t)])
+    corners = boundary_corners(p[loop]) if RECTANGLE_CORNERS else None
+    if corners is None:
+        t = np.concatenate([[0.0], np.cumsum(seg[:-1])]) / seg.sum()
+        uv[loop] = np.column_stack([np.cos(2.0 * np.pi * t), np.sin(2.0 * np.pi * t)])
+    else:
+        loop = np.roll(loop, -int(corners[0]))
+        seg = np.roll(seg, -int(corners[0]))
+        uv[loop] = _rectangle_boundary(seg, corners - corners[0])
 
     # interior: (D - W)_II uv_I = W_IB uv_B, D = diag(row sums of W)
     interior = used.copy()
