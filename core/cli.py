@@ -22,7 +22,7 @@ from .errors import InvalidInputError, OutlierError, TCBError
 from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 from .parameterize import projection_direction
-from .refine import STALLED, SWINGS_LEFT, replaced_default_reason
+from .refine import STALLED, SWINGS_LEFT, mostly_taken_back, replaced_default_reason
 
 __all__ = ["main"]
 
@@ -317,7 +317,8 @@ def _fit(args) -> int:
     advice = {"control-point budget reached": "raise --max-control-points",
               "iteration limit": "raise --max-iterations",
               SWINGS_LEFT: "the rest of the error is where more knots made the surface swing "
-                           "between the data points (a sharp step?)"}.get(r["stop_reason"])
+                           "between the data points (a sharp step?)"}.get(
+        SWINGS_LEFT if mostly_taken_back(r) else r["stop_reason"])
     if advice and args.tolerance > 0:  # the table says why it stopped, not what to change
         unit = " (a fraction of the bounding-box diagonal)" if args.relative else ""
         print(f"note: the tolerance {args.tolerance:g}{unit} was not reached: {advice}, or "

@@ -693,6 +693,15 @@ def _in_discs(x: np.ndarray, discs: list) -> np.ndarray:
     return inside
 
 
+def mostly_taken_back(report: dict) -> bool:
+    """Whether a run stopped at its iteration limit after taking back (the surface swung:
+    :func:`adaptive_fit`) at least half of its fits: more iterations would not help (the CLI
+    note and the Blender advice then say what does)."""
+    history = report.get("history") or []
+    back = sum("knots_taken_back" in h for h in history)
+    return report.get("stop_reason") == "iteration limit" and back > 0 and 2 * back >= len(history)
+
+
 def replaced_default_reason(selection: dict | None) -> str | None:
     """Why the engine cross-validated a default smoothness, in a few words ("sparse data" or
     :data:`STALLED`), from ``report["smoothness_selection"]``; None when it did not (no

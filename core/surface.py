@@ -518,9 +518,9 @@ class TCBSurface:
 
     def _convex_domain(self):
         """The domain polygon prepared for :meth:`_in_domain` / :meth:`_into_domain`: it is
-        convex (a cloud's convex hull; a mesh's boundary on the unit circle). Vertices ``v``
-        (CCW, starting at the smallest angle around the vertex mean ``c``), their angles, the
-        edges and a KD-tree of the vertices."""
+        convex (a cloud's convex hull; a mesh's boundary on the unit circle or a rectangle).
+        Vertices ``v`` (CCW, starting at the smallest angle around the vertex mean ``c``),
+        their angles, the edges and a KD-tree of the vertices."""
         cached = self._domain_cache
         if cached is None:
             v = np.asarray(self._param.domain_polygon, dtype=np.float64)
@@ -1190,7 +1190,8 @@ def fit_surface(
     points : (N, 3) float
         Scanned points, or mesh vertices.
     faces : (F, 3) int, optional
-        Triangles of a disk-topology mesh (then the mesh is parameterized over the unit disk;
+        Triangles of a disk-topology mesh (then the mesh is parameterized over the unit disk,
+        or a rectangle when its boundary has four corners;
         otherwise the cloud is projected on its best-fit plane).
     degree : 2 (C^1, default) or 3 (C^2)
     mode : "tcb" (feature-sensitive configurations) or "dcb" (Delaunay configurations); any case

@@ -329,7 +329,8 @@ def report_result(op, surf, notes=(), warnings=()) -> None:
                   "largest (too few there for more knots)",
                   _core().refine.SWINGS_LEFT: "the rest of the error is where more knots made "
                   "the surface swing between the points (a sharp step?): add points there"
-                  }.get(reason, "")
+                  }.get(_core().refine.SWINGS_LEFT if _core().refine.mostly_taken_back(rep)
+                        else reason, "")
         op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason})"
                   + (f": {advice} or loosen the tolerance" if advice else ""))
 
