@@ -96,7 +96,7 @@ def test_a_deleted_net_leaves_the_surface_on_its_spline(clean_scene, addon, capf
     assert np.allclose(evaluated(bpy, surface), shown.tessellate(16)[0], atol=1e-5)
     assert np.allclose(spline_of(surface).control_points, shown.control_points, atol=1e-6)
 
-    assert run(bpy, bpy.ops.tcb.refine, surface, tolerance=1e-3) == {"FINISHED"}
+    assert run(bpy, bpy.ops.tcb.refine, surface, tolerance=2e-4) == {"FINISHED"}
     refined = spline_of(surface)
     assert len(refined.control_points) > len(surf.control_points)
     assert np.allclose(evaluated(bpy, surface), refined.tessellate(16)[0], atol=1e-5)
@@ -227,7 +227,7 @@ def test_refining_a_shift_d_copy_leaves_the_original_as_it_was(clean_scene, addo
     assert copy.tcb.weights == weights  # Blender does not copy the hidden weights object
     assert (copy.tcb.net != net) if with_net else (copy.tcb.net == net)
 
-    assert run(bpy, bpy.ops.tcb.refine, copy, tolerance=1e-3) == {"FINISHED"}
+    assert run(bpy, bpy.ops.tcb.refine, copy, tolerance=2e-4) == {"FINISHED"}
     refined = spline_of(copy)
     assert len(refined.control_points) > n_net
     # the original: the same live surface, its own net and weights, untouched

@@ -466,9 +466,10 @@ def test_a_net_with_a_deleted_vertex_is_named_when_its_edits_are_ignored(clean_s
 def test_refine_after_applying_the_sources_rotation_and_scale(clean_scene):
     """Apply Rotation & Scale (Ctrl+A) on the source rounds its float32 vertices again: the
     world coordinates change by rounding only. Refine refused it as a changed source (user
-    test); it now refines, and a source moved for real is still refused."""
+    test); it now refines, and a source moved for real is still refused. (Not the quadratic
+    grid: on the rectangle a grid mesh maps to, it is fitted to 4e-5 at once.)"""
     bpy = clean_scene
-    verts, faces = grid(16)
+    verts, faces = grid(16, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y))
     src = add_mesh(bpy, "Patch", verts, faces)
     src.rotation_euler, src.scale, src.location = (0.4, 0.2, 0.7), (2.0, 1.0, 0.5), (3.0, -1.0, 2.0)
     bpy.context.view_layer.update()
@@ -478,7 +479,7 @@ def test_refine_after_applying_the_sources_rotation_and_scale(clean_scene):
     with bpy.context.temp_override(**select(bpy, src)):
         assert bpy.ops.object.transform_apply(location=False, rotation=True, scale=True) == {"FINISHED"}
     with bpy.context.temp_override(**select(bpy, surface)):
-        assert bpy.ops.tcb.refine(tolerance=5e-4) == {"FINISHED"}
+        assert bpy.ops.tcb.refine(tolerance=1e-4) == {"FINISHED"}  # the fit: 2.4e-4
     assert surface.tcb.control_points > n0
     src.location.x += 0.01
     bpy.context.view_layer.update()
