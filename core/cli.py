@@ -64,8 +64,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--drop-invalid", action="store_true",
                    help="leave out points with NaN or infinite coordinates (point clouds)")
     f.add_argument("--drop-outliers", action="store_true",
-                   help="leave out points far from all others instead of refusing the cloud "
-                   "(point clouds only: refused for a mesh)")
+                   help="leave out points far from all others instead of refusing the cloud, "
+                   "and spikes and pits inside it (point clouds only: refused for a mesh)")
     f.add_argument("--projection", type=_projection, default=None, metavar="x|y|z|DX,DY,DZ",
                    help="point clouds: project along this direction (a height field over the "
                    "plane across it) instead of choosing it; still checked for folds. Its sign "

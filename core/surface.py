@@ -1246,7 +1246,8 @@ def fit_surface(
     drop_outliers : bool
         Point clouds only. Points far from all others (stray returns, spikes; see
         ``core.parameterize.isolated_points``) are refused with an error that names them
-        (default), or, with True, left out of the fit: their ``errors`` are NaN and
+        (default), or, with True, left out of the fit, and so are spikes and pits inside the
+        cloud (``core.parameterize.spike_points``): their ``errors`` are NaN and
         ``report["outliers"]`` counts them.
     projection : None, "x", "y", "z" or three numbers
         Point clouds only: the direction to project the cloud along (a height field over the

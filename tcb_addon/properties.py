@@ -100,9 +100,9 @@ class FitSettings:
     drop_outliers: BoolProperty(
         name="Drop Outliers",
         description=(
-            "Leave out points far from all others (stray scan returns, spikes) instead of "
-            "stopping with an error that names them (point clouds; mesh faces hold their "
-            "vertices)"
+            "Leave out points far from all others (stray scan returns) instead of stopping "
+            "with an error that names them, and spikes and pits inside the cloud (point "
+            "clouds; mesh faces hold their vertices)"
         ),
         default=False,
     )  # fmt: skip
