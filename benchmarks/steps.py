@@ -112,8 +112,8 @@ def main() -> None:
     import core
 
     print(f"core: {Path(core.__file__).resolve().parent}")
-    print(f"| cloud | data z | surface z | over (m) | off RMS / max (m) | control points | "
-          f"stop | s |")
+    print("| cloud | data z | surface z | over (m) | off RMS / max (m) | control points | "
+          "stop | s |")
     print("|---|---|---|---|---|---|---|---|")
     for d in datasets(args.quick):
         r = measure(d)

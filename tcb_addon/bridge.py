@@ -279,13 +279,17 @@ def read_selection(context, objects=None) -> InputData:
             if not obj.visible_get():  # its geometry may come from modifiers, not evaluated
                 raise SelectionError(f"'{obj.name}' is hidden and has no {what} of its own: show "
                                      "it (its modifiers make its geometry) and try again")
+            if obj.type not in POINT_TYPES:  # a curve, text, metaball... that makes no mesh
+                raise SelectionError(
+                    f"'{obj.name}' is {_kind(obj)} that makes no surface to fit: give it "
+                    "geometry (a curve: Extrude or Bevel) or convert it to a mesh (Object > "
+                    "Convert > Mesh) and try again")
             raise SelectionError(f"'{obj.name}' has no {what}: nothing to fit")
         bad = sum(int((~np.isfinite(p).all(axis=1)).sum()) for p, _ in got)
         if bad:
-            what = "vertex has" if bad == 1 else "vertices have"
             raise SelectionError(
-                f"'{obj.name}': {bad} of {n} {what} NaN or infinite coordinates (after "
-                "modifiers): delete or fix them and try again"
+                f"'{obj.name}': {bad} of its {n} vertices {'has' if bad == 1 else 'have'} NaN "
+                "or infinite coordinates (after modifiers): delete or fix them and try again"
             )
         counts[obj.name] = n
         points += [p for p, _ in got]

@@ -1259,3 +1259,27 @@ def test_a_cloud_too_noisy_to_check_needs_a_world_axis_projection(clean_scene, a
     mesh = add_mesh(bpy, "Sheet", verts, grid(10)[1])
     with pytest.raises(RuntimeError, match="projection direction applies to point clouds"):
         fit(bpy, mesh, projection="X")
+
+
+def test_a_curve_without_geometry_is_refused_with_what_to_do(clean_scene):
+    """A curve object (no extrusion or bevel) makes no mesh: it was refused as "'Crv' has no
+    points: nothing to fit", which does not say why nor what to do (user test); a mesh with a
+    NaN vertex is named in one sentence."""
+    bpy = clean_scene
+    curve = bpy.data.curves.new("Crv", "CURVE")
+    spline = curve.splines.new("POLY")
+    spline.points.add(3)
+    for i, p in enumerate(spline.points):
+        p.co = (i, 0.5 * i * i, 0.0, 1.0)
+    obj = bpy.data.objects.new("Crv", curve)
+    bpy.context.scene.collection.objects.link(obj)
+    n_objects = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match=r"'Crv' is a curve that makes no surface to fit: "
+                                           r"give it geometry .*Object > Convert > Mesh"):
+        fit(bpy, obj)
+    assert len(bpy.data.objects) == n_objects  # nothing half built
+    verts, faces = grid(8)
+    verts[5] = np.nan
+    bad = add_mesh(bpy, "Bad", verts, faces)
+    with pytest.raises(RuntimeError, match=r"'Bad': 1 of its 64 vertices has NaN or infinite"):
+        fit(bpy, bad)
