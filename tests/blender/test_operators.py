@@ -1283,3 +1283,24 @@ def test_a_curve_without_geometry_is_refused_with_what_to_do(clean_scene):
     bad = add_mesh(bpy, "Bad", verts, faces)
     with pytest.raises(RuntimeError, match=r"'Bad': 1 of its 64 vertices has NaN or infinite"):
         fit(bpy, bad)
+
+
+def test_a_scan_whose_stored_coordinates_are_rounded_says_so(clean_scene, capfd):
+    """A georeferenced patch with Apply Transforms: its vertices are stored at 1e5 m, where
+    32-bit floats are 0.0078 m apart, and the fit of that rounded data was 16x worse with
+    nothing said (Refine called it noise; user test). Fit and Refine say the scan is rounded;
+    the same patch kept at the origin (offset in its Location) says nothing."""
+    bpy = clean_scene
+    verts, faces = grid(30, size=20.0, f=lambda x, y: 0.5 * np.sin(x / 3) * np.cos(y / 4))
+    far = add_mesh(bpy, "Far", verts + [1e5, 2e5, 0.0])
+    capfd.readouterr()
+    assert fit(bpy, far) == {"FINISHED"}
+    text = capfd.readouterr().out
+    assert re.search(r"'Far': its vertex coordinates are stored 0\.0156 apart", text), text
+    assert "keep the offset in the object's Location" in text
+    with bpy.context.temp_override(**select(bpy, bpy.context.view_layer.objects.active)):
+        assert bpy.ops.tcb.refine(tolerance=1e-4) == {"FINISHED"}
+    assert "'Far': its vertex coordinates are stored" in capfd.readouterr().out
+    near = add_mesh(bpy, "Near", verts, location=(1e5, 2e5, 0.0))
+    assert fit(bpy, near) == {"FINISHED"}
+    assert "its vertex coordinates are stored" not in capfd.readouterr().out
