@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import threading
 import time
+import warnings as _warnings
 
 import bpy
 import numpy as np
@@ -338,6 +339,31 @@ def report_result(op, surf, notes=(), warnings=()) -> None:
 # --- the worker-thread job and the modal/execute skeleton --------------------------------------
 
 
+def _recording(fn, sink: list):
+    """``fn``, with the engine's RuntimeWarnings appended to ``sink`` for the operator's report
+    instead of printed to the console with a file and line (user test); other warnings are
+    shown as usual."""
+    def run(**kw):
+        with _warnings.catch_warnings(record=True) as caught:
+            _warnings.simplefilter("always")
+            try:
+                return fn(**kw)
+            finally:
+                for w in caught:
+                    if issubclass(w.category, RuntimeWarning):
+                        if str(w.message) not in sink:
+                            sink.append(str(w.message))
+                    else:
+                        _warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return run
+
+
+def _engine_notes(op) -> list:
+    """The engine's warnings recorded for ``op`` (:func:`_recording`), less the swing warning
+    (report_result words it from the report)."""
+    return [m for m in getattr(op, "_engine", ()) if not m.startswith("the surface swings away")]
+
+
 class _Job:
     """Runs ``fn(**kwargs, callback=...)`` in a thread; the main thread polls it."""
 
@@ -526,7 +552,9 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
                     data.points, ex.indices, data.label,
                     advice="turn on Drop Outliers in the fit settings") from None
 
-        return ("run", fit, dict(points=data.points, faces=data.faces, **kwargs))
+        self._engine = []
+        return ("run", _recording(fit, self._engine),
+                dict(points=data.points, faces=data.faces, **kwargs))
 
     def finish(self, context, surf):
         _cache_put(self._key, surf)
@@ -566,7 +594,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         context.view_layer.objects.active = surface
         reused = ["the same input and settings as the last fit: its result was reused (the "
                   "seconds are that fit's)"] if getattr(self, "_reused", False) else []
-        report_result(self, surf, list(data.notes) + reused)
+        report_result(self, surf, list(data.notes) + reused, _engine_notes(self))
         return {"FINISHED"}
 
     def draw(self, context):
@@ -654,7 +682,9 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         self._warnings = [f"{edited} edited control point{' was' if edited == 1 else 's were'} "
                           "replaced (Refine fits the data again; Ctrl+Z brings the edits back)"
                           ] if edited else []
-        return ("run", surf.refine, dict(points=data.points, faces=data.faces, **self._settings))
+        self._engine = []
+        return ("run", _recording(surf.refine, self._engine),
+                dict(points=data.points, faces=data.faces, **self._settings))
 
     def finish(self, context, surf):
         surface = self._surface
@@ -666,7 +696,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         live.relink(surface, surf, st.resolution, self.report)
         store_spline(surface, surf)
         store_stats(st, surf, self._settings)
-        warnings = list(getattr(self, "_warnings", ())) + ([moved] if moved else [])
+        warnings = (list(getattr(self, "_warnings", ())) + ([moved] if moved else [])
+                    + _engine_notes(self))
         notes = list(getattr(self, "_notes", ()))
         if drop_deviation_points(surface):
             notes.append("the Deviation Points of the previous surface were removed (run "

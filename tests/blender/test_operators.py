@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import re
 import sys
+import warnings
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -1304,3 +1305,21 @@ def test_a_scan_whose_stored_coordinates_are_rounded_says_so(clean_scene, capfd)
     near = add_mesh(bpy, "Near", verts, location=(1e5, 2e5, 0.0))
     assert fit(bpy, near) == {"FINISHED"}
     assert "its vertex coordinates are stored" not in capfd.readouterr().out
+
+
+def test_the_engines_warnings_are_in_the_report_not_on_the_console(clean_scene, capfd):
+    """The engine's RuntimeWarnings went to the console as Python warnings, with an internal
+    file and line, besides the report (user test). They are in the operator's report now:
+    60 points with a smoothness given by hand are sparse, which the engine warns about."""
+    bpy = clean_scene
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(-1, 1, (60, 2))
+    cloud = add_mesh(bpy, "Sparse", np.c_[xy, np.sin(2 * xy[:, 0]) * np.cos(xy[:, 1])])
+    capfd.readouterr()
+    with warnings.catch_warnings(record=True) as escaped:
+        warnings.simplefilter("always")
+        assert fit(bpy, cloud, smoothness=1e-3, tolerance=1e-4) == {"FINISHED"}
+    out, err = capfd.readouterr()
+    assert re.search(r"Warning: TCB: .*only the smoothness 0\.001 holds the surface", out), out
+    assert not [w for w in escaped if issubclass(w.category, RuntimeWarning)], escaped
+    assert "RuntimeWarning" not in out + err
