@@ -74,7 +74,9 @@ def datasets(quick: bool) -> list[dict]:
     xy = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
     out.append(dict(name="lattice 32", points=np.c_[xy, corner_terrain(xy) + 20.0 * (
         _corner(xy) > 0)], **corner))
-    sizes = (("random 1000", 1000, 0.1, 3),) + (() if quick else (("cliff 1e5", 100_000, 0.05, 21),))
+    sizes = (("random 1000", 1000, 0.1, 3),)
+    if not quick:
+        sizes += (("cliff 1e5", 100_000, 0.05, 21),)
     for name, n, noise, seed in sizes:
         rng = np.random.default_rng(seed)
         xy = rng.random((n, 2)) * 200

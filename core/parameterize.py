@@ -951,7 +951,8 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
     without this). Spikes among each other's neighbours: the test is made again (up to 4
     passes) without the spikes found, at the points whose neighbours held one and at those
     that passed the slope test only. If more than 5% of the points are spikes, the surface
-    is rough rather than spiky and none is returned. Measured: none on the 26 clouds of
+    is rough rather than spiky and none is returned (a cloud of fewer than 15 points has
+    none). Measured: none on the 26 clouds of
     benchmarks/compare.py (two seeds) but one point at the sharp apex of F10's grid, none on
     clouds with Gaussian or Laplace noise, a step, a crease, a cone, a steep tanh, a lidar
     fall-off; 281 of the 293 of the user test's spikes more than 0.5 m off (all those above
@@ -960,7 +961,7 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
     n = len(q)
     k = min(_SPIKE_NEIGHBOURS, n - 2)
     none = np.zeros(0, dtype=np.int64)
-    if k < 6:
+    if k - _SPIKE_TRIM < 10:  # a quadratic (6) and a noise estimate from the rest
         return none
     if direction is None:
         direction = principal_axes(q - q.mean(axis=0))[1][2]
@@ -970,7 +971,7 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
     flat = np.column_stack([q @ a, q @ np.cross(w, a)])  # across the direction
     height = q @ w
     spike = np.zeros(n, dtype=bool)
-    check = np.arange(n)
+    check = np.random.default_rng(0).permutation(n)  # (the first chunk: a random sample)
     floor = None
     for _ in range(4):
         keep = np.flatnonzero(~spike)
@@ -1007,8 +1008,8 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
             # the spikes left out), corrected for the 6 parameters fitted to the others
             kept_n = k - _SPIKE_TRIM
             sigma = 1.4826 * np.median(r, axis=1) * np.sqrt(kept_n / (kept_n - 6))
-            if floor is None:  # the noise level of the cloud: the median of the first pass's
-                floor = float(np.median(sigma))
+            if floor is None:  # the cloud's noise level: the median over the first chunk of
+                floor = float(np.median(sigma))  # the first pass (all points, to 1e5)
             hit = far & (d > _SPIKE_SIGMA * np.maximum(sigma, floor))
             # and beyond all of its neighbours' heights (the point is at height 0): a point
             # at a step between neighbours on both levels fits a steep surface badly, but
@@ -1434,14 +1435,20 @@ def _mean_value_weights(p: np.ndarray, tris: np.ndarray, n: int) -> sp.csr_matri
 RECTANGLE_CORNERS = True
 CORNER_TURN = 50.0
 RECTANGLE_SMOOTH = 25.0
+RECTANGLE_CURL = 2.0  # the longest ratio of a side's length to the distance of its ends
 
 
 def boundary_corners(b: np.ndarray) -> np.ndarray | None:
     """The four corners of a boundary loop ``b`` (its points in order, (B, 3)) that is a
-    rectangle's (sorted positions in the loop), or None: the loop turns by more than
+    quadrilateral's (sorted positions in the loop), or None: the loop turns by more than
     CORNER_TURN degrees at exactly four vertices (the angle between the incoming and the
-    outgoing edge) and by less than RECTANGLE_SMOOTH at all others, with at least one edge
-    between consecutive corners."""
+    outgoing edge), by less than RECTANGLE_SMOOTH at all others, and no side is more than
+    RECTANGLE_CURL times as long along the loop as the straight distance between its corners
+    (a half circle: pi / 2). Without the last test a disk with a small rectangular tab (four
+    sharp corners within 7 of its 310 boundary vertices) went onto a 2 x 0.1 rectangle, the
+    disk's arc (6.1 long, its ends 0.25 apart) opposite the tab's 0.1: RMS 0.31 instead of
+    0.0026 (review). Sides of very different lengths are fine: a 100:1 strip, or a quad
+    whose top is 0.04 and bottom 2 (max error 0.0027 on the rectangle, 0.061 on the circle)."""
     if len(b) < 4:
         return None
     d_out = np.roll(b, -1, axis=0) - b
@@ -1451,6 +1458,12 @@ def boundary_corners(b: np.ndarray) -> np.ndarray | None:
     turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
     corners = np.flatnonzero(turn > CORNER_TURN)
     if len(corners) != 4 or np.any(np.delete(turn, corners) >= RECTANGLE_SMOOTH):
+        return None
+    run = np.concatenate([[0.0], np.cumsum(np.linalg.norm(d_out, axis=1))])
+    side = np.diff(np.append(run[corners], run[-1]))  # from each corner to the next
+    side[3] += run[corners[0]]  # (the last side goes on past vertex 0 to the first corner)
+    ends = b[np.roll(corners, -1)] - b[corners]
+    if np.any(side > RECTANGLE_CURL * np.linalg.norm(ends, axis=1)):
         return None
     return corners
 
@@ -1487,7 +1500,8 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
     proportions); the loop then starts at a corner. On the circle a corner's 90 degrees
     became 180: a 41 x 41 grid mesh's corners ended 0.03-0.05 off its fit (max error 0.049,
     272 control points; as a cloud 0.0017, 152); on the rectangle 0.0014 with 153, and
-    three_peaks.off meets the default tolerance with 730 control points instead of 918. Interior: ``sum_j w_ij (uv_i - uv_j) = 0`` with Floater's
+    three_peaks.off meets the default tolerance with 730 control points instead of 918.
+    Interior: ``sum_j w_ij (uv_i - uv_j) = 0`` with Floater's
     mean-value weights (:func:`_mean_value_weights`), one sparse LU solve with two right-hand
     sides. Positive weights and a convex boundary give an embedding (Tutte/Floater); every uv
     triangle is checked to have positive area anyway.

@@ -391,7 +391,8 @@ SWING_GAP_SPAN = 4.0  # ... of longest side at most this times the median one
 SWING_CROWD = 4.0  # knots closer than this many data spacings: all data around them checked
 
 
-def swing_places(space, C, uv, points, errors, seed: int = 0) -> tuple[np.ndarray, int, float]:
+def swing_places(space, C, uv, points, errors, seed: int = 0,
+                 margin: float = 0.0) -> tuple[np.ndarray, int, float]:
     """Where the surface swings away from the data between neighbouring data points (not in
     method.md): ``space`` with control points ``C`` (all functions), the data's parameters
     ``uv``, ``points`` and fit errors ``errors`` (one unit).
@@ -424,9 +425,11 @@ def swing_places(space, C, uv, points, errors, seed: int = 0) -> tuple[np.ndarra
     No place was flagged on the 16 datasets of benchmarks/compare.py at three settings each
     (the final surfaces; the loop took back insertions in the same 2 of the 48 fits as
     without the gap checks: F7 scattered at 1e-4 three, 844 control points instead of 1951,
-    hold-out RMS 1.31e-3 instead of 1.28e-3), nor on noisy or sparse clouds. A swing inside a gap wider than the data spacing is
-    measured against the far points across it, so it shows only when it is larger than the gap
-    (conservative). Returns (the places flagged (f, 2), places checked, the largest excess).
+    hold-out RMS 1.31e-3 instead of 1.28e-3), nor on noisy or sparse clouds. A swing inside
+    a gap wider than the data spacing is measured against the far points across it, so it
+    shows only when it is larger than the gap (conservative). A place is flagged when its excess is above ``margin`` (the loop passes
+    its tolerance: it took back fits for swings of 0.7 mm with a tolerance of 0.29 m: review).
+    Returns (the places flagged (f, 2), places checked, the largest excess).
     """
     uv = np.asarray(uv, dtype=np.float64)
     n = len(uv)
@@ -478,7 +481,7 @@ def swing_places(space, C, uv, points, errors, seed: int = 0) -> tuple[np.ndarra
         at += m
     excess = np.concatenate(away) - np.concatenate([q[2] for q in parts])
     # above rounding: duplicated points of exact data give zero-length segments (review: 1e-12)
-    flagged = excess > 1e-9 * float(np.ptp(p, axis=0).max())
+    flagged = excess > max(margin, 1e-9 * float(np.ptp(p, axis=0).max()))
     return places[flagged], len(places), float(excess.max()) if flagged.any() else 0.0
 
 
@@ -1090,7 +1093,7 @@ def adaptive_fit(
         restarted = fresh and sized is not None and not settle_restart
         if REVERT_SWINGS and (it == 0 or restarted or (not fresh and len(pending))):
             swung = swing_places(space, fit.control_points, uv[: len(e)], points[: len(e)], e,
-                                 seed=rng_seed)[0]
+                                 seed=rng_seed, margin=max(tol, 0.0))[0]
             if it == 0:
                 if len(swung):
                     h = cKDTree(knots).query(swung, k=3, workers=-1)[0][:, -1]
@@ -1102,15 +1105,16 @@ def adaptive_fit(
         if len(swung) and restarted:
             # a restart with more knots than the data hold: again with fewer, half way back
             # to the fit it was sized from (and that one itself at last); no more sizing
+            fewer = (sized[0] + len(interior)) // 2
+            settle_restart = fewer - sized[0] < max(2, sized[0] // 8)
             report["swings"] = int(len(swung))
-            report["knots_taken_back"] = int(max(len(interior) - sized[0], 0))
+            report["knots_taken_back"] = int(max(len(interior) - (
+                sized[0] if settle_restart else fewer), 0))
             history.append(report)
             fit.basis = None
             if callback is not None and _cancel_requested(callback, report):
                 reason = "cancelled"
                 break
-            fewer = (sized[0] + len(interior)) // 2
-            settle_restart = fewer - sized[0] < max(2, sized[0] // 8)
             interior, ring_knots = place(sized[0] if settle_restart else fewer)
             n_before, pending, prev, sizing = len(interior), np.zeros((0, 2)), None, False
             continue

@@ -1149,8 +1149,10 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         )
     # a surface that swings far from the data between neighbouring points (where the knots
     # crowd closer than the data: a sharp step, a gap), which the errors at the data cannot show
-    places, checked, largest = data_swings(best.space, C, uv, points[used], errors[used],
-                                           seed=options.seed)
+    # (swings within the tolerance are no matter, as in the loop)
+    places, checked, largest = data_swings(
+        best.space, C, uv, points[used], errors[used], seed=options.seed,
+        margin=max(options.tolerance, 0.0) * (diagonal if options.relative else 1.0))
     report["swings"] = {"places": places, "checked": checked, "largest": largest,
                         "largest_rel": largest / diagonal}
     if places:
@@ -1328,13 +1330,15 @@ def _smoother_if_swinging(best, uv, points, n_measured: int, seed: int, limit=No
     return best
 
 
-def data_swings(space, C, uv, points, errors, seed: int = 0) -> tuple[int, int, float]:
+def data_swings(space, C, uv, points, errors, seed: int = 0,
+                margin: float = 0.0) -> tuple[int, int, float]:
     """Where the surface swings away from the data between neighbouring data points: a check
     after the fit (not in method.md; :func:`core.refine.swing_places`, which says how, gives
     the places too). ``space`` with control points ``C`` (all functions), the data's
-    parameters ``uv``, ``points`` and fit errors ``errors`` (one unit). Returns (places
-    flagged, places checked, the largest excess)."""
-    where, checked, largest = swing_places(space, C, uv, points, errors, seed)
+    parameters ``uv``, ``points`` and fit errors ``errors`` (one unit); a place counts when
+    its excess is above ``margin``. Returns (places flagged, places checked, the largest
+    excess)."""
+    where, checked, largest = swing_places(space, C, uv, points, errors, seed, margin)
     return len(where), checked, largest
 
 

@@ -305,6 +305,10 @@ def read_selection(context, objects=None) -> InputData:
             if not obj.visible_get():  # its geometry may come from modifiers, not evaluated
                 raise SelectionError(f"'{obj.name}' is hidden and has no {what} of its own: show "
                                      "it (its modifiers make its geometry) and try again")
+            if obj.type == "EMPTY":  # (instancing a collection that has no geometry)
+                raise SelectionError(
+                    f"'{obj.name}' is an empty that instances no mesh or point cloud: select "
+                    "the objects to fit")
             if obj.type not in POINT_TYPES:  # a curve, text, metaball... that makes no mesh
                 raise SelectionError(
                     f"'{obj.name}' is {_kind(obj)} that makes no surface to fit: give it "
@@ -312,9 +316,10 @@ def read_selection(context, objects=None) -> InputData:
                     "Convert > Mesh) and try again")
             raise SelectionError(f"'{obj.name}' has no {what}: nothing to fit")
         bad = sum(int((~np.isfinite(p).all(axis=1)).sum()) for p, _ in got)
+        what = "points" if obj.type == "POINTCLOUD" else "vertices"
         if bad:
             raise SelectionError(
-                f"'{obj.name}': {bad} of its {n} vertices {'has' if bad == 1 else 'have'} NaN "
+                f"'{obj.name}': {bad} of its {n} {what} {'has' if bad == 1 else 'have'} NaN "
                 "or infinite coordinates (after modifiers): delete or fix them and try again"
             )
         counts[obj.name] = n

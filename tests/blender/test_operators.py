@@ -507,8 +507,8 @@ def test_refine_of_a_changed_source_says_to_fit_again(clean_scene):
     assert "fit_surface" not in str(err.value)
 
 
-def test_loose_vertices_spot_heights_with_a_stray_face_and_a_scan_with_a_stray_vertex(clean_scene, addon,
-                                                                                    capfd):
+def test_loose_vertices_spot_heights_with_a_stray_face_and_a_scan_with_a_stray_vertex(
+        clean_scene, addon, capfd):
     """Spot heights (loose vertices) with one accidental face are fitted as a point cloud (it
     had been 'at least 10 points are needed; got 3'); a scan mesh with one loose vertex is
     fitted through its faces and the report counts the vertex it left out."""

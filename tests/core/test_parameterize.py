@@ -524,6 +524,21 @@ def test_a_mesh_with_four_corners_maps_onto_a_rectangle_of_its_proportions() -> 
     # a fifth sharp turn (an L-shaped boundary has six corners): the circle
     square = np.array([[0, 0], [1, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2], [0, 1.0]])
     assert boundary_corners(np.column_stack([square, np.zeros(8)])) is None
+    # a disk with a small rectangular tab has four sharp corners, but its arc is no side of a
+    # quadrilateral (6.1 long, its ends 0.1 apart; review: RMS 0.31 on the rectangle)
+    t = np.linspace(0.05, 2 * np.pi - 0.05, 300)
+    arc = np.column_stack([np.cos(t), np.sin(t)])
+    tab = np.array([[1.15, -0.05], [1.15, 0.05]])
+    loop = np.column_stack([np.vstack([arc, [[1.0, -0.05]], tab, [[1.0, 0.05]]]),
+                            np.zeros(304)])
+    assert boundary_corners(loop) is None
+    import core.parameterize as pz
+    old = pz.RECTANGLE_CURL
+    try:  # (only the side test sends it to the circle)
+        pz.RECTANGLE_CURL = np.inf
+        assert boundary_corners(loop) is not None
+    finally:
+        pz.RECTANGLE_CURL = old
 
 
 def test_the_corners_of_a_grid_mesh_are_fitted_as_well_as_the_same_points_as_a_cloud() -> None:
@@ -537,7 +552,8 @@ def test_the_corners_of_a_grid_mesh_are_fitted_as_well_as_the_same_points_as_a_c
     pts = np.column_stack([x, y, 0.3 * np.sin(2 * x)])
     i, j = np.meshgrid(np.arange(40), np.arange(40))
     a = (j * 41 + i).ravel()
-    faces = np.concatenate([np.column_stack([a, a + 1, a + 42]), np.column_stack([a, a + 42, a + 41])])
+    faces = np.concatenate([np.column_stack([a, a + 1, a + 42]),
+                            np.column_stack([a, a + 42, a + 41])])
     mesh, cloud = fit_surface(pts, faces), fit_surface(pts)
     assert mesh.report["max"] < 2 * cloud.report["max"] < 0.004
     assert mesh.report["control_points"] < 1.2 * cloud.report["control_points"]
@@ -931,10 +947,13 @@ def test_drop_outliers_also_leaves_out_spikes_inside_the_cloud() -> None:
     assert np.isnan(par.uv[dropped]).all() and np.isfinite(par.uv[~dropped]).all()
     # without the option the cloud is not refused for them (only isolated points are)
     assert parameterize_points(pts, False).used.all()
+    # too few points for the test: none (11 points raised ZeroDivisionError: review)
+    assert parameterize_points(pts[:11], True).used.all()
     surf = fit_surface(pts, projection="z", drop_outliers=True)
     v = surf(surf.tessellation_uv(64)[0])
     true_v = 5 * np.sin(v[:, 0] / 40) + 3 * np.cos(v[:, 1] / 30) + 0.02 * v[:, 0]
-    assert np.sqrt(np.mean((v[:, 2] - true_v) ** 2)) < 0.1 and surf.report["outliers"] == dropped.sum()
+    assert np.sqrt(np.mean((v[:, 2] - true_v) ** 2)) < 0.1
+    assert surf.report["outliers"] == dropped.sum()
     # no spike on terrain without them: noisy, with a 20 m step, or a steep smooth ridge
     rng = np.random.default_rng(4)
     xy = pts[:, :2]

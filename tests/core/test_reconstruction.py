@@ -711,7 +711,8 @@ def test_a_run_that_took_back_most_of_its_fits_is_not_told_to_iterate_more():
     note and the Blender advice give the swing advice instead (mostly_taken_back)."""
     fits = [{"iteration": k} for k in range(1, 5)]
     back = {"swings": 3, "knots_taken_back": 10}
-    half = {"stop_reason": "iteration limit", "history": fits[:2] + [{**f, **back} for f in fits[2:]]}
+    half = {"stop_reason": "iteration limit",
+            "history": fits[:2] + [{**f, **back} for f in fits[2:]]}
     assert refine.mostly_taken_back(half)
     assert not refine.mostly_taken_back({**half, "stop_reason": "tolerance reached"})
     one = {"stop_reason": "iteration limit", "history": fits[:3] + [{**fits[3], **back}]}
