@@ -945,14 +945,13 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
         happen to fit well do not make a point of a noisy cloud a spike),
 
     and it lies above (below) all of the neighbours kept by more than ``d_i / 2``, which fit
-    their quadratic within ``d_i / 2``: a point at
-    a step, with neighbours on both levels, is between them (a steep surface can fit such
-    neighbours and miss the point: 2 of 3e4 points of a noisy 20 m step were flagged
-    without this). Spikes among each other's neighbours: the test is made again (up to 4
-    passes) without the spikes found, at the points whose neighbours held one and at those
-    that passed the slope test only. If more than 5% of the points are spikes, the surface
-    is rough rather than spiky and none is returned (a cloud of fewer than 15 points has
-    none). Measured: none on the 26 clouds of
+    their quadratic within ``d_i / 2``. A point at a step, with neighbours on both levels, is
+    between them (a steep surface can fit such neighbours and miss the point: 2 of 3e4
+    points of a noisy 20 m step were flagged without this). Spikes among each other's
+    neighbours: the test is made again (up to 4 passes) without the spikes found, at the
+    points whose neighbours held one and at those that passed the slope test only. If more
+    than 5% of the points are spikes, the surface is rough rather than spiky and none is
+    returned (a cloud of fewer than 15 points has none). Measured: none on the 26 clouds of
     benchmarks/compare.py (two seeds) but one point at the sharp apex of F10's grid, none on
     clouds with Gaussian or Laplace noise, a step, a crease, a cone, a steep tanh, a lidar
     fall-off; 281 of the 293 of the user test's spikes more than 0.5 m off (all those above

@@ -427,8 +427,9 @@ def swing_places(space, C, uv, points, errors, seed: int = 0,
     without the gap checks: F7 scattered at 1e-4 three, 844 control points instead of 1951,
     hold-out RMS 1.31e-3 instead of 1.28e-3), nor on noisy or sparse clouds. A swing inside
     a gap wider than the data spacing is measured against the far points across it, so it
-    shows only when it is larger than the gap (conservative). A place is flagged when its excess is above ``margin`` (the loop passes
-    its tolerance: it took back fits for swings of 0.7 mm with a tolerance of 0.29 m: review).
+    shows only when it is larger than the gap (conservative). A place is flagged when its
+    excess is above ``margin`` (the loop passes its tolerance: it took back fits for swings
+    of 0.7 mm with a tolerance of 0.29 m: review).
     Returns (the places flagged (f, 2), places checked, the largest excess).
     """
     uv = np.asarray(uv, dtype=np.float64)
@@ -1083,18 +1084,17 @@ def adaptive_fit(
             report["rms_area_rel"] = rms_area / diagonal
         if sampled:
             report["sampled_points"] = len(uv)
-        # an insertion that made the surface swing between the data (a sharp step: more knots
-        # than the data hold) is taken back where it swings, and that region is left alone
         # a fit after an insertion or a sizing restart that makes the surface swing between
-        # the data (a sharp step: more knots than the data hold) is taken back; the run's
-        # first fit has nothing to go back to: where it swings is known and not held against
-        # the later ones
+        # the data (a sharp step: more knots than the data hold) is taken back, and that
+        # region is left alone; the run's first fit has nothing to go back to: where it swings
+        # is known and not held against the later ones (a run of one fit: not checked here)
         swung = np.zeros((0, 2))
         restarted = fresh and sized is not None and not settle_restart
-        if REVERT_SWINGS and (it == 0 or restarted or (not fresh and len(pending))):
+        first = it == 0 and options.max_iterations > 1
+        if REVERT_SWINGS and (first or restarted or (not fresh and len(pending))):
             swung = swing_places(space, fit.control_points, uv[: len(e)], points[: len(e)], e,
                                  seed=rng_seed, margin=max(tol, 0.0))[0]
-            if it == 0:
+            if first:
                 if len(swung):
                     h = cKDTree(knots).query(swung, k=3, workers=-1)[0][:, -1]
                     known.append((swung, SWING_FREEZE * h))

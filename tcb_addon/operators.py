@@ -344,17 +344,17 @@ def _recording(fn, sink: list):
     instead of printed to the console with a file and line (user test); other warnings are
     shown as usual."""
     def run(**kw):
-        with _warnings.catch_warnings(record=True) as caught:
-            _warnings.simplefilter("always")
-            try:
+        caught: list = []
+        try:
+            with _warnings.catch_warnings(record=True) as caught:
+                _warnings.simplefilter("always")
                 return fn(**kw)
-            finally:
-                for w in caught:
-                    if issubclass(w.category, RuntimeWarning):
-                        if str(w.message) not in sink:
-                            sink.append(str(w.message))
-                    else:
-                        _warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        finally:  # (after the filters are back: the others are shown as they would have been)
+            for w in caught:
+                if not issubclass(w.category, RuntimeWarning):
+                    _warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+                elif str(w.message) not in sink:
+                    sink.append(str(w.message))
     return run
 
 
