@@ -443,7 +443,8 @@ def swing_places(space, C, uv, points, errors, seed: int = 0,
     x, p, e = uv[sub], np.asarray(points, dtype=np.float64)[sub], np.asarray(errors)[sub]
     pick = np.arange(min(len(sub), SWING_POINTS))
     dd, nb = cKDTree(x).query(x[pick], k=k + 1, workers=-1)
-    dk, _ = cKDTree(space.knots).query(x[pick], workers=-1)
+    knot_tree = cKDTree(space.knots)  # (one for the midpoints and both gap checks)
+    dk, _ = knot_tree.query(x[pick], workers=-1)
     near = dk < SWING_KNOTS * dd[:, -1]
     i, j = np.repeat(pick[near], k), nb[near, 1:].ravel()
     mid = 0.5 * (x[i] + x[j])
@@ -455,10 +456,10 @@ def swing_places(space, C, uv, points, errors, seed: int = 0,
     # points 0.63 m apart, 1e5 points: a sample's triangles are too large to see them)
     parts = [(mid, (a, a + ab), reach)]
     if SWING_GAPS and len(x) >= 3:
-        parts.append(_gap_checks(space, x, p, e, _gap_triangles(x), seed + 1))
+        parts.append(_gap_checks(knot_tree, x, p, e, _gap_triangles(x), seed + 1))
         spacing = float(np.median(dd[:, 1])) * np.sqrt(len(x) / n)  # of all the data
         K = np.asarray(space.knots)
-        gap = cKDTree(K).query(K, k=2, workers=-1)[0][:, 1]
+        gap = knot_tree.query(K, k=2, workers=-1)[0][:, 1]
         crowd = K[gap < SWING_CROWD * spacing]
         if len(crowd):
             r = SWING_CROWD * spacing
@@ -467,7 +468,7 @@ def swing_places(space, C, uv, points, errors, seed: int = 0,
             if len(sel) > SWING_SAMPLE:
                 sel = np.sort(np.random.default_rng(seed + 2).choice(sel, SWING_SAMPLE,
                                                                      replace=False))
-            parts.append(_gap_checks(space, uv[sel], np.asarray(points, dtype=np.float64)[sel],
+            parts.append(_gap_checks(knot_tree, uv[sel], np.asarray(points, dtype=np.float64)[sel],
                                      np.asarray(errors)[sel], _interior_triangles(uv[sel]),
                                      seed + 3))
     places = np.vstack([q[0] for q in parts])
@@ -486,9 +487,10 @@ def swing_places(space, C, uv, points, errors, seed: int = 0,
     return places[flagged], len(places), float(excess.max()) if flagged.any() else 0.0
 
 
-def _gap_checks(space, x, p, e, T, seed):
+def _gap_checks(knot_tree, x, p, e, T, seed):
     """The places to check in the triangles ``T`` of the parameters ``x`` (points ``p``,
-    errors ``e``) for swing_places: the centroids of those with a knot closer than their
+    errors ``e``; ``knot_tree`` a KD-tree of the knots) for swing_places: the centroids of
+    those with a knot closer than their
     longest side and a longest side of at most SWING_GAP_SPAN times the median one (up to
     SWING_POINTS of them, seeded), their corner points, and how far the surface may be from
     the triangle of those: its longest side plus 3 times its corners' largest error."""
@@ -497,7 +499,7 @@ def _gap_checks(space, x, p, e, T, seed):
     cen = x[T].mean(axis=1)
     span = np.max([np.linalg.norm(x[T[:, q]] - x[T[:, q - 1]], axis=1) for q in range(3)],
                   axis=0)
-    near = ((cKDTree(space.knots).query(cen, workers=-1)[0] < SWING_KNOTS * span)
+    near = ((knot_tree.query(cen, workers=-1)[0] < SWING_KNOTS * span)
             & (span <= SWING_GAP_SPAN * np.median(span)))
     T, cen = T[near], cen[near]
     if len(T) > SWING_POINTS:
