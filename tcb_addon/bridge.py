@@ -45,6 +45,19 @@ class InputData:
     sources: list = field(default_factory=list)  # original bpy.types.Object, in selection order
     counts: dict = field(default_factory=dict)  # source name -> number of points read
     notes: list = field(default_factory=list)  # what the user should know about the input
+    # source name -> its modifiers as "Kind 'name'" (with "(off)" for those off in the viewport)
+    modifiers: dict = field(default_factory=dict)
+
+    def modifier_note(self, applied_only: bool = True) -> str | None:
+        """The sources' modifiers in words, or None when they have none: ``applied_only``
+        names only those the input was read through (on in the viewport, source shown)."""
+        parts = []
+        for name, mods in self.modifiers.items():
+            mods = [m for m in mods if not (applied_only and m.endswith(" (not applied)"))]
+            if mods:
+                parts.append(f"'{name}' has the modifier{'s' if len(mods) > 1 else ''} "
+                             f"{', '.join(mods)}")
+        return "; ".join(parts) or None
 
     @property
     def name(self) -> str:
@@ -224,6 +237,21 @@ def _rounding_note(obj, pts: np.ndarray, notes: list) -> None:
             "or import the scan again")
 
 
+def modifier_names(obj) -> list:
+    """``obj``'s modifiers as "Kind 'name'" (Blender's name of the kind: Solidify,
+    Subdivision Surface), with "(not applied)" after those off in the viewport, or after all
+    of them when ``obj`` is hidden (a hidden object is read without them)."""
+    shown = obj.visible_get()
+    out = []
+    for m in getattr(obj, "modifiers", ()):
+        try:
+            kind = m.bl_rna.properties["type"].enum_items[m.type].name
+        except (KeyError, AttributeError):
+            kind = m.type.replace("_", " ").title()
+        out.append(f"{kind} '{m.name}'" + ("" if shown and m.show_viewport else " (not applied)"))
+    return out
+
+
 def read_selection(context, objects=None) -> InputData:
     """World-space points (and faces) of the selected objects, after modifiers.
 
@@ -296,7 +324,7 @@ def read_selection(context, objects=None) -> InputData:
                 notes.append(f"'{obj.name}' is hidden: read without its modifiers (show it to "
                              "fit the modified shape)")
 
-    points, faces, counts = [], [], {}
+    points, faces, counts, modifiers = [], [], {}, {}
     for key, obj in wanted.items():
         got = parts[key]
         n = sum(len(p) for p, _ in got)
@@ -324,12 +352,14 @@ def read_selection(context, objects=None) -> InputData:
             )
         counts[obj.name] = n
         points += [p for p, _ in got]
+        modifiers[obj.name] = modifier_names(obj)
         faces += [f for _, f in got]
 
     pts = np.concatenate(points) if len(points) > 1 else points[0]
     tri = faces[0] if len(faces) == 1 and faces[0] is not None else None
     return InputData(points=pts, faces=None if tri is None else tri.astype(np.int64),
-                     sources=list(wanted.values()), counts=counts, notes=notes)  # fmt: skip
+                     sources=list(wanted.values()), counts=counts, notes=notes,
+                     modifiers=modifiers)  # fmt: skip
 
 
 def _faces_or_cloud(obj, pts, tris, notes):

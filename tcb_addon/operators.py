@@ -551,6 +551,12 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
                 raise core.parameterize.outlier_error(
                     data.points, ex.indices, data.label,
                     advice="turn on Drop Outliers in the fit settings") from None
+            except core.InvalidInputError as ex:  # the shape may be the modifiers' doing
+                mods = data.modifier_note()
+                if mods is None:
+                    raise
+                raise type(ex)(f"{ex} (the input is read after its modifiers: {mods}; turn "
+                               "them off in the viewport to fit the mesh without them)") from None
 
         self._engine = []
         return ("run", _recording(fit, self._engine),
@@ -671,6 +677,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             then, now = len(surf.parameterization.uv), len(data.points)
             what = f"{then} points then, {now} now" if then != now else "other coordinates"
             hidden = "".join(f"; {n}" for n in data.notes)
+            mods = data.modifier_note(applied_only=False)  # (one turned off since the fit: user test)
+            hidden += f"; {mods}" if mods else ""
             raise bridge.SelectionError(
                 f"{names} changed since '{surface.name}' was fitted ({what}{hidden}): Refine "
                 "continues the fit of the same data; select the source and use Fit Surface to "

@@ -555,6 +555,30 @@ def test_a_hidden_modified_source_is_named_as_such(clean_scene, capfd):
     assert "the smoother cross-validated surface was kept" in out and "not reached" not in out, out
 
 
+def test_errors_name_the_modifiers_that_made_the_shape(clean_scene):
+    """A grid closed by a Solidify modifier was refused as "the mesh is closed ... delete some
+    faces" without a word of the modifier (user test L1): the error names it and says how to
+    fit the mesh without it. Refine after a modifier was turned off names it too."""
+    bpy = clean_scene
+    verts, faces = grid(12)
+    shell = add_mesh(bpy, "Shell", verts, faces)
+    shell.modifiers.new("Thick", "SOLIDIFY").thickness = 0.05
+    before = snapshot(shell)
+    _expect_error(bpy, [shell], r"closed .* after its modifiers: 'Shell' has the modifier "
+                                r"Solidify 'Thick'; turn them off in the viewport")
+    assert snapshot(shell) == before
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    scan.modifiers.new("Smooth", "SUBSURF").levels = 1
+    assert fit(bpy, scan) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    scan.modifiers["Smooth"].show_viewport = False
+    bpy.context.view_layer.update()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        with pytest.raises(RuntimeError, match=r"'Scan' changed since .*'Scan' has the modifier "
+                                               r"Subdivision Surface 'Smooth' \(not applied\)"):
+            bpy.ops.tcb.refine()
+
+
 def test_fit_mesh_object_nefertiti(clean_scene, addon):
     bpy = clean_scene
     import importlib
