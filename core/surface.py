@@ -1246,7 +1246,8 @@ def fit_surface(
     seed : int >= 0
         Seed of the random choices (knot sampling, jitter): same input, same surface.
     drop_outliers : bool
-        Point clouds only. Points far from all others (stray returns, spikes; see
+        Point clouds only (a mesh's vertices are held by its faces: True gives a
+        RuntimeWarning and drops none). Points far from all others (stray returns, spikes; see
         ``core.parameterize.isolated_points``) are refused with an error that names them
         (default), or, with True, left out of the fit, and so are spikes and pits inside the
         cloud (``core.parameterize.spike_points``): their ``errors`` are NaN and
@@ -1291,6 +1292,10 @@ def fit_surface(
         raise type(exc)(f"{exc} (note: {coarse})") from None
     if coarse is not None:
         warnings.warn(coarse, RuntimeWarning, stacklevel=2)
+    if faces is not None and drop_outliers:  # (the CLI refuses the option for a mesh)
+        warnings.warn("drop_outliers applies to point clouds: a mesh's vertices are held by its "
+                      "faces, so none were left out (leave the option out for meshes)",
+                      RuntimeWarning, stacklevel=2)
     return _run(points, param, options, callback, checked=faces is None)
 
 

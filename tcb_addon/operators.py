@@ -537,6 +537,11 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         data = bridge.read_selection(context)
         self._data = data
         kwargs = self._fit_kwargs()
+        self._ignored = []
+        if data.faces is not None and kwargs.get("drop_outliers"):  # (a setting left on)
+            kwargs["drop_outliers"] = False
+            self._ignored = [f"Drop Outliers applies to point clouds: '{data.name}' is a mesh, "
+                             "whose faces hold its vertices, so none were left out"]
         self._key = (data.digest(), tuple(sorted(kwargs.items())))
         cached = _cache_get(self._key)
         self._reused = cached is not None
@@ -600,7 +605,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         context.view_layer.objects.active = surface
         reused = ["the same input and settings as the last fit: its result was reused (the "
                   "seconds are that fit's)"] if getattr(self, "_reused", False) else []
-        report_result(self, surf, list(data.notes) + reused, _engine_notes(self))
+        report_result(self, surf, list(data.notes) + self._ignored + reused,
+                      _engine_notes(self))
         return {"FINISHED"}
 
     def draw(self, context):

@@ -555,10 +555,11 @@ def test_a_hidden_modified_source_is_named_as_such(clean_scene, capfd):
     assert "the smoother cross-validated surface was kept" in out and "not reached" not in out, out
 
 
-def test_errors_name_the_modifiers_that_made_the_shape(clean_scene):
+def test_errors_name_the_modifiers_that_made_the_shape(clean_scene, capfd):
     """A grid closed by a Solidify modifier was refused as "the mesh is closed ... delete some
     faces" without a word of the modifier (user test L1): the error names it and says how to
-    fit the mesh without it. Refine after a modifier was turned off names it too."""
+    fit the mesh without it. Refine after a modifier was turned off names it too. Drop
+    Outliers on a mesh is named as not applying (user test L3)."""
     bpy = clean_scene
     verts, faces = grid(12)
     shell = add_mesh(bpy, "Shell", verts, faces)
@@ -571,6 +572,12 @@ def test_errors_name_the_modifiers_that_made_the_shape(clean_scene):
     scan.modifiers.new("Smooth", "SUBSURF").levels = 1
     assert fit(bpy, scan) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
+    # Drop Outliers left on from a cloud: a mesh's faces hold its vertices (a note, no warning)
+    capfd.readouterr()
+    assert fit(bpy, scan, drop_outliers=True) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "Drop Outliers applies to point clouds: 'Scan' is a mesh" in out, out
+    assert "drop_outliers applies" not in out  # (the engine's words: not given the option)
     scan.modifiers["Smooth"].show_viewport = False
     bpy.context.view_layer.update()
     with bpy.context.temp_override(**select(bpy, surface)):

@@ -1173,6 +1173,18 @@ def test_outliers_are_refused_by_name_or_left_out_as_if_they_were_not_there():
     assert fit_surface(clean, max_control_points=200).report["outliers"] == 0
 
 
+def test_drop_outliers_on_a_mesh_warns_and_changes_nothing(nefertiti):
+    """A mesh's vertices are held by its faces: drop_outliers=True leaves none out and says so
+    (it was silently ignored, while the CLI refuses the option: user test L3)."""
+    points, faces, _ = nefertiti
+    kw = dict(max_control_points=150, max_iterations=2)
+    with pytest.warns(RuntimeWarning, match="drop_outliers applies to point clouds"):
+        dropped = fit_surface(points, faces, drop_outliers=True, **kw)
+    plain = fit_surface(points, faces, **kw)
+    assert dropped.report["outliers"] == 0 and dropped.report["points"] == len(points)
+    np.testing.assert_array_equal(dropped.control_points, plain.control_points)
+
+
 def test_closest_points_of_points_off_the_surface_lie_on_the_trimmed_surface(nefertiti):
     """Points all around a cloud's and a mesh's surface: their closest parameters are in the
     data's domain (before, 15-20% of them were on the extension over the border rings, at
