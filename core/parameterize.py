@@ -728,7 +728,8 @@ def projection_direction(projection) -> np.ndarray | None:
 
 
 def _fold_fraction(
-    q: np.ndarray, uv: np.ndarray, normal: np.ndarray, planes=None, sample=None
+    q: np.ndarray, uv: np.ndarray, normal: np.ndarray, planes=None, sample=None,
+    details: dict | None = None,
 ) -> float:
     """Fraction of points where the cloud is not a height field over its best-fit plane.
 
@@ -756,6 +757,11 @@ def _fold_fraction(
     isolated suspects), so noise and line-like neighbourhoods do not cause false alarms.
     Clouds of more than 40 000 points are checked on a seeded (deterministic) random subset of
     that size; ``planes`` are the local planes of that subset when already computed.
+
+    ``details``, when given, receives ``steep`` and ``overlap`` (the shares of the points
+    flagged by each test) and ``layer_gap``: the median over the overlap-flagged points of the
+    median ``|d . n_i|`` of their off-layer neighbours (how far apart the layers are, in the
+    units of ``q``; 0 without overlaps), for the error's words.
     """
     sample = _fold_sample(q) if sample is None else sample
     q, uv = q[sample], uv[sample]
@@ -782,13 +788,39 @@ def _fold_fraction(
 
     flagged = coherent(reliable & overlap)
     steep_flag = coherent(reliable & steep)
+    layered = flagged.copy()
     if steep_flag.any():
         # a sheet that turns over does so at the rim of its projection; steep stripes inside
         # the domain are a steep height field (Renka's F7), which projects without folding
         near_rim = _distance_to_hull(uv) < _FOLD_RIM * float(np.ptp(uv, axis=0).max())
         if np.count_nonzero(steep_flag & near_rim) >= _FOLD_RIM_SHARE * np.count_nonzero(steep_flag):
             flagged |= steep_flag
+        else:
+            steep_flag[:] = False
+    if details is not None:
+        gap = 0.0
+        own = layered & overlap  # (a coherent flag may have no off-layer neighbour itself)
+        if own.any():
+            gap = float(np.median(np.nanmedian(np.where(off[own], dn[own], np.nan), axis=1)))
+        details.update(steep=np.count_nonzero(steep_flag) / len(q),
+                       overlap=np.count_nonzero(layered) / len(q), layer_gap=gap)
     return float(np.count_nonzero(flagged)) / len(q)
+
+
+def _layers_note(details: dict, scale: float) -> str | None:
+    """The words for a cloud that lies in layers (``details`` of :func:`_fold_fraction`; the
+    layer distance times ``scale``, in the user's units), or None when its flags are not
+    mostly overlaps: two scans of one surface that are not aligned (a 0.5 offset between
+    two copies of a 4 x 4 terrain had been "the surface is nearly perpendicular to that plane
+    or overlaps itself in projection ... split the scan into patches": user test L2)."""
+    if not details or details.get("overlap", 0.0) < 4.0 * details.get("steep", 0.0):
+        return None
+    if not details["overlap"] > 0:
+        return None
+    return (f"the points lie in two or more layers about {details['layer_gap'] * scale:.3g} "
+            "apart across the surface (scans that are not aligned to each other, both sides "
+            "of a thin object, or a sheet folded flat): align the scans, or fit each layer (a "
+            "scan, a side) on its own")
 
 
 def isolated_points(
@@ -1175,16 +1207,17 @@ def parameterize_points(
     # the most height-field-like direction first; if the cloud folds over that plane, the
     # other candidates (a steep height field far taller than wide, Renka's F7, has a vertical
     # PCA plane and folds over it, but not over the horizontal one)
-    fractions, tried = [], []
+    fractions, tried, found = [], [], []
     normals = (_projection_normals(q[sample], np.cross(vt[0], vt[1]), planes)
                if direction is None else [direction])
     for n in normals:
         tried.append(n)
         uv_n = _project(q, m, vt, n)[3]
+        found.append({})
         if _on_a_line(uv_n):  # the surface is parallel to n: no height field over its plane
             fractions.append(np.inf)
             continue
-        fractions.append(_fold_fraction(q, uv_n, n, planes, sample))
+        fractions.append(_fold_fraction(q, uv_n, n, planes, sample, found[-1]))
         if fractions[-1] <= _FOLD_CLEAR * _FOLD_MAX_FRACTION:
             break
     # a clear pass ends the search; after a narrow one (flags at 0.5-2% of the points: a
@@ -1198,6 +1231,13 @@ def parameterize_points(
             "the points fall on one line: the surface is parallel to that direction; give a "
             "direction across the surface (e.g. the axis it faces), or leave the projection "
             "automatic"
+        )
+    layers = _layers_note(found[best if fractions[best] <= _FOLD_MAX_FRACTION else 0],
+                          norm.scale)
+    if frac > _FOLD_MAX_FRACTION and layers:
+        raise ParameterizationError(
+            f"the point cloud overlaps itself in projection at {100 * frac:.1f}% of the points: "
+            f"{layers}"
         )
     if frac > _FOLD_MAX_FRACTION and direction is not None:
         raise ParameterizationError(

@@ -3,6 +3,7 @@ detection, mean-value map of disk-like meshes onto the unit disk, and the topolo
 
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
 
@@ -249,6 +250,23 @@ def test_a_z_folded_sheet_is_rejected(r: float, n: int, back: float) -> None:
     z = np.where(s < 1, 0.0, np.where(turn < np.pi, r - r * np.cos(turn), 2 * r))
     with pytest.raises(ParameterizationError):
         parameterize(np.column_stack([x, y, z]))
+
+
+@pytest.mark.parametrize("offset", [0.5, 2.0])
+def test_two_unaligned_scans_are_named_as_layers_with_their_distance(offset: float) -> None:
+    """Two copies of a 4 x 4 terrain scan, one lifted by ``offset``: the error says the points
+    lie in layers that far apart and to align the scans (it said "nearly perpendicular to that
+    plane ... split the scan into patches": user test L2), whichever projection is given."""
+    xy = np.random.default_rng(3).random((3000, 2)) * 4
+    scan = np.c_[xy, 0.3 * np.sin(xy[:, 0])]
+    both = np.vstack([scan, scan + [0.0, 0.0, offset]])
+    for projection in (None, "z"):
+        with pytest.raises(ParameterizationError, match="two or more layers about") as err:
+            parameterize(both, projection=projection)
+        gap = float(re.search(r"layers about ([0-9.]+) apart", str(err.value)).group(1))
+        # (the distance along the local normals: the offset times cos of the slope, <= 0.3)
+        assert 0.9 * offset < gap < 1.02 * offset, str(err.value)
+        assert "align the scans" in str(err.value)
 
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
