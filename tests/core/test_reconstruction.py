@@ -1173,6 +1173,25 @@ def test_outliers_are_refused_by_name_or_left_out_as_if_they_were_not_there():
     assert fit_surface(clean, max_control_points=200).report["outliers"] == 0
 
 
+def test_two_scans_a_little_apart_are_reported_as_layers_and_noise_is_not():
+    """Two copies of a terrain scan 0.1 apart (5 mm noise): closer than the fold check can see,
+    the surface runs between them with the errors of noise (user test L2). The report names
+    the layers and their distance; the same scan with 5 cm noise, twice as large an RMS, does
+    not, nor does a clean fit."""
+    rng = np.random.default_rng(3)
+    xy = rng.random((3000, 2)) * 4
+    scan = np.c_[xy, 0.3 * np.sin(xy[:, 0])]
+    both = np.vstack([scan, scan + [0.0, 0.0, 0.1]]) + rng.normal(0.0, 0.005, (6000, 3))
+    with pytest.warns(RuntimeWarning, match=r"two layers about 0\.\d+ apart .*align the scans"):
+        layered = fit_surface(both)
+    assert 0.095 < layered.report["layers"] < 0.105
+    noisy = scan + rng.normal(0.0, 0.05, scan.shape)
+    for cloud in (noisy, scan):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            assert fit_surface(cloud).report["layers"] == 0.0
+
+
 def test_drop_outliers_on_a_mesh_warns_and_changes_nothing(nefertiti):
     """A mesh's vertices are held by its faces: drop_outliers=True leaves none out and says so
     (it was silently ignored, while the CLI refuses the option: user test L3)."""
