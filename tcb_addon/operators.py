@@ -20,7 +20,8 @@ from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
 from . import bridge, live
-from .properties import DEFAULT_SMOOTHNESS, FIT_KEYS, FitSettings, draw_fit_settings
+from .properties import (DEFAULT_SMOOTHNESS, FIT_KEYS, MAX_RESOLUTION, FitSettings,
+                         draw_fit_settings)
 
 # Custom property of the surface object: TCBSurface.to_bytes() as base64 text. (Raw bytes
 # ID properties lose everything after the first NUL byte when an existing one is reassigned.)
@@ -738,7 +739,8 @@ class TCB_OT_retessellate(bpy.types.Operator):
     bl_label = "Re-tessellate"
     bl_options = {"REGISTER", "UNDO"}
 
-    resolution: IntProperty(name="Resolution", default=64, min=2, soft_max=512, max=4096)
+    resolution: IntProperty(name="Resolution", default=64, min=2, soft_max=512,
+                            max=MAX_RESOLUTION)
 
     @classmethod
     def poll(cls, context):
