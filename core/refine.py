@@ -519,11 +519,14 @@ def _gap_triangles(x: np.ndarray) -> np.ndarray:
     a flat triangle between points far apart on a curved surface is no measure of it; F7
     scattered was 0.35 off such a one, 0.07 of its diagonal). The last result is kept (0.09
     s for 20 000 points; the loop checks the same sample after every insertion)."""
-    key = hash(x.tobytes())
-    if _GAP_CACHE.get("key") == key and _GAP_CACHE["shape"] == x.shape:
-        return _GAP_CACHE["triangles"]
+    key = (hash(x.tobytes()), x.shape)
+    # one tuple, read and replaced whole: fits in two threads (Blender's job and a script)
+    # never pair one sample's key with another's triangles
+    last = _GAP_CACHE.get("last")
+    if last is not None and last[0] == key:
+        return last[1]
     T = _interior_triangles(x)
-    _GAP_CACHE.update(key=key, shape=x.shape, triangles=T)
+    _GAP_CACHE["last"] = (key, T)
     return T
 
 
