@@ -1259,8 +1259,9 @@ def fit_surface(
         RuntimeWarning and drops none). Points far from all others (stray returns, spikes; see
         ``core.parameterize.isolated_points``) are refused with an error that names them
         (default), or, with True, left out of the fit, and so are spikes and pits inside the
-        cloud (``core.parameterize.spike_points``): their ``errors`` are NaN and
-        ``report["outliers"]`` counts them.
+        cloud (``core.parameterize.spike_points``) and up to 5% of points over the surface
+        that the fold check sees as another layer (a power line over terrain): their
+        ``errors`` are NaN and ``report["outliers"]`` counts them.
     projection : None, "x", "y", "z" or three numbers
         Point clouds only: the direction to project the cloud along (a height field over the
         plane across it). None (default) chooses it (the best-fit plane, or a direction over

@@ -992,6 +992,29 @@ def test_drop_outliers_also_leaves_out_spikes_inside_the_cloud() -> None:
         assert parameterize_points(np.c_[xy, many], True).used.all()
 
 
+def test_drop_outliers_leaves_out_a_power_line_over_terrain() -> None:
+    """A wire 20-30 m over a 200 m terrain tile (400 points 0.5 m apart, 20 000 on the
+    ground): its points are neither isolated nor spikes, and the fold check refused the tile
+    with or without drop_outliers (review). With it, the fold check's other layer is left
+    out when it is at most 5% of the points; without, the refusal stands; two scans of one
+    terrain, each half of the points, stay refused as layers."""
+    rng = np.random.default_rng(0)
+    xy = rng.random((20_000, 2)) * 200
+    ground = np.c_[xy, 5 * np.sin(xy[:, 0] / 40) + 3 * np.cos(xy[:, 1] / 30)]
+    t = np.arange(0, 200, 0.5)
+    wire = np.c_[t, np.full_like(t, 100.0), 20 + 0.001 * (t - 100) ** 2]
+    cloud = np.vstack([ground, wire])
+    for projection in (None, "z"):
+        with pytest.raises(ParameterizationError, match="folds over"):
+            parameterize_points(cloud, False, projection)
+        par = parameterize_points(cloud, True, projection)
+        assert par.used[: len(ground)].all()  # no ground point
+        assert np.count_nonzero(~par.used[len(ground):]) >= 0.95 * len(wire)
+        assert abs(par.axes[2][2]) > 0.99
+    with pytest.raises(ParameterizationError, match="two or more layers"):
+        parameterize_points(np.vstack([ground, ground + [0.0, 0.0, 5.0]]), True)
+
+
 @pytest.mark.parametrize("share, seed", [(0.10, 4), (0.10, 5), (0.15, 4)])
 def test_a_tile_with_many_spikes_is_never_projected_sideways(share, seed) -> None:
     """A terrain tile with 10-15% spikes of N(0, 20 m): its spikes widen the projection
