@@ -55,10 +55,10 @@ MIN_POINTS = 10
 # Fold detection for point clouds (method.md section 4).
 _FOLD_NEIGHBOURS = 12  # neighbours (besides the point itself) of the local PCA and uv tests
 _FOLD_MIN_COS = 0.2  # |local normal . plane normal| below this: surface nearly perpendicular
+_STRAY_MAX_SHARE = 0.05  # drop_outliers leaves out at most this share of points over others
 # steep points (|n_i . n| below _FOLD_MIN_COS, down to this) have the overlap test too, with
 # _FOLD_OFF_LAYER_STEEP for _FOLD_OFF_LAYER: a terrain seen edge-on (projected along a
 # horizontal axis) flags 20-29% there, a steep height field (F7 x10 over z) 0.7% (review)
-_STRAY_MAX_SHARE = 0.05  # drop_outliers leaves out at most this share of points over others
 _FOLD_OVERLAP_COS = 0.02
 _FOLD_OFF_LAYER_STEEP = 16.0
 # a uv-neighbour j of i is on another layer when |q_j - q_i| |n_i . n| exceeds this times its
