@@ -209,7 +209,7 @@ def _progress(quiet: bool):
 
 def _fit(args) -> int:
     from .parameterize import outlier_error
-    from .surface import fit_surface
+    from .surface import MAX_RESOLUTION, fit_surface
 
     _check_output(args.output, "surface")
     _check_output(args.net, "control net")
@@ -217,6 +217,9 @@ def _fit(args) -> int:
     _check_distinct(args)
     if args.resolution is not None and args.resolution < 2:
         raise TCBError(f"--resolution must be at least 2, got {args.resolution}")
+    if args.resolution is not None and args.resolution > MAX_RESOLUTION:
+        raise TCBError(f"--resolution must be at most {MAX_RESOLUTION} (about 12 million "
+                       f"vertices), got {args.resolution}")
     t0 = time.perf_counter()
     points, faces = read_geometry(args.input)
     if faces is not None and args.projection is not None:

@@ -54,6 +54,9 @@ FORMAT_VERSION = 2
 MAX_FIT_POINTS = 2_000_000
 # A parameter domain thinner than this (width / length) is a curve, not a surface.
 MIN_ASPECT = 1e-3
+# the finest tessellation (grid steps along the longer side): 2048 took about a minute and 2
+# GiB, 3000 86 s and 3.7 GB (user test)
+MAX_RESOLUTION = 4096
 # tessellation: rounds of edge splits where the data parameters are denser than on average
 TESSELLATION_SPLITS = 4
 # the edge-split rounds look a mesh's compression up on a grid of at most this many cells along
@@ -254,7 +257,14 @@ class TCBSurface:
             resolution = 0
         if resolution < 2:
             raise InvalidInputError(
-                f"the tessellation resolution must be a whole number of at least 2, got {given!r}"
+                f"the tessellation resolution must be a number of at least 2 (a whole number of "
+                f"grid steps), got {given!r}"
+            )
+        if resolution > MAX_RESOLUTION:  # (100 000 ran out of memory, 73 GiB: user test)
+            raise InvalidInputError(
+                f"the tessellation resolution must be at most {MAX_RESOLUTION} (about 12 "
+                f"million vertices, several GiB), got {given!r}: evaluate the surface at "
+                "parameters of your own for more (surf(uv))"
             )
         cached = self._tess_cache.pop(resolution, None)
         if cached is not None:  # most recent last

@@ -110,7 +110,8 @@ def test_cancelling_returns_the_best_surface_and_raises_nothing():
 @pytest.mark.parametrize(
     "call, words",
     [
-        (lambda s: s.tessellate(None), "resolution must be a whole number .* got None"),
+        (lambda s: s.tessellate(None), "resolution must be a number of at least 2 .* got None"),
+        (lambda s: s.tessellate(100_000), "resolution must be at most 4096 .* got 100000"),
         (lambda s: s.tessellate(np.nan), "resolution .* got nan"),
         (lambda s: s.tessellate(np.inf), "resolution .* got inf"),
         (lambda s: s.tessellate(1), "resolution .* at least 2"),
