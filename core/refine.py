@@ -684,6 +684,8 @@ STALLED = "the error stopped falling"
 REVERT_SWINGS = True
 SWING_FREEZE = 8.0
 SWINGS_LEFT = "more knots would make the surface swing between the data"
+# an insertion taken back this many times in a row ends the run (SWINGS_LEFT)
+TAKE_BACKS_IN_A_ROW = 4
 
 
 def _in_discs(x: np.ndarray, discs: list) -> np.ndarray:
@@ -704,11 +706,14 @@ def _in_discs(x: np.ndarray, discs: list) -> np.ndarray:
 
 def mostly_taken_back(report: dict) -> bool:
     """Whether a run stopped at its iteration limit after taking back (the surface swung:
-    :func:`adaptive_fit`) at least half of its fits: more iterations would not help (the CLI
-    note and the Blender advice then say what does)."""
+    :func:`adaptive_fit`) at least half of its fits, or its last two: more iterations would
+    not help (the CLI note and the Blender advice then say what does)."""
     history = report.get("history") or []
     back = sum("knots_taken_back" in h for h in history)
-    return report.get("stop_reason") == "iteration limit" and back > 0 and 2 * back >= len(history)
+    last = history[-2:]  # (or the last two, in a row)
+    return report.get("stop_reason") == "iteration limit" and back > 0 and (
+        2 * back >= len(history) or (len(last) == 2 and all("knots_taken_back" in h
+                                                             for h in last)))
 
 
 def replaced_default_reason(selection: dict | None) -> str | None:
@@ -1008,6 +1013,8 @@ def adaptive_fit(
     frozen: list = []  # (centres, radii) of the regions where knots made the surface swing
     last_insertion: tuple = ()  # insert()'s arguments of the last insertion (pending's)
     known: list = []  # (centres, radii) of where the run's first fit swings
+    taken_back: set = set()  # the knots of the insertions taken back (bytes)
+    in_a_row = 0  # insertions taken back since the last fit kept
     settle_restart = False  # the fit is the one a restart that swung was sized from
 
     def insert(knots, triangles, steer, count) -> np.ndarray:
@@ -1136,13 +1143,21 @@ def adaptive_fit(
             if callback is not None and _cancel_requested(callback, report):
                 reason = "cancelled"
                 break
-            # the insertion again, from the fit before it, with the regions that swing left out
+            # the insertion again, from the fit before it, with the regions that swing left out;
+            # the same knots as one already taken back would go round in circles (a spiky
+            # terrain made the same fit at iterations 17-20, then "raise the iterations"), and
+            # so does an insertion taken back TAKE_BACKS_IN_A_ROW times in a row (the same
+            # terrain read from text: 7 in a row, each a little different, to the limit)
+            taken_back.add(pending.tobytes())
+            in_a_row += 1
             pending = insert(*last_insertion)
-            if len(pending) == 0:
+            if (len(pending) == 0 or pending.tobytes() in taken_back
+                    or in_a_row >= TAKE_BACKS_IN_A_ROW):
                 reason = SWINGS_LEFT
                 break
             interior = np.vstack([interior[:n_before], pending])
             continue
+        in_a_row = 0
         # the best: the lowest RMS within the budget, or the fit that meets the tolerance (a
         # fresh start's knots do not contain the earlier ones: with the criterion "max" a fit
         # of lower RMS may still miss it). A run that stops because the error stopped falling

@@ -720,6 +720,39 @@ def test_a_run_that_took_back_most_of_its_fits_is_not_told_to_iterate_more():
     assert not refine.mostly_taken_back({"stop_reason": "iteration limit", "history": fits})
 
 
+def test_insertions_taken_back_again_and_again_end_the_run(monkeypatch):
+    """Where every insertion makes the surface swing, the loop took it back and made it again
+    to the iteration limit (a spiky terrain: the same fit at iterations 17-20, or 7 in a row
+    each a little different), then advised more iterations (user test). Now 4 in a row end
+    the run with SWINGS_LEFT, and the fit returned is one that was kept. Here a stand-in for
+    swing_places flags a knot of each insertion."""
+    from scipy.spatial import cKDTree
+
+    seen = {}
+
+    def every_new_knot_swings(space, C, uv, points, errors, seed=0, margin=0.0):
+        K, prev = np.asarray(space.knots), seen.get("knots")
+        seen["knots"] = K
+        if prev is None:  # the first fit
+            return np.zeros((0, 2)), 1, 0.0
+        new = K[cKDTree(prev).query(K)[0] > 1e-12]
+        return new[:1], 1, 1.0
+
+    monkeypatch.setattr(refine, "swing_places", every_new_knot_swings)
+    xy = np.random.default_rng(5).random((3000, 2))
+    surf = fit_surface(np.c_[xy, franke(*xy.T)], tolerance=0.0, max_iterations=12)
+    r = surf.report
+    assert r["stop_reason"] == refine.SWINGS_LEFT
+    assert r["iterations"] == 1 + refine.TAKE_BACKS_IN_A_ROW < 12
+    assert all("knots_taken_back" in h for h in r["history"][1:])
+    assert r["returned_iteration"] == 1
+    history = [{"iteration": k} for k in range(1, 7)]
+    back = {"swings": 1, "knots_taken_back": 3}
+    # (2 of 6 fits taken back, the last two: the swing advice, not "more iterations")
+    assert refine.mostly_taken_back({"stop_reason": "iteration limit", "history": history[:4] + [
+        {**h, **back} for h in history[4:]]})
+
+
 class _SpikedPlane:
     """A stand-in for a spline space whose ``evaluate(x) @ np.eye(3)`` is the plane z = 0 with
     a narrow spike of ``height`` at ``centre``: swing_places needs only ``knots`` and that."""
