@@ -4,7 +4,8 @@
 (2005), section 5.1.5, evaluated for many (point, triangle) pairs at once.
 ``point_mesh_distance`` picks candidate triangles per point with a KD-tree over triangle
 centres (the ``k`` nearest) and takes the smallest exact distance among them.
-``column_bounds`` is the per-column minimum and maximum of a long ``(n, d)`` array.
+``column_bounds`` is the per-column minimum and maximum of a long ``(n, d)`` array;
+``float32_rounding`` says when 32-bit coordinates are already coarsely rounded.
 ``distances_at_vertices`` carries the data-to-surface distances of a point cloud to the vertices
 of the surface mesh (the deviation map of a cloud).
 """
@@ -15,7 +16,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 __all__ = ["closest_point_on_triangles", "column_bounds", "distances_at_vertices",
-           "point_mesh_distance"]
+           "float32_rounding", "point_mesh_distance"]
 
 
 def column_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -28,6 +29,26 @@ def column_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lo = np.array([a[:, j].min() for j in range(a.shape[1])])
     hi = np.array([a[:, j].max() for j in range(a.shape[1])])
     return lo, hi
+
+
+def float32_rounding(points, advice: str) -> str | None:
+    """A note (ending with ``advice``) when ``points`` are 32-bit floats whose spacing at
+    their distance from the origin is more than 1e-4 of their extent (georeferenced scans:
+    0.0625 at 1e6), else None: such data is already rounded to a coarse lattice, and a fit of
+    it shows steps (or, at worst, is refused as a fold). For ``fit_surface`` and the files
+    that store 32-bit coordinates (``core.meshio.read_geometry``)."""
+    if not (isinstance(points, np.ndarray) and points.dtype == np.float32 and points.ndim == 2
+            and points.shape[0] > 1 and points.shape[1] == 3 and np.isfinite(points).all()):
+        return None
+    lo, hi = column_bounds(points.astype(np.float64))
+    extent = float((hi - lo).max())
+    step = float(np.spacing(np.maximum(np.abs(lo), np.abs(hi)).astype(np.float32)).max())
+    if not step > 1e-4 * extent:
+        return None
+    return (
+        f"the points are 32-bit floats, which far from the origin are {step:.3g} apart, "
+        f"{step / max(extent, 1e-300):.1e} of the data's extent: {advice}"
+    )
 
 
 def closest_point_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray):

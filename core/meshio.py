@@ -33,6 +33,7 @@ import math
 import os
 import re
 import struct
+import warnings
 import zipfile
 import zlib
 from pathlib import Path
@@ -40,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FileFormatError, InvalidInputError
+from .geometry import float32_rounding
 
 __all__ = ["READ_EXTENSIONS", "WRITE_EXTENSIONS", "read_geometry", "write_mesh"]
 
@@ -94,6 +96,10 @@ def read_geometry(path: PathLike) -> tuple[np.ndarray, np.ndarray | None]:
     except (ValueError, IndexError, TypeError, struct.error, UnicodeDecodeError, EOFError,
             zipfile.BadZipFile, zlib.error) as exc:
         raise FileFormatError(f"cannot read {p.name!r}: malformed content ({exc})") from None
+    coarse = float32_rounding(np.asarray(points), "export the file with 64-bit (double) "
+                              "coordinates, or with an offset subtracted")
+    if coarse is not None:  # (the API says so of float32 arrays; a file said nothing: user test)
+        warnings.warn(f"{p.name}: {coarse}", RuntimeWarning, stacklevel=2)
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     if faces is not None:
         faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
@@ -440,7 +446,9 @@ def _ply_vertices_and_faces(
     missing = [c for c in "xyz" if c not in vt]
     if missing:
         raise _MalformedError(f"the vertex element has no property {', '.join(missing)}")
-    verts = np.column_stack([vt["x"], vt["y"], vt["z"]]).astype(np.float64)
+    verts = np.column_stack([vt["x"], vt["y"], vt["z"]])  # (float32 kept: read_geometry)
+    if verts.dtype != np.float32:
+        verts = verts.astype(np.float64)
     ft = tables.get("face")
     if ft is None:
         return verts, None
@@ -795,7 +803,7 @@ def _points_array(arr: np.ndarray, what: str) -> np.ndarray:
         raise _MalformedError(
             f"{what} must be an (N, 3) array of numbers; got shape {arr.shape}, type {arr.dtype}"
         )
-    return arr[:, :3].astype(np.float64)
+    return arr[:, :3] if arr.dtype == np.float32 else arr[:, :3].astype(np.float64)
 
 
 def _npz_array(z, key: str) -> np.ndarray:

@@ -36,7 +36,7 @@ from .configurations import Configurations
 from .errors import FileFormatError, InvalidInputError, TCBError
 from .fit import (DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL, DefaultSmoothness,
                   fit_control_points)
-from .geometry import column_bounds
+from .geometry import column_bounds, float32_rounding
 from .parameterize import (
     Parameterization, _as_points, _check_finite, box_normalization, normalize, parameterize,
 )
@@ -1299,7 +1299,8 @@ def fit_surface(
     check_callback(callback)
     if not isinstance(drop_outliers, (bool, np.bool_)):
         raise InvalidInputError(f"drop_outliers must be True or False, got {drop_outliers!r}")
-    coarse = _float32_rounding(points)
+    coarse = float32_rounding(points, "pass float64 coordinates, or subtract an offset before "
+                                      "converting to 32 bits")
     try:
         points = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):
@@ -1427,23 +1428,3 @@ def swing_warning(report: dict) -> str:
             "show: more knots crowd there than the data hold (a sharp step, or a gap in the "
             "data); a looser tolerance, or fewer control points, keeps the surface closer to "
             "the data there")
-
-
-def _float32_rounding(points) -> str | None:
-    """A note when ``points`` are 32-bit floats whose spacing at their distance from the
-    origin is more than 1e-4 of their extent (georeferenced scans: 0.0625 at 1e6), else
-    None: such data is already rounded to a coarse lattice, and a fit of it shows steps (or,
-    at worst, is refused as a fold)."""
-    if not (isinstance(points, np.ndarray) and points.dtype == np.float32 and points.ndim == 2
-            and points.shape[0] > 1 and points.shape[1] == 3 and np.isfinite(points).all()):
-        return None
-    lo, hi = column_bounds(points.astype(np.float64))
-    extent = float((hi - lo).max())
-    step = float(np.spacing(np.maximum(np.abs(lo), np.abs(hi)).astype(np.float32)).max())
-    if not step > 1e-4 * extent:
-        return None
-    return (
-        f"the points are 32-bit floats, which far from the origin are {step:.3g} apart, "
-        f"{step / max(extent, 1e-300):.1e} of the data's extent: pass float64 coordinates, or "
-        "subtract an offset before converting to 32 bits"
-    )

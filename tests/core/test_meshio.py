@@ -610,3 +610,34 @@ def test_missing_file_and_unknown_extension(tmp_path: Path) -> None:
     # FileFormatError is an InvalidInputError and a ValueError
     with pytest.raises(ValueError):
         read_geometry(tmp_path / "nothing.obj")
+
+
+def test_files_of_coarsely_rounded_32_bit_coordinates_are_named(tmp_path: Path) -> None:
+    """A 20 m patch at UTM coordinates stored as 32-bit floats (the usual binary PLY export)
+    is already rounded to 0.5 m there: fit_surface warned of float32 arrays, but a file
+    read by read_geometry (the CLI) said nothing (user test). Float64 files, and 32-bit ones
+    near the origin, give no warning; the points are float64 either way."""
+    import warnings
+
+    xy = np.random.default_rng(0).random((400, 2)) * 20
+    local = np.c_[xy, 0.1 * np.sin(xy[:, 0])]
+    far = local + [512345.0, 4212345.0, 100.0]
+    header = ("ply\nformat binary_little_endian 1.0\nelement vertex 400\nproperty float x\n"
+              "property float y\nproperty float z\nend_header\n").encode()
+    for name, pts, warned in (("far.ply", far, True), ("near.ply", local, False)):
+        (tmp_path / name).write_bytes(header + pts.astype("<f4").tobytes())
+        np.save(tmp_path / name.replace(".ply", ".npy"), pts.astype(np.float32))
+        for f in (name, name.replace(".ply", ".npy")):
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                got, _ = read_geometry(tmp_path / f)
+            said = [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)]
+            assert got.dtype == np.float64 and len(got) == 400
+            assert bool(said) == warned, said
+            if warned:
+                assert said[0].startswith(f"{f}: the points are 32-bit floats, which far from "
+                                          "the origin are 0.5 apart") and "64-bit" in said[0]
+    np.save(tmp_path / "double.npy", far)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        read_geometry(tmp_path / "double.npy")
