@@ -347,6 +347,9 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"error: {exc.strerror or exc}: {getattr(exc, 'filename', '')}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C: one line, not a traceback (user test)
+        print("error: cancelled (Ctrl-C)", file=sys.stderr)
+        return 130
     finally:
         warnings.formatwarning = shown
     return 1

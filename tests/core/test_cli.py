@@ -333,3 +333,22 @@ def test_corrupt_input_files_give_one_line_and_exit_2(tmp_path):
         assert r.returncode == 2, r.stderr
         assert r.stderr.strip().count("\n") == 0 and "Traceback" not in r.stderr, r.stderr
         assert r.stderr.startswith(f"error: cannot read {name!r}: ") and words in r.stderr
+
+
+def test_ctrl_c_during_a_fit_is_one_line(tmp_path):
+    """Ctrl-C while the CLI fits: exit 130 and one line, not a KeyboardInterrupt traceback
+    (user test)."""
+    import signal
+
+    xy = np.random.default_rng(0).random((20_000, 2))
+    np.savetxt(tmp_path / "c.xyz", np.c_[xy, np.sin(3 * xy[:, 0])])
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "core", "fit", str(tmp_path / "c.xyz"), "-o",
+         str(tmp_path / "c.obj"), "--tolerance", "1e-6"],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    first = proc.stderr.readline()  # "read ...": main() runs, the fit is next
+    assert first.startswith("read "), first
+    proc.send_signal(signal.SIGINT)
+    rest = proc.stderr.read()
+    assert proc.wait(timeout=60) == 130, rest
+    assert "Traceback" not in rest and rest.strip().endswith("error: cancelled (Ctrl-C)"), rest
