@@ -204,6 +204,13 @@ def _loadtxt(lines: list[str], what: str, **kw) -> np.ndarray:
         return np.loadtxt(lines, ndmin=2, comments=None, **kw)
     except ValueError as exc:
         msg = str(exc).split("\n")[0]
+        # numpy counts the rows of ``lines`` (comments and a header left out): quote the line
+        # itself instead (a file's line 11 was "row 8": user test)
+        at = re.search(r" at row (\d+), column (\d+)", msg)
+        if at and int(at.group(1)) < len(lines):
+            line = lines[int(at.group(1))].strip()
+            msg = f"{msg[: at.start()]} in column {at.group(2)}{msg[at.end():]}"
+            raise _MalformedError(f"bad {what} {line[:60]!r}: {msg}") from None
         raise _MalformedError(f"bad {what}: {msg}") from None
 
 

@@ -437,6 +437,12 @@ def test_text_in_a_number_column_raises_file_format_error(tmp_path: Path) -> Non
     (tmp_path / "q.csv").write_text("0,0\n1,0\n")
     with pytest.raises(FileFormatError, match="three numbers"):
         read_geometry(tmp_path / "q.csv")
+    # after a comment and a header, the bad line is quoted (numpy's "row 8" was line 11)
+    good = "".join(f"{k} {k} {k}\n" for k in range(8))
+    (tmp_path / "h.xyz").write_text("# scan\nx y z\n" + good + "8 8 3,5\n9 9 9\n")
+    with pytest.raises(FileFormatError, match=r"bad line '8 8 3,5': could not convert string "
+                                              r"'3,5' to float64 in column 3"):
+        read_geometry(tmp_path / "h.xyz")
 
 
 def test_npy_and_npz_points_and_faces(tmp_path: Path) -> None:
