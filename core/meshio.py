@@ -841,11 +841,18 @@ def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
                 if "faces" not in keys:
                     return pts, None
                 f = _npz_array(z, "faces")
-                if f.ndim != 2 or f.shape[1] < 3 or not np.issubdtype(f.dtype, np.integer):
+                if f.ndim != 2 or f.shape[1] < 3:
                     raise _MalformedError(
-                        f"'faces' must be an (F, 3) integer array; got {f.shape}"
-                    )
-                return pts, _fan(f)
+                        f"'faces' must be an (F, 3) integer array; got shape {f.shape}")
+                # whole numbers stored as floats are indices too, as fit_surface takes them
+                # (the reader had refused them naming the shape, which was right: user test)
+                whole = np.issubdtype(f.dtype, np.integer) or (
+                    np.issubdtype(f.dtype, np.floating) and np.isfinite(f).all()
+                    and (f == np.round(f)).all())
+                if not whole:
+                    raise _MalformedError(
+                        f"'faces' must hold whole vertex indices; got values of type {f.dtype}")
+                return pts, _fan(f.astype(np.int64))
             if "elevation" in keys:
                 return _dem_points({k: _npz_array(z, k) for k in keys}), None
     except (zipfile.BadZipFile, zlib.error, EOFError) as exc:

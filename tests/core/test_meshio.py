@@ -453,6 +453,13 @@ def test_npy_and_npz_points_and_faces(tmp_path: Path) -> None:
     np.savez(tmp_path / "m.npz", points=VERTS, faces=np.array([[0, 1, 2, 3], [1, 4, 2, 0]]))
     pts, faces = read_geometry(tmp_path / "m.npz")
     np.testing.assert_array_equal(faces, [[0, 1, 2], [0, 2, 3], [1, 4, 2], [1, 2, 0]])
+    # whole numbers stored as floats are indices, as fit_surface takes them (user test); others
+    # are refused by their type
+    np.savez(tmp_path / "f.npz", points=VERTS, faces=np.array([[0, 1, 2, 3], [1, 4, 2, 0]], float))
+    assert read_geometry(tmp_path / "f.npz")[1].tolist() == faces.tolist()
+    np.savez(tmp_path / "h.npz", points=VERTS, faces=np.array([[0, 1, 2.5]]))
+    with pytest.raises(FileFormatError, match="whole vertex indices; got values of type float64"):
+        read_geometry(tmp_path / "h.npz")
     np.save(tmp_path / "bad.npy", VERTS[:, :2])
     with pytest.raises(FileFormatError, match=r"\(N, 3\)"):
         read_geometry(tmp_path / "bad.npy")
