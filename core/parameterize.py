@@ -1687,13 +1687,20 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
     _, label = connected_components(graph, directed=False)
     n_pieces = len(np.unique(label[used]))
     if n_pieces > 1:
-        if _welded_pieces(p, tris) < n_pieces / 2:  # STL-style: corners not shared
+        welded = _welded_pieces(p, tris)
+        if welded < n_pieces / 2:  # STL-style: corners not shared
             raise TopologyError(
                 f"the mesh has {n_pieces} separate pieces because its faces do not share "
                 "vertices: each corner is its own vertex at the same position as its "
                 "neighbours' (as in STL files); merge vertices at equal positions (Blender: "
                 "Mesh > Clean Up > Merge by Distance) and fit again"
             )
+        if welded < n_pieces:  # pieces that meet at vertices of equal positions: a seam
+            raise TopologyError(
+                f"the mesh has {n_pieces} separate pieces, which meet along a seam of "
+                "vertices at equal positions (duplicated there, as by a UV seam split or an "
+                f"export): merged, they are {welded}; merge vertices at equal positions "
+                "(Blender: Mesh > Clean Up > Merge by Distance) and fit again")
         raise TopologyError(
             f"the mesh has {n_pieces} separate pieces (connected components); one connected "
             "disk-like patch is needed: keep the largest piece or fit each piece separately"

@@ -688,6 +688,16 @@ def test_a_mesh_whose_faces_share_no_vertices_is_told_to_merge_them() -> None:
     two = np.concatenate([pts, pts + [3.0, 0, 0]])
     with pytest.raises(TopologyError, match="keep the largest piece"):
         parameterize(two, np.concatenate([faces, faces + len(pts)]))
+    # a grid split along a column (its vertices duplicated for the faces on one side): a
+    # seam to merge, not two pieces to choose from (user test)
+    column = np.flatnonzero(np.isclose(pts[:, 0], 0.5))
+    right = (pts[faces][:, :, 0] >= 0.5 - 1e-9).all(axis=1)
+    copy = np.arange(len(pts))
+    copy[column] = len(pts) + np.arange(len(column))
+    split = np.where(right[:, None], copy[faces], faces)
+    with pytest.raises(TopologyError, match=r"2 separate pieces, which meet along a seam .*"
+                                            r"merged, they are 1; .*Merge by Distance"):
+        parameterize(np.concatenate([pts, pts[column]]), split)
 
 
 def test_bowtie_vertex_is_a_topology_error() -> None:
