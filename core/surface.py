@@ -38,7 +38,8 @@ from .fit import (DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL, DefaultSmoothne
                   fit_control_points)
 from .geometry import column_bounds, float32_rounding
 from .parameterize import (
-    Parameterization, _as_points, _check_finite, box_normalization, normalize, parameterize,
+    Parameterization, _as_points, _as_triangles, _check_finite, box_normalization, normalize,
+    parameterize,
 )
 from .refine import RefineOptions, adaptive_fit, area_weights, check_callback, swing_places
 from .spline_space import SplineSpace, _whole, derivative_order, frozen
@@ -680,12 +681,31 @@ class TCBSurface:
                 "same order; these differ from them (other values, by more than rounding, or "
                 "another order). To fit other data, call fit_surface()"
             )
+        if faces is not None:  # (they were ignored, whatever they were: user test)
+            if self._param.faces is None:
+                raise InvalidInputError(
+                    "refine() was given faces, but this surface was fitted to a point cloud: "
+                    "give its points only (faces=None)")
+            try:
+                same = np.array_equal(_as_triangles(faces, len(points)), self._param.faces)
+            except InvalidInputError:
+                same = False
+            if not same:
+                raise InvalidInputError(
+                    "refine() needs the faces this surface was fitted to (or None for them); "
+                    "these differ from them. To fit another mesh, call fit_surface()")
         unknown = sorted(set(changes) - set(_OPTION_NAMES))
         if unknown:
             raise InvalidInputError(
                 f"refine() has no option {', '.join(map(repr, unknown))}; the options are "
                 f"{', '.join(_OPTION_NAMES)}"
             )
+        if not np.array_equal(self._c, self._fitted_c):  # (as Blender's Refine says: user test)
+            moved = int(np.count_nonzero(np.any(self._c != self._fitted_c, axis=1)))
+            warnings.warn(
+                f"{moved} edited control point{' is' if moved == 1 else 's are'} replaced: "
+                "refine() fits the data again from the knots (the edits are not kept)",
+                RuntimeWarning, stacklevel=2)
         fields = self._options.__dict__ | {"max_iterations": 5} | changes
         options = RefineOptions(**fields)
         options.validate()

@@ -361,8 +361,10 @@ def _recording(fn, sink: list):
 
 def _engine_notes(op) -> list:
     """The engine's warnings recorded for ``op`` (:func:`_recording`), less the swing warning
-    (report_result words it from the report)."""
-    return [m for m in getattr(op, "_engine", ()) if not m.startswith("the surface swings away")]
+    (report_result words it from the report) and refine()'s word on edited control points
+    (Refine says it in Blender's terms)."""
+    return [m for m in getattr(op, "_engine", ()) if not m.startswith("the surface swings away")
+            and "edited control point" not in m]
 
 
 class _Job:

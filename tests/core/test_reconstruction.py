@@ -439,6 +439,30 @@ def test_a_cloud_is_checked_once_and_refine_checks_its_points_again():
         fast.refine(bad)
 
 
+def test_refine_checks_the_faces_and_says_that_edits_are_replaced(nefertiti):
+    """refine() ignored its faces (any, or faces for a cloud's surface) and dropped edited
+    control points without a word (user test): faces other than the fit's are refused, faces
+    for a cloud's surface too, and an edited surface's refine() warns that the edits go."""
+    points, faces, _ = nefertiti
+    surf = fit_surface(points, faces, max_control_points=150, max_iterations=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # (no edits: no warning)
+        same = surf.refine(points, faces, max_iterations=1)
+    np.testing.assert_array_equal(same.control_points,
+                                  surf.refine(points, max_iterations=1).control_points)
+    for other in (faces[::-1], faces[:10], faces[:, [0, 2, 1]]):
+        with pytest.raises(InvalidInputError, match="needs the faces this surface was fitted to"):
+            surf.refine(points, other, max_iterations=1)
+    cloud = ridge_cloud(600)
+    with pytest.raises(InvalidInputError, match="fitted to a point cloud: give its points only"):
+        fit_surface(cloud, max_iterations=1).refine(cloud, np.array([[0, 1, 2]]))
+    edited = surf.with_control_points(surf.control_points + [0.0, 0.0, 0.01])
+    with pytest.warns(RuntimeWarning, match=rf"{len(surf.control_points)} edited control points "
+                                            r"are replaced: refine\(\) fits the data again"):
+        again = edited.refine(points, faces, max_iterations=1)
+    np.testing.assert_array_equal(again.control_points, same.control_points)
+
+
 def test_refine_continues_with_a_tighter_tolerance():
     points = ridge_cloud(3000)
     coarse = fit_surface(points, max_iterations=2, tolerance=0)
