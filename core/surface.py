@@ -749,6 +749,13 @@ class TCBSurface:
     @classmethod
     def from_bytes(cls, data: bytes, what: str = "the data") -> "TCBSurface":
         """Inverse of :meth:`to_bytes`; raises :class:`FileFormatError` on bad content."""
+        if isinstance(data, (bytearray, memoryview)):
+            data = bytes(data)
+        if not isinstance(data, bytes):  # (a str raised TypeError: user test)
+            raise FileFormatError(
+                f"{what} must be the bytes of a TCB surface file (to_bytes(), or a file's "
+                f"content read in binary mode), got {type(data).__name__}; to read a file by "
+                "its path, use TCBSurface.load(path)")
         if not data.startswith(b"PK"):  # a .npz is a zip archive (a .npy, text, ... is not)
             raise FileFormatError(
                 f"{what} is not a TCB surface file (a .npz archive written by save())"

@@ -357,6 +357,10 @@ def test_save_load_round_trips_bit_exactly(nefertiti, tmp_path):
     np.testing.assert_array_equal(back.control_net()[1], surf.control_net()[1])
     assert back.report == surf.report
     assert TCBSurface.from_bytes(surf.to_bytes()).report == surf.report
+    assert TCBSurface.from_bytes(bytearray(surf.to_bytes())).report == surf.report
+    # a path given as a str: the error says to load() it (it raised TypeError: user test)
+    with pytest.raises(FileFormatError, match=r"must be the bytes .* got str; .*load\(path\)"):
+        TCBSurface.from_bytes(str(path))
 
 
 def test_save_names_what_is_wrong_and_gives_the_file_the_umask_permissions(nefertiti, tmp_path):
