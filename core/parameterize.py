@@ -56,11 +56,6 @@ MIN_POINTS = 10
 _FOLD_NEIGHBOURS = 12  # neighbours (besides the point itself) of the local PCA and uv tests
 _FOLD_MIN_COS = 0.2  # |local normal . plane normal| below this: surface nearly perpendicular
 _STRAY_MAX_SHARE = 0.05  # drop_outliers leaves out at most this share of points over others
-# steep points (|n_i . n| below _FOLD_MIN_COS, down to this) have the overlap test too, with
-# _FOLD_OFF_LAYER_STEEP for _FOLD_OFF_LAYER: a terrain seen edge-on (projected along a
-# horizontal axis) flags 20-29% there, a steep height field (F7 x10 over z) 0.7% (review)
-_FOLD_OVERLAP_COS = 0.02
-_FOLD_OFF_LAYER_STEEP = 16.0
 # a uv-neighbour j of i is on another layer when |q_j - q_i| |n_i . n| exceeds this times its
 # offset across the projection plane (n the projection direction; 1 on i's local plane)
 _FOLD_OFF_LAYER = 2.0
@@ -754,11 +749,8 @@ def _fold_fraction(
       the local plane of ``i`` can be for its offset ``d_p`` across the projection plane,
       ``|d| |n_i . n| > 2 |d_p|`` (an offset in the local plane shortens in projection by at
       most ``|n_i . n|``), and it leaves the local plane beyond the noise, ``|d . n_i| > 4
-      sigma_i``; where ``|n_i . n| < 0.2`` (down to 0.02) with 16 for 2: a steep height field
-      (F7 x10 over the horizontal plane) flags 0.7% there, a terrain seen edge-on (projected
-      along a horizontal axis, where every point is steep and the steep test below lets it
-      through) 20-29%. The projection put points of another layer next to ``i``: their
-      order flipped. (The earlier
+      sigma_i``; tested where ``|n_i . n| >= 0.2`` (steeper points are the first test's). The
+      projection put points of another layer next to ``i``: their order flipped. (The earlier
       test, ``d`` at more than 60 degrees to the local plane, missed layers under a sheet
       tilted to the projection: a spiral sheet and rotated steep height fields passed with
       7-49% of their triangles flipped.)
@@ -792,9 +784,8 @@ def _fold_fraction(
     d2 = np.einsum("nkj,nkj->nk", d, d)
     dproj = np.sqrt(np.maximum(d2 - (d @ normal) ** 2, 0.0))
     cos = np.abs(normals @ normal)
-    factor = np.where(cos >= _FOLD_MIN_COS, _FOLD_OFF_LAYER, _FOLD_OFF_LAYER_STEEP)[:, None]
-    off = ((np.sqrt(d2) * cos[:, None] > factor * dproj)
-           & (dn > _FOLD_NOISE_FACTOR * sigma[:, None]) & (cos >= _FOLD_OVERLAP_COS)[:, None])
+    off = ((np.sqrt(d2) * cos[:, None] > _FOLD_OFF_LAYER * dproj)
+           & (dn > _FOLD_NOISE_FACTOR * sigma[:, None]) & (cos >= _FOLD_MIN_COS)[:, None])
     overlap = np.count_nonzero(off, axis=1) >= _FOLD_MIN_OFF_NEIGHBOURS * k
     # folds are regions, noise flags isolated points: keep a flag only where it is coherent
     def coherent(mask):
@@ -1283,7 +1274,7 @@ def parameterize_points(
     # points steeper than 78 degrees), so a terrain projected along a horizontal axis has
     # no flags: a tile with 10% spikes passed the vertical candidates narrowly (1.7-1.9%,
     # the spikes) and was projected sideways, as the candidate with the fewest flags (review;
-    # the overlap test of steep points now fails such a projection too)
+    # with 15% spikes the vertical ones fail, 7-8%, and it still is: a limit)
     edge_on = [f.get("edge_on", 0.0) >= _EDGE_ON for f in found]
     best = min(range(len(fractions)), key=lambda i: (fractions[i] > _FOLD_MAX_FRACTION,
                                                       edge_on[i], fractions[i]))
@@ -1554,34 +1545,76 @@ RECTANGLE_CORNERS = True
 CORNER_TURN = 50.0
 RECTANGLE_SMOOTH = 25.0
 RECTANGLE_CURL = 2.0  # the longest ratio of a side's length to the distance of its ends
+CORNER_GAP = 2  # turns at most this many edges apart are one group (boundary_corners)
+CORNER_SPAN = 0.03  # a corner's group spans at most this share of the loop's length
 
 
 def boundary_corners(b: np.ndarray) -> np.ndarray | None:
     """The four corners of a boundary loop ``b`` (its points in order, (B, 3)) that is a
-    quadrilateral's (sorted positions in the loop), or None: the loop turns by more than
-    CORNER_TURN degrees at exactly four vertices (the angle between the incoming and the
-    outgoing edge), by less than RECTANGLE_SMOOTH at all others, and no side is more than
-    RECTANGLE_CURL times as long along the loop as the straight distance between its corners
-    (a half circle: pi / 2). Without the last test a disk with a small rectangular tab (four
-    sharp corners within 7 of its 310 boundary vertices) went onto a 2 x 0.1 rectangle, the
-    disk's arc (6.1 long, its ends 0.25 apart) opposite the tab's 0.1: RMS 0.31 instead of
-    0.0026 (review). Sides of very different lengths are fine: a 100:1 strip, or a quad
-    whose top is 0.04 and bottom 2 (max error 0.0027 on the rectangle, 0.061 on the circle)."""
-    if len(b) < 4:
+    quadrilateral's (sorted positions in the loop), or None.
+
+    Each vertex turns by the angle between its incoming and outgoing edge, signed by the
+    loop's normal (Newell's); a bend out of the loop's plane (a crease crossing the boundary
+    of patch-01.off) has no sign and counts 0. Vertices that turn by RECTANGLE_SMOOTH degrees
+    or more form groups: such vertices at most CORNER_GAP edges apart (a chamfer's two
+    45-degree turns, a notch's +90, -90, +90 where a corner cell is missing), except that two
+    sharp turns (above CORNER_TURN) the same way are two corners (a short side). A group is a
+    corner when its turns add up to more than CORNER_TURN within CORNER_SPAN of the loop's
+    length (at the vertex where half of it is reached); every other group must add up to
+    less than RECTANGLE_SMOOTH. The loop is a quadrilateral's with exactly four corners and
+    no side more than RECTANGLE_CURL times as long along the loop as the straight distance
+    between its corners (a half circle: pi / 2). Without the last test a disk with a small
+    rectangular tab (four sharp corners within 7 of its 310 boundary vertices) went onto a 2
+    x 0.1 rectangle, the disk's arc (6.1 long, its ends 0.25 apart) opposite the tab's 0.1:
+    RMS 0.31 instead of 0.0026 (review). Sides of very different lengths are fine: a 100:1
+    strip, or a quad whose top is 0.04 and bottom 2 (max error 0.0027 on the rectangle,
+    0.061 on the circle). A 41 x 41 grid with a corner cell missing was on the circle: 486
+    control points at 1e-3 instead of 142 (review)."""
+    B = len(b)
+    if B < 4:
         return None
     d_out = np.roll(b, -1, axis=0) - b
     d_in = b - np.roll(b, 1, axis=0)
     cos = np.einsum("ij,ij->i", d_in, d_out) / np.maximum(
         np.linalg.norm(d_in, axis=1) * np.linalg.norm(d_out, axis=1), 1e-300)
     turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    corners = np.flatnonzero(turn > CORNER_TURN)
-    if len(corners) != 4 or np.any(np.delete(turn, corners) >= RECTANGLE_SMOOTH):
+    normal = np.cross(b, np.roll(b, -1, axis=0)).sum(axis=0)  # (Newell: twice the area vector)
+    normal /= max(float(np.linalg.norm(normal)), 1e-300)
+    across = np.einsum("ij,j->i", np.cross(d_in, d_out), normal)
+    small = 1e-9 * np.linalg.norm(d_in, axis=1) * np.linalg.norm(d_out, axis=1)
+    signed = turn * np.where(np.abs(across) > small, np.sign(across), 0.0)
+    seg = np.linalg.norm(d_out, axis=1)
+    sig = np.flatnonzero(turn >= RECTANGLE_SMOOTH)
+    if len(sig) < 4:
         return None
-    run = np.concatenate([[0.0], np.cumsum(np.linalg.norm(d_out, axis=1))])
+    sharp, way = turn[sig] > CORNER_TURN, np.sign(signed[sig])
+    # a group ends after sig[k] when the next is farther, or when one of the two is sharp and
+    # they turn the same way
+    ends = ((np.roll(sig, -1) - sig) % B > CORNER_GAP) | (
+        (sharp | np.roll(sharp, -1)) & (way == np.roll(way, -1)))
+    if not ends.any():
+        return None  # one chain all around
+    last = np.flatnonzero(ends)
+    start, stop = sig[(np.roll(last, 1) + 1) % len(sig)], sig[last]  # each group's span
+    length = (stop - start) % B + 1  # vertices in the span
+    # sums over the (cyclic) spans from cumulative sums of the loop taken twice
+    ct = np.concatenate([[0.0], np.cumsum(np.tile(signed, 2))])
+    cs = np.concatenate([[0.0], np.cumsum(np.tile(seg, 2))])
+    total = ct[start + length] - ct[start]
+    arc = cs[start + length - 1] - cs[start]
+    corner = (np.abs(total) > CORNER_TURN) & (arc <= CORNER_SPAN * seg.sum())
+    if np.count_nonzero(corner) != 4 or np.any(np.abs(total[~corner]) >= RECTANGLE_SMOOTH):
+        return None
+    at = []
+    for s0, n0, t0 in zip(start[corner], length[corner], total[corner]):  # (four)
+        run = np.abs(ct[s0 + 1 : s0 + n0 + 1] - ct[s0])
+        at.append((s0 + int(np.argmax(run >= 0.5 * abs(t0)))) % B)
+    corners = np.sort(np.array(at))
+    run = np.concatenate([[0.0], np.cumsum(seg)])
     side = np.diff(np.append(run[corners], run[-1]))  # from each corner to the next
     side[3] += run[corners[0]]  # (the last side goes on past vertex 0 to the first corner)
-    ends = b[np.roll(corners, -1)] - b[corners]
-    if np.any(side > RECTANGLE_CURL * np.linalg.norm(ends, axis=1)):
+    ends3 = b[np.roll(corners, -1)] - b[corners]
+    if np.any(side > RECTANGLE_CURL * np.linalg.norm(ends3, axis=1)):
         return None
     return corners
 

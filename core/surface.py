@@ -38,8 +38,7 @@ from .fit import (DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL, DefaultSmoothne
                   fit_control_points)
 from .geometry import column_bounds, float32_rounding
 from .parameterize import (
-    Parameterization, _as_points, _as_triangles, _check_finite, box_normalization, normalize,
-    parameterize,
+    Parameterization, _as_points, _check_finite, box_normalization, normalize, parameterize,
 )
 from .refine import RefineOptions, adaptive_fit, area_weights, check_callback, swing_places
 from .spline_space import SplineSpace, _whole, derivative_order, frozen
@@ -686,11 +685,8 @@ class TCBSurface:
                 raise InvalidInputError(
                     "refine() was given faces, but this surface was fitted to a point cloud: "
                     "give its points only (faces=None)")
-            try:
-                same = np.array_equal(_as_triangles(faces, len(points)), self._param.faces)
-            except InvalidInputError:
-                same = False
-            if not same:
+            stored = self._report.get("faces_digest")  # (None: a file saved before it)
+            if stored is not None and faces_digest(faces) != stored:
                 raise InvalidInputError(
                     "refine() needs the faces this surface was fitted to (or None for them); "
                     "these differ from them. To fit another mesh, call fit_surface()")
@@ -711,6 +707,7 @@ class TCBSurface:
         options.validate()
         check_callback(callback)
         return _run(points, self._param, options, callback,
+                    faces_key=self._report.get("faces_digest"),
                     start=self.knots[: self._n_interior], rings=self.knots[self._n_interior:],
                     history=self._report.get("history", []), start_degree=self.degree)
 
@@ -900,6 +897,23 @@ def _user_path(path) -> Path:
 ROUNDING_RTOL = 1e-6
 
 
+def faces_digest(faces) -> str | None:
+    """A digest (BLAKE2b, 128 bits, hex) of the faces as given (int64, in their order), or None
+    when they are no integer array: ``refine()`` compares it, not the fit's own faces, which
+    are the given ones cleaned (degenerate and repeated faces dropped, orientation made
+    consistent: review)."""
+    try:
+        f = np.asarray(faces)
+        if f.dtype.kind == "f" and np.isfinite(f).all() and (f == np.round(f)).all():
+            f = f.astype(np.int64)
+        if f.dtype.kind not in "iu":
+            return None
+        f = np.ascontiguousarray(f, dtype=np.int64)
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return hashlib.blake2b(str(f.shape).encode() + f.tobytes(), digest_size=16).hexdigest()
+
+
 def data_digest(points: np.ndarray) -> str:
     """A digest (BLAKE2b, 128 bits, hex) of the float64 values of ``points`` in their order:
     ``refine()`` uses it to refuse data other than the data a surface was fitted to."""
@@ -1063,7 +1077,7 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0):
 
 
 def _run(points, param, options, callback, start=None, rings=None, history=(), checked=False,
-         start_degree=None):
+         start_degree=None, faces_key=None):
     """Fit ``points`` over ``param``; ``checked``: ``parameterize_points`` has just accepted
     these very points (a cloud), so :func:`normalize` need not check them again."""
     t0 = time.perf_counter()
@@ -1155,6 +1169,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # refine() checks that it is given the same points (values and order)
         "data_digest": data_digest(points),
     }
+    if faces_key is not None:  # (and the same faces: faces_digest)
+        report["faces_digest"] = faces_key
     if param.faces is None:
         # the RMS over the parameter area (core.refine.area_weights): a cloud of uneven density
         # meets the tolerance by it too; equal to "rms" within ~10% for an even one
@@ -1344,7 +1360,8 @@ def fit_surface(
         warnings.warn("drop_outliers applies to point clouds: a mesh's vertices are held by its "
                       "faces, so none were left out (leave the option out for meshes)",
                       RuntimeWarning, stacklevel=2)
-    return _run(points, param, options, callback, checked=faces is None)
+    return _run(points, param, options, callback, checked=faces is None,
+                faces_key=None if faces is None else faces_digest(faces))
 
 
 def _smoother_if_swinging(best, uv, points, n_measured: int, seed: int, limit=None,
