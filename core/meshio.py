@@ -846,12 +846,16 @@ def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
                         f"'faces' must be an (F, 3) integer array; got shape {f.shape}")
                 # whole numbers stored as floats are indices too, as fit_surface takes them
                 # (the reader had refused them naming the shape, which was right: user test)
-                whole = np.issubdtype(f.dtype, np.integer) or (
-                    np.issubdtype(f.dtype, np.floating) and np.isfinite(f).all()
-                    and (f == np.round(f)).all())
-                if not whole:
-                    raise _MalformedError(
-                        f"'faces' must hold whole vertex indices; got values of type {f.dtype}")
+                if not np.issubdtype(f.dtype, np.integer):
+                    if not np.issubdtype(f.dtype, np.floating):
+                        raise _MalformedError(
+                            f"'faces' must hold whole vertex indices; got values of type "
+                            f"{f.dtype}")
+                    bad = ~(np.isfinite(f) & (f == np.round(f)) & (np.abs(f) < 2.0**53))
+                    if bad.any():  # (1e20 had passed and been cast to -9.2e18: review)
+                        raise _MalformedError(
+                            f"'faces' must hold whole vertex indices; got {f[bad].flat[0]!r} "
+                            f"({int(bad.sum())} such values)")
                 return pts, _fan(f.astype(np.int64))
             if "elevation" in keys:
                 return _dem_points({k: _npz_array(z, k) for k in keys}), None

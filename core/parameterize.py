@@ -808,7 +808,12 @@ def _fold_fraction(
     if details is not None:
         gap = 0.0
         own = layered & overlap  # (a coherent flag may have no off-layer neighbour itself)
-        details["strays"] = np.unique(jdx[own][off[own]])  # (the other layer: into q)
+        # the other layer: the off-layer neighbours of the flagged points that are not
+        # flagged themselves (a power line's points); when both layers are flagged (a bridge
+        # deck over the ground) there is no stray layer: all of the deck and the ground under
+        # it had been left out, a hole 60 m long (review)
+        strays = np.unique(jdx[own][off[own]])
+        details["strays"] = strays[~flagged[strays]]  # (into q)
         if own.any():
             gap = float(np.median(np.nanmedian(np.where(off[own], dn[own], np.nan), axis=1)))
         details.update(steep=np.count_nonzero(steep_flag) / len(q),
@@ -850,8 +855,9 @@ def _layers_note(details: dict, scale: float) -> str | None:
         return None
     return (f"the points lie in two or more layers about {details['layer_gap'] * scale:.3g} "
             "apart across the surface (scans that are not aligned to each other, both sides "
-            "of a thin object, or a sheet folded flat): align the scans, or fit each layer (a "
-            "scan, a side) on its own")
+            "of a thin object, a sheet folded flat, or objects over the ground such as "
+            "buildings or trees): align the scans, fit each layer (a scan, a side) on its own, "
+            "or keep the ground points only (a classified scan's ground class)")
 
 
 def isolated_points(

@@ -45,7 +45,7 @@ class InputData:
     sources: list = field(default_factory=list)  # original bpy.types.Object, in selection order
     counts: dict = field(default_factory=dict)  # source name -> number of points read
     notes: list = field(default_factory=list)  # what the user should know about the input
-    # source name -> its modifiers as "Kind 'name'" (with "(off)" for those off in the viewport)
+    # source name -> its modifiers as "Kind 'name'" ("(not applied)" after those not applied)
     modifiers: dict = field(default_factory=dict)
 
     def modifier_note(self, applied_only: bool = True) -> str | None:

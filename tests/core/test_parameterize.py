@@ -543,6 +543,19 @@ def test_a_mesh_with_four_corners_maps_onto_a_rectangle_of_its_proportions() -> 
     # a fifth sharp turn (an L-shaped boundary has six corners): the circle
     square = np.array([[0, 0], [1, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2], [0, 1.0]])
     assert boundary_corners(np.column_stack([square, np.zeros(8)])) is None
+    # a grid without a corner vertex's faces: a chamfer (two 45-degree turns) where it had one
+    # triangle, a notch (+90, -90, +90) where it had two; both are still four corners (they
+    # went to the circle: 486 control points at 1e-3 instead of 142; review)
+    pts, faces = grid_mesh(21)
+    for corner in (0, 20):  # (vertex 0 is in two triangles, vertex 20 in one)
+        cut = faces[~(faces == corner).any(axis=1)]
+        par = parameterize_mesh(pts, cut)
+        assert boundary_corners(pts[par.boundary]) is not None
+        check_disk(par, pts)
+    # a crease crossing the boundary bends it out of its plane, which is no corner: the CAD
+    # patch's four corners are found (its loop turns 20-30 degrees at two such bends)
+    patch = read_geometry(DATA / "patch-01.off")
+    assert len(boundary_corners(patch[0][parameterize(*patch).boundary])) == 4
     # a disk with a small rectangular tab has four sharp corners, but its arc is no side of a
     # quadrilateral (6.1 long, its ends 0.1 apart; review: RMS 0.31 on the rectangle)
     t = np.linspace(0.05, 2 * np.pi - 0.05, 300)
