@@ -690,7 +690,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             what = (f"{then} points then, {now} now" if then != now else "other coordinates"
                     if not surf.fitted_to(data.points) else "other faces")
             hidden = "".join(f"; {n}" for n in data.notes)
-            mods = data.modifier_note(applied_only=False)  # (one turned off since the fit: user test)
+            # (one turned off since the fit: user test)
+            mods = data.modifier_note(applied_only=False)
             hidden += f"; {mods}" if mods else ""
             raise bridge.SelectionError(
                 f"{names} changed since '{surface.name}' was fitted ({what}{hidden}): Refine "

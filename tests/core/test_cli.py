@@ -167,9 +167,10 @@ def test_bad_path_and_malformed_file_give_one_line_and_exit_2(tmp_path):
 
 
 def test_bad_options_are_refused_before_the_fit(tmp_path):
-    """A resolution below 2 or above 4096, an output folder that does not exist or a spline file that is not
-    .npz: one line and exit 2 before reading or fitting anything (the input does not even
-    exist here, so a check made after the fit would report the missing input instead)."""
+    """A resolution below 2 or above 4096, an output folder that does not exist or a spline file
+    that is not .npz: one line and exit 2 before reading or fitting anything (the input does
+    not even exist here, so a check made after the fit would report the missing input
+    instead)."""
     missing_input = tmp_path / "never-read.ply"
     cases = [
         (["-o", tmp_path / "s.obj", "--resolution", "1"], "--resolution must be at least 2"),
