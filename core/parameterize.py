@@ -821,7 +821,7 @@ def _fold_fraction(
     return float(np.count_nonzero(flagged)) / len(q)
 
 
-def _stray_points(q: np.ndarray, sample: np.ndarray, strays) -> np.ndarray:
+def _stray_points(q: np.ndarray, sample: np.ndarray, strays) -> tuple[np.ndarray, int]:
     """The points of ``q`` off the surface (sorted indices) that ``drop_outliers`` leaves out
     when the fold check fails: those nearer to a stray of the fold sample (``strays``,
     indices into ``q[sample]``: the other layer over the overlap-flagged points, see
@@ -830,17 +830,18 @@ def _stray_points(q: np.ndarray, sample: np.ndarray, strays) -> np.ndarray:
     strays). Not in method.md. A power line 20 m over a 200 m terrain tile (400 points on
     the wire, 20 000 on the ground) made the fold check refuse the tile, with or without
     drop_outliers (review): the wire's points are not isolated (0.5 m apart) and not spikes
-    (their neighbours are wire points)."""
+    (their neighbours are wire points). Returns them and how many there were (also when
+    they were too many to leave out)."""
     strays = np.asarray(strays, dtype=np.int64)
     if len(strays) == 0:
-        return np.zeros(0, dtype=np.int64)
+        return np.zeros(0, dtype=np.int64), 0
     is_stray = np.zeros(len(sample), dtype=bool)
     is_stray[strays] = True
     near = cKDTree(q[sample]).query(q, workers=-1)[1]
     off = np.flatnonzero(is_stray[near])
     if len(off) > _STRAY_MAX_SHARE * len(q):
-        return np.zeros(0, dtype=np.int64)
-    return off
+        return np.zeros(0, dtype=np.int64), len(off)
+    return off, len(off)
 
 
 def _layers_note(details: dict, scale: float) -> str | None:
@@ -1293,10 +1294,14 @@ def parameterize_points(
             "direction across the surface (e.g. the axis it faces), or leave the projection "
             "automatic"
         )
+    tail = ""
     if frac > _FOLD_MAX_FRACTION and strays:
         # a few points of another layer over the surface (a power line over terrain): left
         # out, and the rest parameterized as if they were not there
-        off = _stray_points(q, sample, found[0].get("strays", ()))
+        off, seen = _stray_points(q, sample, found[0].get("strays", ()))
+        if seen and not len(off):  # (the refusal said nothing of them: review)
+            tail = (f" (drop_outliers found {seen} points of another layer over the surface, "
+                    f"more than the {100 * _STRAY_MAX_SHARE:.0f}% of the points it leaves out)")
         if len(off):
             kept = np.ones(len(q), dtype=bool)
             kept[off] = False
@@ -1313,21 +1318,21 @@ def parameterize_points(
     if frac > _FOLD_MAX_FRACTION and layers:
         raise ParameterizationError(
             f"the point cloud overlaps itself in projection at {100 * frac:.1f}% of the points: "
-            f"{layers}"
+            f"{layers}{tail}"
         )
     if frac > _FOLD_MAX_FRACTION and direction is not None:
         raise ParameterizationError(
             f"the point cloud folds over the plane across the projection direction "
             f"({', '.join(f'{x:.3g}' for x in direction)}): at {100 * frac:.1f}% of the points "
             "the surface is nearly parallel to that direction or overlaps itself along it; give "
-            "another direction, or leave the projection automatic"
+            f"another direction, or leave the projection automatic{tail}"
         )
     if frac > _FOLD_MAX_FRACTION:
         raise ParameterizationError(
             f"the point cloud folds over its best-fit plane: at {100 * frac:.1f}% of the points "
             "the surface is nearly perpendicular to that plane or overlaps itself in projection; "
             "a height field or a gently curved patch is needed: split the scan into patches "
-            "that each face one direction, or supply a mesh of disk topology (with faces)"
+            f"that each face one direction, or supply a mesh of disk topology (with faces){tail}"
         )
     try:
         hull = ConvexHull(uv)  # 2D: vertices are in counter-clockwise order

@@ -1025,8 +1025,8 @@ def test_drop_outliers_leaves_out_a_power_line_over_terrain() -> None:
     """A wire 20-30 m over a 200 m terrain tile (400 points 0.5 m apart, 20 000 on the
     ground): its points are neither isolated nor spikes, and the fold check refused the tile
     with or without drop_outliers (review). With it, the fold check's other layer is left
-    out when it is at most 5% of the points; without, the refusal stands; two scans of one
-    terrain, each half of the points, stay refused as layers."""
+    out when it is at most 5% of the points (more: the refusal says so); without, the refusal
+    stands; two scans of one terrain, each half of the points, stay refused as layers."""
     rng = np.random.default_rng(0)
     xy = rng.random((20_000, 2)) * 200
     ground = np.c_[xy, 5 * np.sin(xy[:, 0] / 40) + 3 * np.cos(xy[:, 1] / 30)]
@@ -1042,6 +1042,11 @@ def test_drop_outliers_leaves_out_a_power_line_over_terrain() -> None:
         assert abs(par.axes[2][2]) > 0.99
     with pytest.raises(ParameterizationError, match="two or more layers"):
         parameterize_points(np.vstack([ground, ground + [0.0, 0.0, 5.0]]), True)
+    # eight wires 10 m apart (15% of the points): too many to leave out, and the error says so
+    eight = np.vstack([wire + [0.0, 10.0 * i - 60.0, 0.0] for i in range(8)])
+    with pytest.raises(ParameterizationError, match=r"drop_outliers found \d+ points of another "
+                                                    r"layer over the surface, more than the 5%"):
+        parameterize_points(np.vstack([ground, eight]), True)
 
 
 @pytest.mark.parametrize("share, seed", [(0.10, 4), (0.10, 5)])
