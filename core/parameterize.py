@@ -1621,11 +1621,11 @@ def boundary_corners(b: np.ndarray) -> np.ndarray | None:
         run = np.abs(ct[s0 + 1 : s0 + n0 + 1] - ct[s0])
         at.append((s0 + int(np.argmax(run >= 0.5 * abs(t0)))) % B)
     corners = np.sort(np.array(at))
-    run = np.concatenate([[0.0], np.cumsum(seg)])
+    run = cs[: B + 1]  # (the loop's length from vertex 0)
     side = np.diff(np.append(run[corners], run[-1]))  # from each corner to the next
     side[3] += run[corners[0]]  # (the last side goes on past vertex 0 to the first corner)
-    ends3 = b[np.roll(corners, -1)] - b[corners]
-    if np.any(side > RECTANGLE_CURL * np.linalg.norm(ends3, axis=1)):
+    chord = b[np.roll(corners, -1)] - b[corners]
+    if np.any(side > RECTANGLE_CURL * np.linalg.norm(chord, axis=1)):
         return None
     return corners
 

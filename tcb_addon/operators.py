@@ -684,11 +684,12 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         key = rep.get("faces_digest")  # (a mesh's faces; None for clouds and older files)
         faces_changed = key is not None and (
             data.faces is None or _core().surface.faces_digest(data.faces) != key)
-        if not surf.fitted_to(data.points) or faces_changed:
+        same_points = surf.fitted_to(data.points)  # (a digest of all points: once)
+        if not same_points or faces_changed:
             names = ", ".join(repr(o.name) for o in data.sources)
             then, now = len(surf.parameterization.uv), len(data.points)
-            what = (f"{then} points then, {now} now" if then != now else "other coordinates"
-                    if not surf.fitted_to(data.points) else "other faces")
+            what = (f"{then} points then, {now} now" if then != now
+                    else "other coordinates" if not same_points else "other faces")
             hidden = "".join(f"; {n}" for n in data.notes)
             # (one turned off since the fit: user test)
             mods = data.modifier_note(applied_only=False)
