@@ -31,22 +31,31 @@ def column_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def float32_rounding(points, advice: str) -> str | None:
+def float32_rounding(points, advice: str, columns=None) -> str | None:
     """A note (ending with ``advice``) when ``points`` are 32-bit floats whose spacing at
     their distance from the origin is more than 1e-4 of their extent (georeferenced scans:
     0.0625 at 1e6), else None: such data is already rounded to a coarse lattice, and a fit of
     it shows steps (or, at worst, is refused as a fold). For ``fit_surface`` and the files
-    that store 32-bit coordinates (``core.meshio.read_geometry``)."""
-    if not (isinstance(points, np.ndarray) and points.dtype == np.float32 and points.ndim == 2
-            and points.shape[0] > 1 and points.shape[1] == 3 and np.isfinite(points).all()):
+    that store 32-bit coordinates (``core.meshio.read_geometry``). ``columns``: which of the
+    three columns were stored in 32 bits (a mask, for files that mix 32-bit x and y with a
+    64-bit z); by default all of a float32 array's and none of another's."""
+    if not (isinstance(points, np.ndarray) and points.ndim == 2 and points.shape[0] > 1
+            and points.shape[1] == 3):
+        return None
+    columns = (np.full(3, points.dtype == np.float32) if columns is None
+               else np.asarray(columns, dtype=bool).reshape(3))
+    if not columns.any() or not np.isfinite(points).all():
         return None
     lo, hi = column_bounds(points.astype(np.float64))
     extent = float((hi - lo).max())
-    step = float(np.spacing(np.maximum(np.abs(lo), np.abs(hi)).astype(np.float32)).max())
+    far = np.maximum(np.abs(lo), np.abs(hi))[columns]
+    step = float(np.spacing(far.astype(np.float32)).max())
     if not step > 1e-4 * extent:
         return None
+    which = ("the points are" if columns.all() else
+             f"the points' {' and '.join(np.array(list('xyz'))[columns])} are")
     return (
-        f"the points are 32-bit floats, which far from the origin are {step:.3g} apart, "
+        f"{which} 32-bit floats, which far from the origin are {step:.3g} apart, "
         f"{step / max(extent, 1e-300):.1e} of the data's extent: {advice}"
     )
 

@@ -88,7 +88,8 @@ def read_geometry(path: PathLike) -> tuple[np.ndarray, np.ndarray | None]:
             f"supported: {', '.join(READ_EXTENSIONS)}"
         )
     try:
-        points, faces = _READERS[ext](p)
+        # (a reader may add which columns the file stored in 32 bits: PLY can mix them)
+        points, faces, *single = _READERS[ext](p)
     except _MalformedError as exc:
         raise FileFormatError(f"cannot read {p.name!r}: {exc}") from None
     except OSError as exc:
@@ -97,7 +98,8 @@ def read_geometry(path: PathLike) -> tuple[np.ndarray, np.ndarray | None]:
             zipfile.BadZipFile, zlib.error) as exc:
         raise FileFormatError(f"cannot read {p.name!r}: malformed content ({exc})") from None
     coarse = float32_rounding(np.asarray(points), "export the file with 64-bit (double) "
-                              "coordinates, or with an offset subtracted")
+                              "coordinates, or with an offset subtracted",
+                              single[0] if single else None)
     if coarse is not None:  # (the API says so of float32 arrays; a file said nothing: user test)
         warnings.warn(f"{p.name}: {coarse}", RuntimeWarning, stacklevel=2)
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
@@ -445,21 +447,24 @@ def _ply_header(data: bytes) -> tuple[str, list[_PlyElement], int]:
 
 def _ply_vertices_and_faces(
     tables: dict[str, dict[str, np.ndarray]],
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """Pick ``x, y, z`` of ``vertex`` and the triangles of ``face`` from the parsed tables."""
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Pick ``x, y, z`` of ``vertex`` and the triangles of ``face`` from the parsed tables,
+    and which of the three are 32-bit floats (for ``float32_rounding``: x and y may be float
+    and z double)."""
     vt = tables.get("vertex")
     if vt is None:
         raise _MalformedError("there is no 'vertex' element")
     missing = [c for c in "xyz" if c not in vt]
     if missing:
         raise _MalformedError(f"the vertex element has no property {', '.join(missing)}")
+    single = np.array([vt[c].dtype == np.float32 for c in "xyz"])
     verts = np.column_stack([vt["x"], vt["y"], vt["z"]])  # (float32 kept: read_geometry)
     if verts.dtype != np.float32:
         verts = verts.astype(np.float64)
     ft = tables.get("face")
     if ft is None:
-        return verts, None
-    return verts, ft.get("__triangles__", np.empty((0, 3), dtype=np.int64))
+        return verts, None, single
+    return verts, ft.get("__triangles__", np.empty((0, 3), dtype=np.int64)), single
 
 
 def _face_list_name(el: _PlyElement) -> str | None:
@@ -470,7 +475,7 @@ def _face_list_name(el: _PlyElement) -> str | None:
     return None
 
 
-def _read_ply(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+def _read_ply(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """PLY (ascii, binary_little_endian, binary_big_endian)."""
     data = _strip_bom(path.read_bytes())
     fmt, elements, offset = _ply_header(data)
