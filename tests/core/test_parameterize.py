@@ -1021,6 +1021,35 @@ def test_drop_outliers_also_leaves_out_spikes_inside_the_cloud() -> None:
         assert parameterize_points(np.c_[xy, many], True).used.all()
 
 
+def test_drop_outliers_leaves_out_poles_and_tree_crowns() -> None:
+    """Compact groups over a terrain: a pole of 10 points stacked within 0.15 m, 3-15 m up,
+    and a crown of 40 points 8 m across, 9 m up, over a tile of 2e4 points 1.4 m apart. Each
+    group's points are each other's nearest neighbours, so spike_points took the group for the
+    surface and dropped none of them (poles of 6 or more, clusters of 6 or more); the fit
+    then rose 5-9 m there on 4x the control points. Now the points with a neighbour steeply
+    above or below them are tested against the points around that have none; a narrow
+    ridge, a wall and a step stay whole (long groups, or both levels around)."""
+    rng = np.random.default_rng(0)
+    xy = rng.random((20_000, 2)) * 200
+
+    def terrain(x, y):
+        return 0.05 * x + 5 * np.sin(y / 30)
+
+    ground = np.c_[xy, terrain(*xy.T) + rng.normal(0, 0.05, len(xy))]
+    c1, c2 = np.array([100.3, 87.1]), np.array([40.2, 150.7])
+    pole = np.c_[c1 + rng.normal(0, 0.15, (10, 2)), terrain(*c1) + np.linspace(3, 15, 10)]
+    crown = np.c_[c2 + rng.normal(0, 2.0, (40, 2)), terrain(*c2) + 9 + rng.normal(0, 1.5, 40)]
+    par = parameterize_points(np.vstack([ground, pole, crown]), True)
+    dropped = ~par.used
+    assert not dropped[: len(ground)].any()
+    assert dropped[len(ground) : len(ground) + 10][1:].all()  # (the lowest, 3 m up, may stay)
+    assert dropped[len(ground) + 10 :].mean() >= 0.95
+    # without them in the cloud, and with smooth or stepped features, nothing is dropped
+    for z in (ground[:, 2], ground[:, 2] + 8 * np.exp(-(((xy[:, 0] - 100) / 2.5) ** 2)),
+              ground[:, 2] + 20.0 * ((xy[:, 0] > 100) & (xy[:, 1] > 80))):
+        assert parameterize_points(np.c_[xy, z], True).used.all()
+
+
 def test_drop_outliers_leaves_out_a_power_line_over_terrain() -> None:
     """A wire 20-30 m over a 200 m terrain tile (400 points 0.5 m apart, 20 000 on the
     ground): its points are neither isolated nor spikes, and the fold check refused the tile
