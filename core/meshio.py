@@ -878,6 +878,10 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
     Column ``j`` is at ``x = linspace(xmin, xmax, cols)[j]`` and row ``i`` at
     ``y = linspace(ymin, ymax, rows)[i]`` as stored (the jacksboro file stores the northern
     latitude as ``ymin``: its row 0 is the northern edge, so the order is kept, not sorted).
+    With optional cell sizes ``dx``, ``dy`` that say the bounds are the grid's outer edges
+    (``cols dx = |xmax - xmin|``: a pixel-registered grid, as the jacksboro file is) the
+    nodes are the cells' centres, ``xmin + (j + 1/2) (xmax - xmin) / cols``; a cell size
+    that fits neither (nor ``(cols - 1) dx``) is an error.
 
     Geographic grids (bounds in degrees: |x| <= 180, |y| <= 90, and an elevation range larger
     than 10x the extent in degrees, i.e. heights in metres) are converted to metres relative to
@@ -897,8 +901,8 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
     except (TypeError, ValueError):
         raise _MalformedError("the DEM bounds xmin, xmax, ymin, ymax must be numbers") from None
     rows, cols = elev.shape
-    x = np.linspace(xmin, xmax, cols)
-    y = np.linspace(ymin, ymax, rows)
+    x = _dem_nodes(xmin, xmax, cols, z.get("dx"), "x")
+    y = _dem_nodes(ymin, ymax, rows, z.get("dy"), "y")
     h = elev.astype(np.float64)
     units = str(z["units"]) if "units" in z else "auto"
     if units not in ("auto", "degrees", "metres", "meters"):
@@ -925,6 +929,32 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
     else:
         _refuse_fill_values(pts[keep, 2])
     return pts[keep]
+
+
+def _dem_nodes(lo: float, hi: float, count: int, cell, axis: str) -> np.ndarray:
+    """The ``count`` node coordinates of a DEM axis with bounds ``lo``, ``hi`` (in the order
+    stored) and an optional cell size ``cell``: the bounds themselves are the first and last
+    nodes, unless ``count cell`` spans them (the bounds are the outer cell edges: the nodes
+    are the cells' centres). The user test found the jacksboro grid stretched by 1/402 and
+    1/343 (75 m over the tile) when its edges were taken for nodes."""
+    span = hi - lo
+    if cell is None:
+        return np.linspace(lo, hi, count)
+    try:
+        cell = abs(float(np.asarray(cell)))
+    except (TypeError, ValueError):
+        raise _MalformedError(f"the DEM cell size d{axis} must be a number") from None
+    tol = 1e-6 * max(abs(span), 1e-300)
+    if abs(count * cell - abs(span)) <= tol:  # the bounds are the outer edges of the cells
+        return lo + (np.arange(count) + 0.5) * (span / count)
+    if abs((count - 1) * cell - abs(span)) <= tol:  # the bounds are the first and last nodes
+        return np.linspace(lo, hi, count)
+    raise _MalformedError(
+        f"the DEM cell size d{axis} = {cell:g} fits neither its {count} cells between "
+        f"{axis}min and {axis}max ({abs(span):g} / {count} = {abs(span) / count:g}) nor its "
+        f"{count} nodes ({abs(span):g} / {count - 1} = {abs(span) / max(count - 1, 1):g}); "
+        f"correct d{axis} or the bounds, or leave d{axis} out"
+    )
 
 
 # fill values of DEM formats (GDAL/ESRI -9999, SRTM -32768, float32 lowest) for cells without data

@@ -570,11 +570,19 @@ def test_dem_npz_becomes_grid_points_in_metres() -> None:
     with np.load(DATA / "jacksboro_fault_dem.npz") as z:
         elev = z["elevation"]
     np.testing.assert_array_equal(pts[:, 2], elev.ravel())
-    # 3 arc-second grid: about 74 m (x, at 36.6 deg N) by 93 m (y), starting at the SW corner
+    # 3 arc-second grid: about 74 m (x, at 36.6 deg N) by 93 m (y), in metres from the SW
+    # corner. Its bounds are the outer edges of its cells (403 dx = xmax - xmin), so the nodes
+    # are the cells' centres, dx apart and half a cell in (the user test found the grid
+    # stretched by 1/402 and 1/343 when the edges were taken for nodes: 75 m over the tile)
+    with np.load(DATA / "jacksboro_fault_dem.npz") as z:
+        cell, lat = float(z["dx"]), np.radians(0.5 * (float(z["ymin"]) + float(z["ymax"])))
+    mx, my = 111200.0 * cell * np.cos(lat), 111200.0 * cell  # the cell in metres
     dx = np.diff(np.unique(pts[:, 0]))
     dy = np.diff(np.unique(pts[:, 1]))
-    assert 70 < dx.mean() < 78 and 89 < dy.mean() < 97
-    assert pts[:, 0].min() == 0 and pts[:, 1].min() == 0
+    np.testing.assert_allclose(dx, mx, rtol=1e-9)
+    np.testing.assert_allclose(dy, my, rtol=1e-9)
+    assert 70 < mx < 78 and 89 < my < 97
+    np.testing.assert_allclose(pts[:, :2].min(axis=0), [mx / 2, my / 2], rtol=1e-9)
     # row 0 is the northern edge (the file stores the northern latitude as 'ymin')
     assert pts[0, 1] == pts[:, 1].max()
 
@@ -594,6 +602,25 @@ def test_small_dem_in_metres_with_nodata(tmp_path: Path) -> None:
     np.testing.assert_array_equal(
         pts, [[1000, 500, 1], [1010, 500, 2], [1000, 510, 4], [1020, 510, 6]]
     )
+
+
+def test_dem_cell_sizes_say_where_the_nodes_are(tmp_path: Path) -> None:
+    """``dx``/``dy`` that fill the bounds with the cells: nodes at the cells' centres; that
+    fill them with the gaps between nodes: nodes on the bounds; that fit neither: refused."""
+    elev = np.arange(6.0).reshape(2, 3)
+    bounds = dict(xmin=1000.0, xmax=1030.0, ymin=500.0, ymax=520.0)
+    np.savez(tmp_path / "edges.npz", elevation=elev, dx=10.0, dy=10.0, **bounds)
+    pts, _ = read_geometry(tmp_path / "edges.npz")
+    np.testing.assert_array_equal(np.unique(pts[:, 0]), [1005, 1015, 1025])
+    np.testing.assert_array_equal(np.unique(pts[:, 1]), [505, 515])
+    np.savez(tmp_path / "nodes.npz", elevation=elev, dx=15.0, dy=20.0, **bounds)
+    pts, _ = read_geometry(tmp_path / "nodes.npz")
+    np.testing.assert_array_equal(np.unique(pts[:, 0]), [1000, 1015, 1030])
+    np.testing.assert_array_equal(np.unique(pts[:, 1]), [500, 520])
+    np.savez(tmp_path / "bad.npz", elevation=elev, dx=12.0, **bounds)
+    with pytest.raises(FileFormatError, match=r"the DEM cell size dx = 12 fits neither its 3 "
+                                              r"cells between xmin and xmax"):
+        read_geometry(tmp_path / "bad.npz")
 
 
 def test_a_dem_fill_value_without_a_nodata_key_is_refused(tmp_path: Path) -> None:
