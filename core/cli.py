@@ -115,7 +115,9 @@ def _smoothness_text(report: dict) -> str:
     text = f"{report['smoothness']:.3g}"
     sel = report.get("smoothness_selection")
     why = replaced_default_reason(sel)
-    if sel is not None:
+    if sel is not None and "cross_validated_rms" not in sel:  # (the default swung)
+        text += f" (with the default {sel['chosen']:.3g} the surface swung away from the data)"
+    elif sel is not None:
         text += (f" (auto chose {sel['chosen']:.3g}, which misses the tolerance: default kept)"
                  if "kept" in sel else f" (cross-validated: {why})" if why else " (auto)")
         if "smoother" in sel:  # core.surface._smoother_if_swinging

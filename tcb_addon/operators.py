@@ -276,7 +276,9 @@ def _summary(surf) -> str:
     n = rep.get("control_points", len(surf.control_points))
     sel = rep.get("smoothness_selection") or {}
     why = _core().refine.replaced_default_reason(sel)
-    how = f" ({why}: cross-validated)" if why else " (auto)" if sel else ""
+    how = (f" ({why}: cross-validated)" if why
+           else f" (with the default {sel['chosen']:.3g} the surface swung away from the data)"
+           if sel and "cross_validated_rms" not in sel else " (auto)" if sel else "")
     return (
         f"TCB: {n} control points, RMS {rep.get('rms', float('nan')):.4g}, "
         f"max {rep.get('max', float('nan')):.4g} ({100 * rep.get('max_rel', float('nan')):.3g}% "

@@ -82,10 +82,13 @@ def test_a_surface_swinging_off_the_data_is_a_warning_line_and_a_row(tmp_path, c
                      r"knots taken back$", err, re.M), err
     assert not any("swings away" in str(w.message) for w in caught)
     assert "swings off data" not in out
-    # switched off in a subprocess of its own (the warnings then reach stderr as in a shell)
+    # switched off in a subprocess of its own (the warnings then reach stderr as in a shell);
+    # the smoothness given (the default would be replaced by a smoother one that does not
+    # swing: core.surface._smoother_if_swinging)
     r = subprocess.run([sys.executable, "-c", "import sys, core.refine, core.cli; core.refine."
                         "REVERT_SWINGS = False; sys.exit(core.cli.main(sys.argv[1:]))",
-                        *args, "--quiet"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+                        *args, "--quiet", "--smoothness", "1e-4"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     out, err = r.stdout, r.stderr
     lines = [ln for ln in err.splitlines() if "swings away" in ln]

@@ -643,10 +643,11 @@ def test_a_surface_that_swings_away_between_the_data_is_reported(monkeypatch):
     tested on a surface that swings (a fresh start can still)."""
     monkeypatch.setattr(refine, "REVERT_SWINGS", False)
     tile = step_tile()
+    # (a smoothness given: the default would be replaced by a smoother one, next test)
     with pytest.warns(RuntimeWarning, match="swings away from the data between neighbouring "
                                             "points at [0-9]+ of the [0-9]+ places checked"):
         surf = fit_surface(tile, tolerance=0.1, relative=False, projection="z",
-                           max_control_points=1000)
+                           max_control_points=1000, smoothness=1e-4)
     sw = surf.report["swings"]
     assert sw["places"] > 0 and sw["largest"] > 5.0  # metres beyond the data
     # the places checked are a random sample, whatever the order of the points (a scan line
@@ -675,6 +676,24 @@ def test_a_surface_that_swings_away_between_the_data_is_reported(monkeypatch):
     assert np.ptp(loose(loose.tessellation_uv(300)[0])[:, 2]) < 42.0  # data: 40
 
 
+@pytest.mark.parametrize("smoothness, beyond", [(0.0, 1.0), (1e-7, 0.01)])
+def test_a_mesh_flaring_out_at_its_border_is_reported(smoothness, beyond):
+    """nefertiti.off fitted with smoothness 0 (the Blender option offers it) reached its
+    tolerance, max error 0.3% of the diagonal, while the surface flared out to z = 20-27 at
+    its border, 3 diagonals off the scan (1e-7: 0.2 diagonals), between the boundary vertices
+    where the midpoint checks did not look: "tolerance reached", no warning (Blender user
+    test). The final check now also looks along the border and over the whole domain
+    (core.refine._domain_checks); a smoothness given is kept, with the warning."""
+    points, faces = read_geometry(DATA / "nefertiti.off")
+    with pytest.warns(RuntimeWarning, match="swings away from the data"):
+        surf = fit_surface(points, faces, smoothness=smoothness)
+    sw = surf.report["swings"]
+    assert sw["places"] > 0 and sw["largest_rel"] > beyond
+    assert surf.report["smoothness"] == smoothness
+    v, _ = surf.tessellate(128)
+    assert np.ptp(v, axis=0).max() > (1 + beyond) * np.ptp(points, axis=0).max()  # it is there
+
+
 def test_an_insertion_that_makes_the_surface_swing_is_taken_back(monkeypatch):
     """The step tile of the test above: each insertion after which the surface swings between
     the data (core.refine.swing_places) is taken back and made again away from the places
@@ -684,11 +703,11 @@ def test_an_insertion_that_makes_the_surface_swing_is_taken_back(monkeypatch):
     tile = step_tile()
     truth = lambda x, y: 0.05 * x + 5 * np.sin(y / 30) + 20.0 * (x + 0.3 * y > 120)  # noqa: E731
 
-    def fit():
+    def fit(**kw):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             return fit_surface(tile, tolerance=0.1, relative=False, projection="z",
-                               max_control_points=1000)
+                               max_control_points=1000, **kw)
 
     def off_beyond_the_step(surf):  # RMS and max off the true shape beyond 3 m of the step
         v = surf(surf.tessellation_uv(300)[0])
@@ -705,12 +724,21 @@ def test_an_insertion_that_makes_the_surface_swing_is_taken_back(monkeypatch):
     assert r["swings"]["places"] == 0 and r["swings"]["checked"] > 0
     assert surf(surf.tessellation_uv(300)[0])[:, 2].max() < 36.0  # data: <= 35
     monkeypatch.setattr(refine, "REVERT_SWINGS", False)
-    swinging = fit()
+    swinging = fit(smoothness=1e-4)  # (given: the default would be replaced, below)
     assert swinging.report["swings"]["places"] > 0
     (rms, top), (rms_swinging, top_swinging) = off_beyond_the_step(surf), off_beyond_the_step(swinging)
     # 0.25/8.6 m (0.21/5.1 m before the gap checks took back more insertions near the step),
     # 0.65/39 m
     assert rms < 0.5 * rms_swinging and top < 10.0 < 20.0 < top_swinging
+    # the default smoothness of a final surface that swings is replaced by the smallest larger
+    # one that does not (core.surface._smoother_if_swinging), and the report says so
+    smoother = fit()
+    sel = smoother.report["smoothness_selection"]
+    assert smoother.report["swings"]["places"] == 0 and smoother.report["smoothness"] > 1e-4
+    assert sel["chosen"] == 1e-4 and "with the default 0.0001 the surface swung" in sel["smoother"]
+    rms_smoother, top_smoother = off_beyond_the_step(smoother)  # 0.13/2.9 m with 1.0
+    assert rms_smoother < 0.5 * rms_swinging and top_smoother < 10.0
+    assert smoother(smoother.tessellation_uv(300)[0])[:, 2].max() < 36.0  # data: <= 35
 
 
 def test_a_sizing_restart_that_makes_the_surface_swing_is_taken_back():
