@@ -357,6 +357,9 @@ def read_selection(context, objects=None) -> InputData:
 
     pts = np.concatenate(points) if len(points) > 1 else points[0]
     tri = faces[0] if len(faces) == 1 and faces[0] is not None else None
+    if len(points) > 1:  # (an error about "the point cloud" did not say so: user test)
+        notes.append(f"the {len(points)} selected objects ({', '.join(repr(n) for n in counts)}) "
+                     "were fitted together as one point cloud")
     return InputData(points=pts, faces=None if tri is None else tri.astype(np.int64),
                      sources=list(wanted.values()), counts=counts, notes=notes,
                      modifiers=modifiers)  # fmt: skip
