@@ -1109,13 +1109,15 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
         hit &= np.nanmax(rs, axis=1) < 0.5 * d
         return hit, far, nbr, coef
 
+    def tested(points, pool):
+        """:func:`test` of ``points`` against ``pool``, in chunks: (at, hit, far, nbr, coef)."""
+        tree = cKDTree(flat[pool])
+        return [(at, *test(at, pool, tree))
+                for at in (points[lo : lo + chunk] for lo in range(0, len(points), chunk))]
+
     for _ in range(4):
-        keep = np.flatnonzero(~spike)
-        tree = cKDTree(flat[keep])
         found, again = [], []
-        for lo in range(0, len(check), chunk):
-            at = check[lo : lo + chunk]
-            hit, far, nbr, _ = test(at, keep, tree)
+        for at, hit, far, nbr, _ in tested(check, np.flatnonzero(~spike)):
             found.append(at[hit])
             again.append((at[far & ~hit], nbr[hit]))
         new = np.concatenate(found)
@@ -1149,11 +1151,8 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
         members = np.flatnonzero(steep)
         pool = np.flatnonzero(~spike & ~steep)
         if 0 < len(members) <= _STACK_MAX_SHARE * n and len(pool) > k:
-            tree = cKDTree(flat[pool])
             hits, coefs = [], []
-            for lo in range(0, len(members), chunk):
-                at = members[lo : lo + chunk]
-                hit, _, _, coef = test(at, pool, tree)
+            for at, hit, _, _, coef in tested(members, pool):
                 hits.append(at[hit])
                 coefs.append(coef[hit])
             hits, coef = np.concatenate(hits), np.concatenate(coefs)
