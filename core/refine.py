@@ -445,8 +445,10 @@ def swing_places(space, C, uv, points, errors, seed: int = 0,
     smoothness 0 flared out 3 diagonals beyond its border, and a grid of SWING_GRID places
     per side, where the surface must stay near the slab of its nearest data points (1000
     points of the DEM on 492 control points swung 2.3 km off terrain of 0.8 km relief; user
-    tests). Not in the loop: on the benchmarks' fits it would take back insertions at cusps
-    (F10's cone point dips between the data, by about the data spacing).
+    test: flagged, but that case is near the limit, and the same fit of the DEM read with
+    its nodes at the cells' centres swings 0.3 km and is not). Not in the loop: on the
+    benchmarks' fits it would take back insertions at cusps (F10's cone point dips between
+    the data, by about the data spacing).
     Returns (the places flagged (f, 2), places checked, the largest excess).
     """
     uv = np.asarray(uv, dtype=np.float64)
@@ -526,9 +528,8 @@ def _domain_checks(x, p, e) -> list:
     one is 0.43 of the limit but at F10's cone point (1.72: a dip between the data as deep as
     they are apart); 1.76 for the DEM's 2.3 km swing, 10.7 for a mesh fitted with smoothness
     0 (/tmp/s18/envrun3.py of the eighteenth session)."""
-    try:
-        hull, tri = ConvexHull(x), Delaunay(x)
-    except Exception:  # (degenerate: on a line)
+    tri = _delaunay(x)  # (the gap checks' one)
+    if tri is None:  # (degenerate: on a line)
         return []
     # the hull's edges between neighbouring points (the Delaunay triangles' sides without a
     # neighbour: a grid's side holds all its points, not only its corners)
@@ -550,7 +551,7 @@ def _domain_checks(x, p, e) -> list:
     d = float((hi - lo).max()) / SWING_GRID
     g = [np.arange(lo[j] + d / 2, hi[j], d) for j in range(2)]
     grid = np.stack(np.meshgrid(*g), -1).reshape(-1, 2)
-    grid = grid[(grid @ hull.equations[:, :2].T + hull.equations[:, 2] <= 0).all(axis=1)]
+    grid = grid[tri.find_simplex(grid) >= 0]  # (inside the hull)
     k = min(SWING_SLAB_NEIGHBOURS, len(x))
     if len(grid) and k >= 4:
         nb = cKDTree(x).query(grid, k=k, workers=-1)[1]
@@ -596,24 +597,38 @@ def _gap_checks(knot_tree, x, p, e, T, seed):
 _GAP_CACHE: dict = {}  # the last sample's triangles (the loop checks the same sample each time)
 
 
-def _gap_triangles(x: np.ndarray) -> np.ndarray:
-    """The Delaunay triangles of ``x`` that have no side on its hull (slivers along the hull:
-    a flat triangle between points far apart on a curved surface is no measure of it; F7
-    scattered was 0.35 off such a one, 0.07 of its diagonal). The last result is kept (0.09
-    s for 20 000 points; the loop checks the same sample after every insertion)."""
+def _delaunay(x: np.ndarray):
+    """The Delaunay triangulation of the sample ``x``, or None (fewer than 4 points, or all on
+    a line). The last one is kept (0.09 s for 20 000 points; the loop checks the same sample
+    after every insertion, and the final check uses it twice)."""
     key = (hash(x.tobytes()), x.shape)
     # one tuple, read and replaced whole: fits in two threads (Blender's job and a script)
-    # never pair one sample's key with another's triangles
+    # never pair one sample's key with another's triangulation
     last = _GAP_CACHE.get("last")
     if last is not None and last[0] == key:
         return last[1]
-    T = _interior_triangles(x)
-    _GAP_CACHE["last"] = (key, T)
-    return T
+    tri = None
+    if len(x) >= 4:
+        try:
+            tri = Delaunay(x)
+        except Exception:  # a degenerate set (all on a line): no gaps to check
+            tri = None
+    _GAP_CACHE["last"] = (key, tri)
+    return tri
+
+
+def _gap_triangles(x: np.ndarray) -> np.ndarray:
+    """The Delaunay triangles of the sample ``x`` that have no side on its hull (slivers along
+    the hull: a flat triangle between points far apart on a curved surface is no measure of
+    it; F7 scattered was 0.35 off such a one, 0.07 of its diagonal)."""
+    tri = _delaunay(x)
+    if tri is None:
+        return np.zeros((0, 3), dtype=np.intp)
+    return tri.simplices[(tri.neighbors >= 0).all(axis=1)]
 
 
 def _interior_triangles(x: np.ndarray) -> np.ndarray:
-    """The Delaunay triangles of ``x`` with no side on its hull ((t, 3) indices)."""
+    """The Delaunay triangles of ``x`` with no side on its hull ((t, 3) indices), not kept."""
     if len(x) < 4:
         return np.zeros((0, 3), dtype=np.intp)
     try:
