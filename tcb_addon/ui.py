@@ -7,8 +7,8 @@ selected (nothing, a camera, a result object, ...).
 import bpy
 
 from . import bridge
-from .operators import (NO_DATA_KEY, SPLINE_KEY, is_max, live_link_problem, net_copy_note,
-                        net_vertex_problem, result_objects, uneven_density)
+from .operators import (NO_DATA_KEY, SPLINE_KEY, is_max, live_link_problem, live_moved_problem,
+                        net_copy_note, net_vertex_problem, result_objects, uneven_density)
 from .properties import FIT_KEYS, draw_fit_settings
 
 
@@ -89,6 +89,9 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
         copy = net_copy_note(context.active_object)
         if copy:
             col.label(text=copy, icon="INFO")
+        moved = live_moved_problem(surface)
+        if moved:
+            col.label(text=moved[0].upper() + moved[1:], icon="INFO")
 
         layout.separator()
         row = layout.row(align=True)
