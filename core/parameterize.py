@@ -990,6 +990,7 @@ _SPIKE_TRIM = 3
 _SPIKE_SIGMA = 8.0
 _SPIKE_SLOPE = 1.0
 _SPIKE_MAX_SHARE = 0.05
+_SPIKE_FLOOR_SAMPLE = 2000  # spike_points(only=...): points sampled for the noise level
 _STACK_NEIGHBOURS = 8  # stacks: the neighbours looked at for one steeply above or below
 _STACK_MAX_SHARE = 0.1  # ... and the largest share of points with one (more: steep surface)
 _STACK_LINK = 2.0  # a group: members at most this many data spacings apart, linked ...
@@ -997,7 +998,8 @@ _STACK_SPAN = 12.0  # ... spanning at most this many (a pole, a crown; not a rid
 
 
 def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
-                 chunk: int = 100_000, stats: dict | None = None) -> np.ndarray:
+                 chunk: int = 100_000, stats: dict | None = None, only=None,
+                 slope: float = _SPIKE_SLOPE) -> np.ndarray:
     """Indices (sorted) of the points of a cloud that stick out of the surface of their
     neighbours like spikes or pits: stray returns inside the cloud, which
     :func:`isolated_points` does not see (a point 5 m above a terrain scanned every metre
@@ -1045,6 +1047,11 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
     the lowest point, 3 m up, of some poles; /tmp/s18/pole.py and spikefp.py of the
     eighteenth session). O(n k) in chunks of 1e5; 0.5 s for 3e4 points, 1.7-1.9 s for 1e5
     (1.0-1.25x without the stacks).
+
+    ``only`` (indices): test these points only (and a random sample of _SPIKE_FLOOR_SAMPLE
+    for the noise level), without the stacks, and return those of them that are spikes: the
+    check after a fit of the points it misses most (:func:`core.surface.data_spikes`).
+    ``slope``: how steep a spike must be (1: 45 degrees).
     """
     n = len(q)
     k = min(_SPIKE_NEIGHBOURS, n - 2)
@@ -1060,6 +1067,9 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
     height = q @ w
     spike = np.zeros(n, dtype=bool)
     check = np.random.default_rng(0).permutation(n)  # (the first chunk: a random sample)
+    if only is not None:  # (a sample for the noise level first, then those asked about)
+        only = np.unique(np.asarray(only, dtype=np.int64))
+        check = np.r_[check[:_SPIKE_FLOOR_SAMPLE], only]
     floor = None
 
     def test(at, keep, tree):
@@ -1090,7 +1100,7 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
         d = np.abs(coef[:, 0])  # the point itself is at (0, 0) and height 0
         rs = np.where(use, r, np.nan)
         spacing = np.nanmedian(np.where(use, np.linalg.norm(uv, axis=2), np.nan), axis=1)
-        far = d > _SPIKE_SLOPE * spacing
+        far = d > slope * spacing
         # the noise: MAD of all the neighbours' residuals from the trimmed fit (robust to
         # the spikes left out), corrected for the 6 parameters fitted to the others
         kept_n = k - _SPIKE_TRIM
@@ -1140,6 +1150,8 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
     # _SPIKE_SIGMA noise levels) are tested again against the nearest points that have none
     # (the ground around a pole; at a step, both levels: then not a spike)
     keep = np.flatnonzero(~spike)
+    if only is not None:
+        return only[spike[only]]
     if floor is not None and len(keep) > k + _STACK_NEIGHBOURS:
         tree = cKDTree(flat[keep])
         steep = np.zeros(n, dtype=bool)

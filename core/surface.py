@@ -39,6 +39,7 @@ from .fit import (AUTO_SMOOTHNESS, DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL
 from .geometry import column_bounds, float32_rounding
 from .parameterize import (
     Parameterization, _as_points, _check_finite, box_normalization, normalize, parameterize,
+    spike_points,
 )
 from .refine import RefineOptions, adaptive_fit, area_weights, check_callback, swing_places
 from .spline_space import SplineSpace, _whole, derivative_order, frozen
@@ -1077,7 +1078,7 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0):
 
 
 def _run(points, param, options, callback, start=None, rings=None, history=(), checked=False,
-         start_degree=None, faces_key=None):
+         start_degree=None, faces_key=None, spikes=False):
     """Fit ``points`` over ``param``; ``checked``: ``parameterize_points`` has just accepted
     these very points (a cloud), so :func:`normalize` need not check them again."""
     t0 = time.perf_counter()
@@ -1221,6 +1222,14 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         if gap > 2.0 * max(options.tolerance, 0.0) * (diagonal if options.relative else 1.0):
             report["layers"] = gap
             warnings.warn(layers_warning(report), RuntimeWarning, stacklevel=3)
+    if spikes and param.faces is None and param.axes is not None:
+        # a few points far off the surface that drop_outliers would have left out (10 stray
+        # returns 50-200 m up among 4e4 lidar points: 127 m spikes in the surface, no word;
+        # user test)
+        found, largest = data_spikes(points[used], errors[used], np.asarray(param.axes)[2])
+        report["spikes"] = found
+        if found:
+            warnings.warn(spikes_warning(found, largest), RuntimeWarning, stacklevel=3)
     if best.refit is not None:  # iterations on a subset, the chosen space fitted to all points
         report["refit"] = best.refit
     if best.selection is not None:  # smoothness="auto"
@@ -1363,7 +1372,8 @@ def fit_surface(
                       "faces, so none were left out (leave the option out for meshes)",
                       RuntimeWarning, stacklevel=2)
     return _run(points, param, options, callback, checked=faces is None,
-                faces_key=None if faces is None else faces_digest(faces))
+                faces_key=None if faces is None else faces_digest(faces),
+                spikes=faces is None and not drop_outliers)
 
 
 def _smoother_if_swinging(best, uv, points, n_measured: int, seed: int, limit=None,
@@ -1428,6 +1438,45 @@ def data_swings(space, C, uv, points, errors, seed: int = 0,
     where, checked, largest = swing_places(space, C, uv, points, errors, seed, margin,
                                            domain=True)
     return len(where), checked, largest
+
+
+# the spikes check (:func:`data_spikes`): the share of points looked at (those the fit misses
+# most), how much more than the RMS of the others they must miss, and how steep a spike must
+# be (2: 63 degrees; F10's cone point, sampled at its tip, is a spike at 45)
+SPIKE_SHARE = 1e-3
+SPIKE_FACTOR = 10.0
+SPIKE_SLOPE = 2.0
+
+
+def data_spikes(points, errors, direction) -> tuple[int, float]:
+    """The points of a cloud that stick out of their neighbours' surface like spikes, among
+    those the fit misses most (not in method.md): the worst SPIKE_SHARE of the points that
+    miss it by more than SPIKE_FACTOR times the RMS of the others, tested by
+    :func:`core.parameterize.spike_points` (steeper than SPIKE_SLOPE) across ``direction``
+    (the projection's). For a cloud fitted without ``drop_outliers``, which would have left
+    them out: they pull the surface. Returns (how many, the largest error among them)."""
+    e = np.asarray(errors, dtype=np.float64)
+    n = len(e)
+    top = max(1, int(SPIKE_SHARE * n))
+    if n < 20:
+        return 0, 0.0
+    order = np.argsort(e)[::-1]
+    rest = float(np.sqrt(np.mean(e[order[top:]] ** 2)))
+    cand = order[:top][e[order[:top]] > SPIKE_FACTOR * rest]
+    if len(cand) == 0:
+        return 0, 0.0
+    q = box_normalization(points).apply(points)
+    found = spike_points(q, direction, only=cand, slope=SPIKE_SLOPE)
+    return int(len(found)), float(e[found].max(initial=0.0))
+
+
+def spikes_warning(found: int, largest: float) -> str:
+    """The warning of :func:`data_spikes`, with what to do."""
+    return (f"{found} point{'s' if found != 1 else ''} stick{'s' if found == 1 else ''} out of "
+            f"the surface of {'their' if found != 1 else 'its'} neighbours like "
+            f"{'spikes' if found != 1 else 'a spike'} (missed by up to {largest:.4g}): stray "
+            "returns? They pull the surface towards them; drop_outliers=True (--drop-outliers, "
+            "in Blender Drop Outliers) leaves such points out")
 
 
 # the layers check (:func:`data_layers`): points checked, share of them near the surface
