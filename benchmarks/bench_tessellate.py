@@ -86,6 +86,17 @@ def main() -> None:
             t_eval = time.perf_counter() - t0
             print(f"| {d['name']} | {r} | {len(uv)} | {len(tri)} | {t_new:.2f} | {m_new:.0f} "
                   f"| {t_old:.2f} | {m_old:.0f} | {t_old / t_new:.1f}x | {differ} | {t_eval:.2f} |", flush=True)
+    # a long thin strip (1000:1) is all boundary strip, no lattice cell: qhull on its regular
+    # grid of co-circular points, as they are (the peer) and moved by 1e-7 of a grid step
+    rng = np.random.default_rng(0)
+    xy = np.c_[rng.uniform(0, 1000, 1600), rng.uniform(0, 1, 1600)]
+    surf = fit_surface(np.c_[xy, 0.01 * np.sin(xy[:, 0] / 50)])
+    uv, tri, t_new, _ = timed(surf, 64, repeats=1)
+    with mock.patch.object(S, "TESSELLATION_JITTER", 0.0):
+        uv0, tri0, t_old, _ = timed(surf, 64, repeats=1)
+    print(f"\nstrip 1000:1: {len(uv)} vertices, {len(tri)} triangles, {t_new:.2f} s moved, "
+          f"{t_old:.2f} s as they are ({t_old / t_new:.1f}x); areas {area(uv, tri):.6g} and "
+          f"{area(uv0, tri0):.6g}")
 
 
 if __name__ == "__main__":
