@@ -105,7 +105,10 @@ def selection_problem(context) -> str | None:
 
 def _world(positions: np.ndarray, matrix) -> np.ndarray:
     m = np.array(matrix, dtype=np.float64)  # the float32 matrix, exactly, in float64
-    return positions.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+    # (NaN or infinite coordinates are refused by the caller with a clear error: numpy's
+    # "invalid value" warning was printed to the console before it, user test)
+    with np.errstate(invalid="ignore", over="ignore"):
+        return positions.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
 
 
 def read_positions(data) -> np.ndarray:
