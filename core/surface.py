@@ -1463,7 +1463,7 @@ def data_spikes(points, errors, direction) -> tuple[int, float]:
     those the fit misses most (not in method.md): the worst SPIKE_SHARE of the points that
     miss it by more than SPIKE_FACTOR times the RMS of the others, tested by
     :func:`core.parameterize.spike_points` (steeper than SPIKE_SLOPE) across ``direction``
-    (the projection's). For a cloud fitted without ``drop_outliers``, which would have left
+    (the projection's), and alone at their height among their 24 nearest points. For a cloud fitted without ``drop_outliers``, which would have left
     them out: they pull the surface. Returns (how many, the largest error among them)."""
     e = np.asarray(errors, dtype=np.float64)
     n = len(e)
@@ -1475,8 +1475,19 @@ def data_spikes(points, errors, direction) -> tuple[int, float]:
     cand = order[:top][e[order[:top]] > SPIKE_FACTOR * rest]
     if len(cand) == 0:
         return 0, 0.0
-    q = box_normalization(points).apply(points)
+    norm = box_normalization(points)
+    q = norm.apply(points)
     found = spike_points(q, direction, only=cand, slope=SPIKE_SLOPE)
+    if len(found):
+        # alone at its height: no two of its 24 nearest across the direction within a quarter
+        # of its error of it (a point of the lower level where a 20 m step meets the tile's
+        # border, its 11 nearest all on the upper level, passed the spike test: suite)
+        w = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
+        h = q @ w
+        flat = q - np.outer(h, w)
+        nb = cKDTree(flat).query(flat[found], k=min(25, len(q)), workers=-1)[1][:, 1:]
+        level = np.abs(h[nb] - h[found][:, None]) * norm.scale < 0.25 * e[found][:, None]
+        found = found[level.sum(axis=1) < 2]
     return int(len(found)), float(e[found].max(initial=0.0))
 
 

@@ -227,6 +227,10 @@ def store_stats(tcb, surf, settings: dict) -> None:
         tcb.smoothness = float(rep["smoothness"])
     # the default smoothness of a sparse cloud or a stalled run is cross-validated
     tcb.smoothness_cross_validated = "why" in (rep.get("smoothness_selection") or {})
+    # the default replaced by a smoother one: with it the surface swung (review: the panel
+    # said "Smoothness 1" with no word why)
+    sel = rep.get("smoothness_selection") or {}
+    tcb.smoothness_smoother = "smoother" in sel and "cross_validated_rms" not in sel
 
 
 def remember_placement(surface_obj) -> None:

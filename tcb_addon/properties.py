@@ -194,6 +194,7 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     auto_smoothness: BoolProperty()
     # the value used was cross-validated although Auto Smoothness was off (sparse cloud, stall)
     smoothness_cross_validated: BoolProperty()
+    smoothness_smoother: BoolProperty()
     resolution: IntProperty()
     # deviation map (distance of the surface vertices to the data)
     has_deviation: BoolProperty()

@@ -73,7 +73,8 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
             ("Tolerance (" + ("max" if is_max(st) else "RMS") + ")",
              f"{100 * st.tolerance:.3g} %" if st.relative else f"{st.tolerance:.4g}"),
             ("Smoothness" + (" (auto)" if st.auto_smoothness else
-                             " (cross-validated)" if st.smoothness_cross_validated else ""),
+                             " (cross-validated)" if st.smoothness_cross_validated else
+                             " (default swung)" if st.smoothness_smoother else ""),
              f"{st.smoothness:.3g}"),
             ("Seconds", f"{st.seconds:.2f}"),
         ):

@@ -346,6 +346,9 @@ def test_a_surface_that_swings_off_the_data_is_a_warning(clean_scene, capfd, mon
     text = capfd.readouterr().out
     assert "with the default 0.0001 the surface swung away from the data" in text, text
     assert "swings away" not in text
+    surface = bpy.context.view_layer.objects.active  # and its panel says so
+    labels = [e[1] for e in draw_panels(bpy, [surface]) if e[0] == "label"]
+    assert "Smoothness (default swung)" in labels, labels
 
 
 def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
