@@ -256,7 +256,8 @@ def live_moved_problem(surface_obj) -> str | None:
     """Why moving a live surface's object shows no change, or None: the surface follows its
     net wherever its object is (Blender user test: moved, rotated or parented, it stayed, and
     nothing said why)."""
-    if surface_obj.modifiers.get(live.MODIFIER_NAME) is None or not _moved_from_placement(surface_obj):
+    live_net = surface_obj.modifiers.get(live.MODIFIER_NAME) is not None
+    if not live_net or not _moved_from_placement(surface_obj):
         return None
     return ("the surface object was moved, but a live surface stays with its control net: "
             "move the net to move the surface")
@@ -267,7 +268,8 @@ def moved_note(surface_obj, what: str = WRITTEN_BACK) -> str | None:
     surface object can be moved (G) away from its spline; the spline stays with the data and
     the net, so Re-tessellate and Refine write it where it was (with a live net the surface
     follows the net wherever its object is)."""
-    if surface_obj.modifiers.get(live.MODIFIER_NAME) is not None or not _moved_from_placement(surface_obj):
+    live_net = surface_obj.modifiers.get(live.MODIFIER_NAME) is not None
+    if live_net or not _moved_from_placement(surface_obj):
         return None
     how = "move the net, or " if surface_obj.tcb.net is not None else ""
     return (f"'{surface_obj.name}' had been moved as an object, away from its spline: {what} "
