@@ -551,7 +551,9 @@ def test_a_hidden_modified_source_is_named_as_such(clean_scene, capfd):
     surface = bpy.context.view_layer.objects.active
     scan.hide_set(True)
     with bpy.context.temp_override(**select(bpy, surface)):
-        with pytest.raises(RuntimeError, match=r"other coordinates: moved, transformed or edited; 'Scan' is hidden: read without its modifiers"):
+        with pytest.raises(RuntimeError, match=r"other coordinates: moved, transformed or "
+                                               r"edited; 'Scan' is hidden: read without its "
+                                               r"modifiers"):
             bpy.ops.tcb.refine()
         capfd.readouterr()
         assert bpy.ops.tcb.deviation_map(points_copy=False) == {"FINISHED"}

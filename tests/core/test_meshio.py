@@ -686,7 +686,8 @@ def test_files_of_coarsely_rounded_32_bit_coordinates_are_named(tmp_path: Path) 
         read_geometry(tmp_path / "double.npy")
     # x and y in 32 bits, z in 64 (review): the same warning, naming the columns; a 32-bit
     # column near the origin (z here) is no matter
-    for types, warned in ((("float", "float", "double"), True), (("double", "double", "float"), False)):
+    for types, warned in ((("float", "float", "double"), True),
+                          (("double", "double", "float"), False)):
         head = "ply\nformat binary_little_endian 1.0\nelement vertex 400\n" + "".join(
             f"property {t} {c}\n" for t, c in zip(types, "xyz")) + "end_header\n"
         rec = np.zeros(400, dtype=[(c, "<f4" if t == "float" else "<f8")

@@ -1261,7 +1261,8 @@ def test_a_new_knot_never_lands_on_a_data_point():
     assert cKDTree(uv).query(new)[0].min() > 1e-6
     # the ridge itself fits (it raised BorderError)
     xy = np.random.default_rng(7).random((20_000, 2)) * 200
-    z = 5 * np.sin(xy[:, 0] / 40) + 3 * np.cos(xy[:, 1] / 30) + 8 * np.exp(-(((xy[:, 0] - 100) / 1.5) ** 2))
+    z = (5 * np.sin(xy[:, 0] / 40) + 3 * np.cos(xy[:, 1] / 30)
+         + 8 * np.exp(-(((xy[:, 0] - 100) / 1.5) ** 2)))
     surf = fit_surface(np.c_[xy, z], tolerance=0.05, relative=False, projection="z")
     assert surf.report["rms"] < 0.1
 
