@@ -1050,7 +1050,7 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
     the 293 of the user test's spikes more than 0.5 m off (all those above 2.2 m); poles of
     1-20 points and crowns of up to 40 (all but the lowest point, 3 m up, of some poles;
     /tmp/s18/pole.py and spikefp.py of the eighteenth session). O(n k) in chunks of 1e5;
-    0.5 s for 3e4 points, 1.7-1.9 s for 1e5 (1.0-1.25x without the stacks).
+    0.5-0.7 s for 3e4 points, 1.9-2.5 s for 1e5 (1.1-1.3x the time without the stacks).
 
     ``only`` (indices): test these points only (and a random sample of _SPIKE_FLOOR_SAMPLE
     for the noise level), without the stacks, and return those of them that are spikes: the

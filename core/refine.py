@@ -470,7 +470,8 @@ def swing_places(space, C, uv, points, errors, seed: int = 0,
     sub = np.random.default_rng(seed).permutation(n)[:SWING_SAMPLE]
     x, p, e = uv[sub], np.asarray(points, dtype=np.float64)[sub], np.asarray(errors)[sub]
     pick = np.arange(min(len(sub), SWING_POINTS))
-    dd, nb = cKDTree(x).query(x[pick], k=k + 1, workers=-1)
+    x_tree = cKDTree(x)  # (also the domain checks')
+    dd, nb = x_tree.query(x[pick], k=k + 1, workers=-1)
     knot_tree = cKDTree(space.knots)  # (one for the midpoints and both gap checks)
     dk, _ = knot_tree.query(x[pick], workers=-1)
     near = dk < SWING_KNOTS * dd[:, -1]
@@ -500,7 +501,7 @@ def swing_places(space, C, uv, points, errors, seed: int = 0,
                                      np.asarray(errors)[sel], _interior_triangles(uv[sel]),
                                      seed + 3))
     if domain and len(x) >= 3:
-        parts.extend(_domain_checks(x, p, e))
+        parts.extend(_domain_checks(x, p, e, x_tree))
     places = np.vstack([q[0] for q in parts])
     if len(places) == 0:
         return np.zeros((0, 2)), 0, 0.0
@@ -524,9 +525,9 @@ def swing_places(space, C, uv, points, errors, seed: int = 0,
     return places[flagged], len(places), float(excess.max()) if flagged.any() else 0.0
 
 
-def _domain_checks(x, p, e) -> list:
+def _domain_checks(x, p, e, tree) -> list:
     """The domain checks of :func:`swing_places` for the parameters ``x`` (points ``p``, errors
-    ``e``): parts ``(places, corners, reach)``. The convex hull's edges (between neighbouring
+    ``e``; ``tree`` a KD-tree of ``x``): parts ``(places, corners, reach)``. The convex hull's edges (between neighbouring
     points on it, at most SWING_GAP_SPAN times their median length) at 1/4, 1/2 and 3/4
     (segments: the surface within the edge's length plus 3 times its ends' largest error of
     the edge), and a grid of SWING_GRID places per side inside the hull, within SWING_NEAR
@@ -568,7 +569,6 @@ def _domain_checks(x, p, e) -> list:
     grid = grid[(grid @ hull.equations[:, :2].T + hull.equations[:, 2] <= 1e-12).all(axis=1)]
     k = min(SWING_SLAB_NEIGHBOURS, len(x))
     if len(grid) and k >= 4:
-        tree = cKDTree(x)
         # near the data only: not in a hole or a notch inside the hull, where the surface is
         # not shown (the tessellation trims it) and extrapolates (review: a hole of radius
         # 0.3 in Franke's function was flagged at 225 places, up to 20% of the diagonal)
