@@ -23,6 +23,7 @@ from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 from .parameterize import projection_direction
 from .refine import STALLED, SWINGS_LEFT, mostly_taken_back, replaced_default_reason
+from .surface import default_swung
 
 __all__ = ["main"]
 
@@ -115,7 +116,7 @@ def _smoothness_text(report: dict) -> str:
     text = f"{report['smoothness']:.3g}"
     sel = report.get("smoothness_selection")
     why = replaced_default_reason(sel)
-    if sel is not None and "cross_validated_rms" not in sel:  # (the default swung)
+    if default_swung(sel):
         text += f" (with the default {sel['chosen']:.3g} the surface swung away from the data)"
     elif sel is not None:
         text += (f" (auto chose {sel['chosen']:.3g}, which misses the tolerance: default kept)"

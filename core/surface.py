@@ -1387,6 +1387,13 @@ def fit_surface(
                 spikes=faces is None and not drop_outliers)
 
 
+def default_swung(selection: dict | None) -> bool:
+    """Whether ``report["smoothness_selection"]`` says the default smoothness was replaced by
+    a smoother one because its surface swung (:func:`_smoother_if_swinging`): a
+    ``"smoother"`` entry without cross-validation scores."""
+    return bool(selection) and "smoother" in selection and "cross_validated_rms" not in selection
+
+
 def _smoother_if_swinging(best, uv, points, n_measured: int, seed: int, limit=None,
                           criterion: str = "rms", margin: float = 0.0, default: bool = False):
     """``best`` (an IterationState of adaptive_fit), or, when its smoothness was chosen by

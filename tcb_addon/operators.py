@@ -229,8 +229,7 @@ def store_stats(tcb, surf, settings: dict) -> None:
     tcb.smoothness_cross_validated = "why" in (rep.get("smoothness_selection") or {})
     # the default replaced by a smoother one: with it the surface swung (review: the panel
     # said "Smoothness 1" with no word why)
-    sel = rep.get("smoothness_selection") or {}
-    tcb.smoothness_smoother = "smoother" in sel and "cross_validated_rms" not in sel
+    tcb.smoothness_smoother = _core().surface.default_swung(rep.get("smoothness_selection"))
 
 
 def remember_placement(surface_obj) -> None:
@@ -303,7 +302,7 @@ def _summary(surf, seconds: float | None = None) -> str:
     why = _core().refine.replaced_default_reason(sel)
     how = (f" ({why}: cross-validated)" if why
            else f" (with the default {sel['chosen']:.3g} the surface swung away from the data)"
-           if sel and "cross_validated_rms" not in sel else " (auto)" if sel else "")
+           if _core().surface.default_swung(sel) else " (auto)" if sel else "")
     return (
         f"TCB: {n} control points, RMS {rep.get('rms', float('nan')):.4g}, "
         f"max {rep.get('max', float('nan')):.4g} ({100 * rep.get('max_rel', float('nan')):.3g}% "
