@@ -20,6 +20,8 @@ from core import (
 )
 from core.fit import fit_control_points
 from core import refine
+import core.surface
+from core.surface import data_swings
 from core.refine import UNEVEN_DENSITY, area_weights, automatic_start, next_start
 from core.meshio import read_geometry
 from core.simplex import orient2d
@@ -296,8 +298,6 @@ def test_fine_tessellation_is_a_lattice_inside_and_covers_the_disk_exactly(nefer
     strip (``core.surface._lattice``). The pieces must join into one triangulated disk: the
     polygon's area exactly, every triangle CCW, each edge in one or two triangles, Euler
     characteristic 1 (a strip triangle across a lattice cell would overlap it)."""
-    import core.surface
-
     _, _, surf = nefertiti
     split = []
 
@@ -652,8 +652,6 @@ def test_a_surface_that_swings_away_between_the_data_is_reported(monkeypatch):
     assert sw["places"] > 0 and sw["largest"] > 5.0  # metres beyond the data
     # the places checked are a random sample, whatever the order of the points (a scan line
     # by line): the same fit checked with its points sorted along x still shows them
-    from core.surface import data_swings
-
     order = np.argsort(tile[:, 0])
     full = np.zeros((surf.space.n_basis, 3))
     full[surf.active] = surf.control_points
@@ -765,6 +763,15 @@ def test_an_insertion_that_makes_the_surface_swing_is_taken_back(monkeypatch):
     rms_smoother, top_smoother = off_beyond_the_step(smoother)  # 0.13/2.9 m with 1.0
     assert rms_smoother < 0.5 * rms_swinging and top_smoother < 10.0
     assert smoother(smoother.tessellation_uv(300)[0])[:, 2].max() < 36.0  # data: <= 35
+    # the final check reuses the one made on the fit returned (normalized units): it says what
+    # checking the surface returned says, also where no smoother one is left to take
+    monkeypatch.setattr(core.surface, "AUTO_SMOOTHNESS", ())
+    monkeypatch.setattr(core.surface, "SPARSE_SMOOTHNESS", ())
+    for s in (surf, smoother, fit()):
+        again = data_swings(s.space, s._c, s.parameterization.uv, tile, s.errors, margin=0.1)
+        r = s.report["swings"]
+        assert (r["places"], r["checked"]) == again[:2] and r["largest"] == pytest.approx(again[2])
+    assert r["places"] > 0
 
 
 def test_a_sizing_restart_that_makes_the_surface_swing_is_taken_back():
