@@ -398,6 +398,39 @@ class SplineSpace:
             out.append(A)
         return out
 
+    def combine(self, uv, coefficients, derivatives=((0, 0),)) -> list:
+        """``evaluate(uv, d) @ coefficients`` for each derivative order ``d``, without the
+        sparse matrices: the surface ``S(x) = sum_I c_I B_I(x)`` (method.md section 2.2) and
+        its partial derivatives at ``uv`` (m, 2), each an (m, d) array for ``coefficients``
+        (n_basis, d). The pairs' values are summed per point (``np.bincount``) as they come;
+        0.65-0.75x the time of building the matrices for 2e5 points, three orders and 334
+        functions (/tmp/s19/evt.py of the nineteenth session). Equal to the product to
+        rounding (another order of summation)."""
+        ders = [derivative_order(der) for der in derivatives]
+        uv = as_parameters(uv)
+        c = np.asarray(coefficients, dtype=np.float64)
+        c2 = c.reshape(len(c), -1)
+        if len(c2) != self.n_basis:
+            raise ValueError(f"coefficients must have {self.n_basis} rows, got {len(c2)}")
+
+        def block(bounds):
+            s, e = bounds
+            x = uv[s:e]
+            out = np.zeros((len(ders), c2.shape[1], e - s))
+            for pt, cfg in self._index.pairs(x):
+                values = self._batch.evaluate_many(x[pt], cfg, ders)
+                cb = np.take(c2, self.config_basis[cfg], axis=0)
+                for o, v in zip(out, values):
+                    for j in range(c2.shape[1]):
+                        o[j] += np.bincount(pt, weights=v * cb[:, j], minlength=e - s)
+            return out
+
+        parts = pmap(block, row_blocks(len(uv), min_rows=2048))
+        if not parts:
+            return [np.zeros((0,) + c.shape[1:]) for _ in ders]
+        full = np.concatenate(parts, axis=2)
+        return [full[i].T.reshape((len(uv),) + c.shape[1:]) for i in range(len(ders))]
+
     def check_partition_of_unity(self, uv, tol: float = 1e-9, raise_error: bool = False):
         """See :func:`core.border.check_partition_of_unity`."""
         return check_partition_of_unity(self, uv, tol, raise_error)

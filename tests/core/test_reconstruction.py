@@ -1291,6 +1291,43 @@ def test_distances_recover_known_offsets_along_the_normal():
         np.testing.assert_allclose(surf.closest_parameters(p), uv, rtol=0, atol=1e-5)
 
 
+def test_closest_points_of_a_cloud_s_data_take_one_descent_but_agree_with_two(monkeypatch):
+    """A cloud's points near its surface descend from their projection only, not also from
+    the nearest tessellation vertex, when that start is within CLOSEST_SAME_BASIN steps of where
+    they ended (2.6x faster at a fit's data points); at the data of a fit with a sharp step the
+    distances agree with those of both descents to 1e-6 of the diagonal (4.8e-5 at 20 of
+    the 10 000 points of the step tile, where the nearest start found a closer place on the
+    step's wall), and at points farther off the surface both are more often taken."""
+    xy = np.random.default_rng(5).random((6000, 2))
+    z = 0.3 * np.tanh((xy[:, 0] + 0.3 * xy[:, 1] - 0.6) / 0.01) + 0.1 * np.sin(5 * xy[:, 1])
+    z += np.random.default_rng(6).normal(0, 2e-3, len(z))
+    data = np.c_[xy, z]
+    surf = fit_surface(data, tolerance=2e-3, max_control_points=600)
+    v, _ = surf.tessellate(96)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    off = np.random.default_rng(7).uniform(lo - 0.2 * (hi - lo), hi + 0.2 * (hi - lo), (3000, 3))
+    calls = []
+    newton = TCBSurface._newton_closest
+
+    def counted(self, p, *args, **kw):
+        calls.append(len(p))
+        return newton(self, p, *args, **kw)
+
+    monkeypatch.setattr(TCBSurface, "_newton_closest", counted)
+    one = {"data": surf.distances(data)}
+    assert calls[0] == len(data) and calls[1] < 0.05 * len(data)  # (the second descent's)
+    calls.clear()
+    one["off"] = surf.distances(off)
+    assert calls[1] > 0.3 * len(off)  # (1322 of 3000)
+    monkeypatch.setattr(core.surface, "CLOSEST_SAME_BASIN", -1.0)  # every point, both starts
+    both = {"data": surf.distances(data), "off": surf.distances(off)}
+    diag = surf.report["diagonal"]
+    for k in one:
+        assert np.all(one[k] >= both[k] - 1e-12 * diag)
+        assert np.all(one[k] <= both[k] + 1e-6 * diag)  # (1.0e-9 and 2.1e-10 measured)
+    assert np.all(one["data"] <= surf.errors * (1 + 1e-9) + 1e-12)
+
+
 def test_the_surface_is_nan_where_its_basis_is_not_a_partition_of_unity(nefertiti):
     """Beyond the border rings the basis fades to 0 and the surface would be pulled towards the
     origin: there the surface, its derivatives and normals are NaN, and covers() says so; the

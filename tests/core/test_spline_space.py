@@ -109,6 +109,27 @@ def test_derivatives_match_central_differences(mode, degree):
         check(der, fd)
 
 
+@pytest.mark.parametrize("mode", ["tcb", "dcb"])
+def test_combine_is_the_product_of_the_basis_with_the_coefficients(mode):
+    """``combine`` (the surface and its derivatives without the sparse matrices, for closest
+    points) equals ``evaluate(x, d) @ c`` to rounding, for one or several columns and for
+    points outside every support (0 there), in more blocks than one."""
+    space = build_space(knot_set("random", 80, 2, seed=3), 2, mode=mode)
+    rng = np.random.default_rng(8)
+    x = np.vstack([rng.uniform(-0.1, 1.1, (9000, 2)), [[5.0, 5.0]]])
+    ders = [(0, 0), (1, 0), (0, 1), (2, 0), (1, 1)]
+    for c in (rng.normal(size=(space.n_basis, 3)), rng.normal(size=space.n_basis)):
+        got = space.combine(x, c, ders)
+        for d, g in zip(ders, got):
+            want = space.evaluate(x, d) @ c
+            assert g.shape == want.shape
+            np.testing.assert_allclose(g, want, rtol=0, atol=1e-12 * np.abs(want).max())
+        assert np.all(got[0][-1] == 0)  # (far outside: no function there)
+    assert [g.shape for g in space.combine(np.zeros((0, 2)), c, ders[:2])] == [(0,), (0,)]
+    with pytest.raises(ValueError, match="rows"):
+        space.combine(x, c[:-1])
+
+
 @pytest.mark.parametrize("degree", [2, 3])
 @pytest.mark.parametrize("kind", ["random", "hex"])
 def test_last_level_link_triangulation_does_not_change_tcb_basis(degree, kind):
