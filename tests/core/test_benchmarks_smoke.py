@@ -57,3 +57,16 @@ def test_net_size_quick():
         fixed_cp, fixed_rms, sized_cp, sized_rms = int(r[2]), r[3], int(r[6]), r[7]
         assert sized_cp <= fixed_cp, r
         assert "*" not in sized_rms or "*" in fixed_rms, r
+
+
+def test_bench_closest_quick():
+    """``benchmarks/bench_closest.py --quick`` prints its four rows; the search as shipped is
+    at most 1e-4 of the diagonal farther than the one from every start, and the nearest
+    tessellation vertex (the peer) is never closer than the surface."""
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_closest.py"),
+                          "--quick"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = [r.split() for r in res.stdout.splitlines()[1:]]
+    assert [r[:2] for r in rows] == [[d, w] for d in ("franke", "dem") for w in ("data", "around")]
+    for r in rows:
+        assert float(r[8]) <= 1e-4 and float(r[12]) >= -1e-12, r

@@ -349,7 +349,10 @@ def test_ctrl_c_during_a_fit_is_one_line(tmp_path):
     proc = subprocess.Popen(
         [sys.executable, "-m", "core", "fit", str(tmp_path / "c.xyz"), "-o",
          str(tmp_path / "c.obj"), "--tolerance", "1e-6"],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        # (a suite started in the background of a shell without job control inherits SIGINT
+        # ignored, and Python then keeps ignoring it: the fit ran to its end)
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     first = proc.stderr.readline()  # "read ...": main() runs, the fit is next
     assert first.startswith("read "), first
     proc.send_signal(signal.SIGINT)
