@@ -51,9 +51,10 @@ class SingularSystemError(TCBError):
 
 
 class CancelledError(TCBError):
-    """Not raised by the engine (kept as a name for code that catches it).
+    """A callback of ``TCBSurface.closest_points`` (``closest_parameters``, ``distances``)
+    returned True: the computation stopped and has no result.
 
-    A callback that returns True ends the fit early without an exception: ``fit_surface`` and
-    ``TCBSurface.refine`` return the best surface so far, with
+    A fit's callback that returns True ends the fit early without an exception:
+    ``fit_surface`` and ``TCBSurface.refine`` return the best surface so far, with
     ``report["stop_reason"] == "cancelled"``.
     """

@@ -33,7 +33,7 @@ import scipy.sparse as sp
 from scipy.spatial import Delaunay, cKDTree
 
 from .configurations import Configurations
-from .errors import FileFormatError, InvalidInputError, TCBError
+from .errors import CancelledError, FileFormatError, InvalidInputError, TCBError
 from .fit import (AUTO_SMOOTHNESS, DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL,
                   SPARSE_SMOOTHNESS, DefaultSmoothness, fit_control_points)
 from .geometry import column_bounds, float32_rounding
@@ -61,6 +61,9 @@ MIN_ASPECT = 1e-3
 # 96-step tessellation from where their projection's descent ended
 CLOSEST_DISTANCE_TOL = 1e-9
 CLOSEST_SAME_BASIN = 2.0
+# closest points are computed in chunks of this many points: a callback hears of each (progress,
+# cancellation) and the descent's work arrays stay bounded (1e6 points in 16 chunks)
+CLOSEST_CHUNK = 1 << 16
 # the finest tessellation (grid steps along the longer side): 2048 took about a minute and 2
 # GiB, 3000 86 s and 3.7 GB (user test)
 MAX_RESOLUTION = 4096
@@ -459,7 +462,7 @@ class TCBSurface:
         return edited
 
     # ---- distances ---------------------------------------------------------------------
-    def closest_parameters(self, points, iterations: int = 8) -> np.ndarray:
+    def closest_parameters(self, points, iterations: int = 8, callback=None) -> np.ndarray:
         """Parameters (m, 2) of the surface points closest to ``points`` (m, 3).
 
         Start at the nearest vertex of a fine tessellation (and, for clouds, also at the point's
@@ -469,18 +472,24 @@ class TCBSurface:
         a closest point on the edge; a cloud's domain is its convex hull, so in a concave
         cloud's notch, which :meth:`tessellate` leaves out, there is surface too); the better
         result is returned.
-        """
-        return self._closest(points, iterations)[0]
 
-    def closest_points(self, points, iterations: int = 8) -> np.ndarray:
+        ``callback``, if given, is called with ``{"points_done": k, "points": m}`` before the
+        first chunk of :data:`CLOSEST_CHUNK` points and after each (k of the m points done);
+        if it returns True the computation stops with :class:`CancelledError` (nothing
+        partial is returned). The chunks do not change the result: every point is computed
+        on its own.
+        """
+        return self._closest(points, iterations, callback)[0]
+
+    def closest_points(self, points, iterations: int = 8, callback=None) -> np.ndarray:
         """The surface points (m, 3) closest to ``points`` (m, 3): ``S`` at
         :meth:`closest_parameters` (the feet of the points on the trimmed surface; their
-        distances are :meth:`distances`)."""
-        return self._closest(points, iterations)[2]
+        distances are :meth:`distances`). ``callback``: as for :meth:`closest_parameters`."""
+        return self._closest(points, iterations, callback)[2]
 
-    def _closest(self, points, iterations: int = 8):
+    def _closest(self, points, iterations: int = 8, callback=None):
         """:meth:`closest_parameters`, the distances ``|S(x) - p|`` and the surface points ``S(x)``
-        there: (m, 2), (m,), (m, 3)."""
+        there: (m, 2), (m,), (m, 3), in chunks of :data:`CLOSEST_CHUNK` points."""
         steps = _whole(iterations)
         if steps is None or steps < 0:
             raise InvalidInputError(
@@ -509,20 +518,32 @@ class TCBSurface:
         data, _ = self._data_parameters()
         starts = np.vstack([uv_t, np.clip(data[:: max(1, len(data) // 20_000)], lo, hi)])
         at = self(starts)
-        near, nearest = cKDTree(at).query(p)
+        tree = cKDTree(at)
         # the size of the surface (for when a step no longer changes a distance) and its
         # tessellation's longest edge (no surface point is farther from a start)
         size = float(np.linalg.norm(np.ptp(at, axis=0)))
         edge = float(np.linalg.norm(at[tri] - at[tri[:, [1, 2, 0]]], axis=2).max())
-        x, d, S = self._descend(p, starts[nearest], lo, hi, steps, None, size, near, edge)
-        # the steps above stay in the domain's box; the few that ended outside the domain (on
-        # the extension over the border rings) are redone from the same starts with every step
-        # kept in the domain (clamping all points' steps to the polygon made points outside a
-        # 596-edge mesh 9x slower)
-        out = np.flatnonzero(~self._in_domain(x))
-        if len(out):
-            x[out], d[out], S[out] = self._descend(p[out], starts[nearest[out]], lo, hi, steps,
-                                                   self._into_domain, size, near[out], edge)
+        m = len(p)
+        x, d, S = np.empty((m, 2)), np.empty(m), np.empty((m, 3))
+        for s in range(0, m, CLOSEST_CHUNK):
+            if callback is not None and callback({"points_done": s, "points": m}):
+                raise CancelledError(f"closest points cancelled after {s} of {m} points")
+            c = slice(s, s + CLOSEST_CHUNK)
+            near, nearest = tree.query(p[c], workers=-1)
+            xc, dc, Sc = self._descend(p[c], starts[nearest], lo, hi, steps, None, size, near,
+                                       edge)
+            # the steps above stay in the domain's box; the few that ended outside the domain
+            # (on the extension over the border rings) are redone from the same starts with
+            # every step kept in the domain (clamping all points' steps to the polygon made
+            # points outside a 596-edge mesh 9x slower)
+            out = np.flatnonzero(~self._in_domain(xc))
+            if len(out):
+                xc[out], dc[out], Sc[out] = self._descend(
+                    p[c][out], starts[nearest[out]], lo, hi, steps, self._into_domain, size,
+                    near[out], edge)
+            x[c], d[c], S[c] = xc, dc, Sc
+        if callback is not None:
+            callback({"points_done": m, "points": m})
         return x, d, S
 
     def _descend(self, p, x, lo, hi, steps, keep_in, size, near, edge):
@@ -673,9 +694,10 @@ class TCBSurface:
             active = np.concatenate([idx, worse[scale[worse] >= 0.25**3]])
         return x, dist, S
 
-    def distances(self, points) -> np.ndarray:
-        """Distance (m,) of ``points`` (m, 3) to the surface (closest point, see above)."""
-        return self._closest(points)[1]
+    def distances(self, points, callback=None) -> np.ndarray:
+        """Distance (m,) of ``points`` (m, 3) to the surface (closest point, see above;
+        ``callback`` as for :meth:`closest_parameters`)."""
+        return self._closest(points, callback=callback)[1]
 
     # ---- refinement --------------------------------------------------------------------
     def fitted_to(self, points) -> bool:

@@ -68,14 +68,31 @@ def clear_cache():
 
 
 def progress_text(report: dict | None, what: str = "Fitting") -> str:
+    """The status-bar line of a running job: a fit's iteration report, or the closest
+    points' ``{"points_done", "points"}``."""
     if not report:
         return f"TCB: {what}... (Esc to cancel)"
+    if "points_done" in report:
+        return (f"TCB: {what}, {progress_percent(report)}% of {report['points']:,} points "
+                "(Esc to cancel)")
     parts = [f"TCB: {what}", f"iteration {report.get('iteration', '?')}"]
     if "control_points" in report:
         parts.append(f"{report['control_points']} control points")
     if "rms_rel" in report and "max_rel" in report:
         parts.append(f"RMS {report['rms_rel']:.3g}, max {report['max_rel']:.3g} of diagonal")
     return ", ".join(parts) + " (Esc to cancel)"
+
+
+def progress_percent(report: dict | None, iteration_offset: int = 0,
+                     max_iterations: int = 20) -> int:
+    """How far a running job is, 0-99 (the progress bar): the share of the points done, or
+    this run's iterations of ``max_iterations`` (Refine's reports go on from the fit's
+    numbers: ``iteration_offset``)."""
+    report = report or {}
+    if "points_done" in report:
+        return min(99, int(100 * report["points_done"] / max(1, report["points"])))
+    it = report.get("iteration", 0) - iteration_offset
+    return min(99, max(0, int(100 * it / max(1, max_iterations))))
 
 
 def result_objects(obj):
@@ -425,6 +442,8 @@ class _Job:
 
 
 def _print_progress(report, what: str = "Fitting"):
+    if "points_done" in report and report["points"] <= _core().surface.CLOSEST_CHUNK:
+        return  # (one chunk: nothing to follow)
     print(progress_text(report, what).replace(" (Esc to cancel)", ""), flush=True)
 
 
@@ -487,10 +506,9 @@ class _EngineOperator:
         if not job.done:
             if not job.cancel:
                 self._status(context, progress_text(job.progress, self._what))
-            # this run's iterations (Refine's reports go on from the fit's numbers)
-            it = (job.progress or {}).get("iteration", 0) - getattr(self, "_iteration_offset", 0)
-            maxit = max(1, getattr(self, "max_iterations", 20))
-            context.window_manager.progress_update(min(99, int(100 * it / maxit)))
+            context.window_manager.progress_update(progress_percent(
+                job.progress, getattr(self, "_iteration_offset", 0),
+                getattr(self, "max_iterations", 20)))
             return {"RUNNING_MODAL"}
         self._cleanup(context)
         if job.cancel:
@@ -819,7 +837,7 @@ NO_DATA_COLOR = (0.5, 0.5, 0.5)
 NO_DATA_KEY = "tcb_deviation_no_data"
 
 
-class TCB_OT_deviation_map(bpy.types.Operator):
+class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
     """Color the active TCB surface by how far the input data is from it, and store the distance
     of every input point to the surface on a copy of the input points"""
 
@@ -834,6 +852,9 @@ class TCB_OT_deviation_map(bpy.types.Operator):
     bl_idname = "tcb.deviation_map"
     bl_label = "Deviation Map"
     bl_options = {"REGISTER", "UNDO"}
+    # the distances are computed on a thread, with the progress in the status bar and Esc to
+    # cancel (1e6 points of a cloud take about 15 s: it had blocked Blender with no progress)
+    _what = "Deviation Map"
 
     points_copy: BoolProperty(
         name="Copy of Input Points", default=True,
@@ -844,21 +865,19 @@ class TCB_OT_deviation_map(bpy.types.Operator):
     def poll(cls, context):
         return context.mode == "OBJECT" and active_surface(context) is not None
 
-    def execute(self, context):
+    def prepare(self, context):
         surface = active_surface(context)
-        try:
-            if surface is None:
-                raise bridge.SelectionError("Select a TCB surface (or its control net)")
-            data = source_data(context, surface)
-            surf = stored_surface(surface)
-            if data.faces is None:  # a cloud: also the closest surface points (feet)
-                feet = np.asarray(surf.closest_points(data.points), dtype=np.float64)
-                data_dist = np.linalg.norm(feet - data.points, axis=1)
-            else:
-                data_dist = np.abs(np.asarray(surf.distances(data.points), dtype=np.float64))
-        except _user_errors() as ex:
-            self.report({"ERROR"}, str(ex))
-            return {"CANCELLED"}
+        if surface is None:
+            raise bridge.SelectionError("Select a TCB surface (or its control net)")
+        data = source_data(context, surface)
+        surf = stored_surface(surface)
+        self._surface, self._data, self._surf = surface, data, surf
+        return ("run", _data_distances, dict(surf=surf, points=data.points,
+                                             cloud=data.faces is None))
+
+    def finish(self, context, result):
+        surface, data, surf = self._surface, self._data, self._surf
+        feet, data_dist = result
         moved = moved_note(surface, "the colors are painted on it where it is now, the "
                                     "distances are those to the spline (Re-tessellate puts it back)")
         # the source moved or edited since the fit: the distances measure that, not the fit
@@ -950,6 +969,15 @@ class TCB_OT_deviation_map(bpy.types.Operator):
         if changed:
             self.report({"WARNING"}, f"TCB: {changed}")
         return {"FINISHED"}
+
+
+def _data_distances(surf, points, cloud, callback=None):
+    """The Deviation Map's engine part (on the job's thread): (feet, distances) of the data
+    points; a cloud's feet are its closest surface points, a mesh needs none (None)."""
+    if cloud:
+        feet = np.asarray(surf.closest_points(points, callback=callback), dtype=np.float64)
+        return feet, np.linalg.norm(feet - points, axis=1)
+    return None, np.abs(np.asarray(surf.distances(points, callback=callback), dtype=np.float64))
 
 
 def _show_attribute_colors(context):

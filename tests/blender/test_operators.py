@@ -712,6 +712,47 @@ def test_worker_job_cancels_and_reports_progress(installed, addon):
     assert job.result is not None  # the best surface so far; the modal operator discards it
 
 
+def test_deviation_map_runs_in_chunks_with_progress_and_esc(clean_scene, addon, monkeypatch,
+                                                             capfd):
+    """The Deviation Map's closest points run as a job (on a thread in the UI, with the share
+    of the points done in the status bar and Esc to cancel): its progress reports, the
+    percentages shown, a cancelled job's CancelledError (the modal operator then reports
+    "cancelled; nothing was changed"), and in the background the progress lines when there is
+    more than one chunk; the distances are those of one pass."""
+    bpy = clean_scene
+    ops = sys.modules[ADDON + ".tcb_addon.operators"]
+    core = core_module()
+    verts, _ = grid(16)
+    obj = add_mesh(bpy, "Cloud", verts)  # no faces: a point cloud
+    assert fit(bpy, obj, tolerance=5e-3, resolution=8) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    surf = ops.stored_surface(surface)
+    monkeypatch.setattr(core.surface, "CLOSEST_CHUNK", 100)
+    job = ops._Job(ops._data_distances, dict(surf=surf, points=verts, cloud=True)).start()
+    job.thread.join(120)
+    assert job.done and job.error is None
+    feet, dist = job.result
+    assert job.progress == {"points_done": 256, "points": 256}
+    np.testing.assert_array_equal(dist, np.linalg.norm(surf.closest_points(verts) - verts, axis=1))
+    half = {"points_done": 128, "points": 256}
+    assert ops.progress_text(half, "Deviation Map") == (
+        "TCB: Deviation Map, 50% of 256 points (Esc to cancel)")
+    assert ops.progress_percent(half) == 50 and ops.progress_percent(job.progress) == 99
+    assert ops.progress_percent({"iteration": 7}, 2, 10) == 50  # (a Refine's fit reports)
+    job = ops._Job(ops._data_distances, dict(surf=surf, points=verts, cloud=False))
+    job.cancel = True  # as Esc does: it stops before the first chunk
+    job.start()
+    job.thread.join(120)
+    assert isinstance(job.error, core.CancelledError) and job.result is None
+    capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.deviation_map(points_copy=False) == {"FINISHED"}
+    out = capfd.readouterr().out
+    for done in ("0%", "39%", "78%", "99%"):
+        assert f"TCB: Deviation Map, {done} of 256 points\n" in out, out
+    assert surface.tcb.deviation_data_max == pytest.approx(dist.max(), abs=1e-6)
+
+
 def test_core_error_mid_fit_leaves_the_scene_as_it_was(clean_scene, addon, monkeypatch):
     """An exception raised by the engine during an iteration: ERROR report, CANCELLED, no new
     objects, the source untouched (issue 6, interruption)."""

@@ -10,6 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from core import (
+    CancelledError,
     FileFormatError,
     InvalidInputError,
     TCBError,
@@ -1358,6 +1359,33 @@ def test_closest_points_of_a_cloud_s_data_take_one_descent_but_agree_with_two(mo
         assert np.all(one[k] >= both[k] - 1e-12 * diag)
         assert np.all(one[k] <= both[k] + 1e-6 * diag)  # (1.0e-9 and 2.1e-10 measured)
     assert np.all(one["data"] <= surf.errors * (1 + 1e-9) + 1e-12)
+
+
+def test_closest_points_in_chunks_report_progress_cancel_and_equal_one_pass(nefertiti,
+                                                                            monkeypatch):
+    """Closest points run in chunks of CLOSEST_CHUNK points (Blender's Deviation Map shows
+    the progress and Esc stops it): the callback hears of 0, each chunk and the end; the
+    result is that of one pass bit for bit (each point is computed on its own); a callback
+    that returns True stops it with CancelledError and nothing else."""
+    surf = nefertiti[2]
+    v, _ = surf.tessellate(40)
+    rng = np.random.default_rng(3)
+    p = v[rng.integers(0, len(v), 1000)] + rng.normal(0, 0.02 * surf.report["diagonal"], (1000, 3))
+    monkeypatch.setattr(core.surface, "CLOSEST_CHUNK", 10**9)
+    whole = surf._closest(p)
+    monkeypatch.setattr(core.surface, "CLOSEST_CHUNK", 300)
+    reports = []
+    chunked = surf._closest(p, callback=lambda r: reports.append(dict(r)))
+    for a, b in zip(whole, chunked):
+        np.testing.assert_array_equal(a, b)
+    assert [r["points_done"] for r in reports] == [0, 300, 600, 900, 1000]
+    assert all(r["points"] == 1000 for r in reports)
+    np.testing.assert_array_equal(surf.distances(p, callback=lambda r: False), whole[1])
+    seen = []
+    with pytest.raises(CancelledError, match="cancelled after 600 of 1000 points"):
+        surf.closest_points(p, callback=lambda r: seen.append(r["points_done"]) or
+                            r["points_done"] >= 600)
+    assert seen == [0, 300, 600]
 
 
 def test_the_surface_is_nan_where_its_basis_is_not_a_partition_of_unity(nefertiti):
