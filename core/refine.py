@@ -507,30 +507,40 @@ def swing_places(space, C, uv, points, errors, seed: int = 0,
         return np.zeros((0, 2)), 0, 0.0
     S = space.evaluate(places) @ C
     away, at = [], 0
+    reach_of = [q[2] for q in parts]
+    # above rounding: duplicated points of exact data give zero-length segments (review: 1e-12)
+    floor = max(margin, 1e-9 * float(np.ptp(p, axis=0).max()))
     for where, corners, _ in parts:
         m = len(where)
         Sm = S[at : at + m]
         if len(corners) == 2:
             away.append(_segment_distance(Sm, corners[0], corners[1] - corners[0]))
+        elif len(corners) == 4:  # a hull edge: its segment, and the slab of its neighbours
+            pa, pb, slab, slab_reach = corners
+            seg = _segment_distance(Sm, pa, pb - pa) - reach_of[len(away)]
+            off = _slab_distance(Sm, *slab) - slab_reach
+            # flagged only when both are exceeded, by the segment's excess (the measure of
+            # the others; + its reach, which is subtracted below)
+            away.append(np.where(off > floor, seg, np.minimum(seg, off)) + reach_of[len(away)])
         elif len(corners) == 3:
             away.append(_triangle_distance(Sm, *corners))
         else:  # a slab: centre, normal, lowest and highest neighbour along it, a marker
-            c, nrm, lo, hi, _ = corners
-            h = np.einsum("ij,ij->i", Sm - c, nrm)
-            away.append(np.maximum(h - hi, lo - h))
+            away.append(_slab_distance(Sm, *corners[:4]))
         at += m
-    excess = np.concatenate(away) - np.concatenate([q[2] for q in parts])
-    # above rounding: duplicated points of exact data give zero-length segments (review: 1e-12)
-    flagged = excess > max(margin, 1e-9 * float(np.ptp(p, axis=0).max()))
+    excess = np.concatenate(away) - np.concatenate(reach_of)
+    flagged = excess > floor
     return places[flagged], len(places), float(excess.max()) if flagged.any() else 0.0
 
 
 def _domain_checks(x, p, e, tree) -> list:
     """The domain checks of :func:`swing_places` for the parameters ``x`` (points ``p``, errors
-    ``e``; ``tree`` a KD-tree of ``x``): parts ``(places, corners, reach)``. The convex hull's edges (between neighbouring
-    points on it, at most SWING_GAP_SPAN times their median length) at 1/4, 1/2 and 3/4
-    (segments: the surface within the edge's length plus 3 times its ends' largest error of
-    the edge), and a grid of SWING_GRID places per side inside the hull, within SWING_NEAR
+    ``e``; ``tree`` a KD-tree of ``x``): parts ``(places, corners, reach)``. The convex
+    hull's edges (between neighbouring points on it, at most SWING_GAP_SPAN times their
+    median length) at 1/4, 1/2 and 3/4 (segments: the surface within the edge's length plus 3
+    times its ends' largest error of the edge; flagged only when it is also outside the slab
+    of the place's SWING_SLAB_NEIGHBOURS nearest points, see below, by more than 3 times their
+    largest error), and a grid of SWING_GRID places per side inside the hull, within
+    SWING_NEAR
     data spacings (or a grid step) of a data point: the surface within
     ``3 max e + max(SWING_SLAB (t + 0.05 w), SWING_REACH r)`` of the slab of the place's
     SWING_SLAB_NEIGHBOURS nearest points (their principal frame: ``t`` their thickness along
@@ -558,7 +568,20 @@ def _domain_checks(x, p, e, tree) -> list:
     pa, pb = np.repeat(p[a], 3, axis=0), np.repeat(p[b], 3, axis=0)
     reach = (np.linalg.norm(pb - pa, axis=1)
              + 3.0 * np.repeat(np.maximum(e[a], e[b]), 3))
-    parts = [(where, (pa, pb), reach)]
+    k = min(SWING_SLAB_NEIGHBOURS, len(x))
+    if len(where) and k >= 4:
+        # and outside the slab of the place's nearest data points by more than 3 times their
+        # largest error: the chord of a long edge of a steep surface is no bound (F7 with 3x
+        # its heights, 5000 points: the surface bent 5.9 off a chord 0.3 long, as the
+        # function does, inside that slab and within 0.08 of the function; flagged, the
+        # default was replaced by a smoothness 31x worse in cross-validation). The grid's
+        # reach would be too loose at a coarse mesh's border (nefertiti with smoothness 1e-7
+        # flares 0.029 diagonals past the chord rule, 0.010 outside the slab, within its
+        # reach of 0.059)
+        slab, slab_reach = _slabs(p, e, tree.query(where, k=k, workers=-1)[1], 0.0, 0.0)
+        parts = [(where, (pa, pb, slab, slab_reach), reach)]
+    else:
+        parts = [(where, (pa, pb), reach)]
     lo, hi = x.min(axis=0), x.max(axis=0)
     d = float((hi - lo).max()) / SWING_GRID
     g = [np.arange(lo[j] + d / 2, hi[j], d) for j in range(2)]
@@ -567,7 +590,6 @@ def _domain_checks(x, p, e, tree) -> list:
     # 100-300 s on the 20 000-point sample of a 1e5 fit)
     hull = ConvexHull(x)
     grid = grid[(grid @ hull.equations[:, :2].T + hull.equations[:, 2] <= 1e-12).all(axis=1)]
-    k = min(SWING_SLAB_NEIGHBOURS, len(x))
     if len(grid) and k >= 4:
         # near the data only: not in a hole or a notch inside the hull, where the surface is
         # not shown (the tessellation trims it) and extrapolates (review: a hole of radius
@@ -577,19 +599,35 @@ def _domain_checks(x, p, e, tree) -> list:
         near = dist[:, 0] <= max(SWING_NEAR * step, d)
         grid, nb = grid[near], nb[near]
     if len(grid) and k >= 4:
-        Q = p[nb]
-        c = Q.mean(axis=1)
-        X = Q - c[:, None]
-        _, R = np.linalg.eigh(np.einsum("mki,mkj->mij", X, X))  # axes by ascending spread
-        nrm = R[:, :, 0]
-        h = np.einsum("mki,mi->mk", X, nrm)
-        along = np.einsum("mki,mi->mk", X, R[:, :, 2])
-        thick, width = np.ptp(h, axis=1), np.ptp(along, axis=1)
-        radius = np.linalg.norm(X, axis=2).max(axis=1)
-        reach = 3.0 * e[nb].max(axis=1) + np.maximum(SWING_SLAB * (thick + 0.05 * width),
-                                                     SWING_REACH * radius)
-        parts.append((grid, (c, nrm, h.min(axis=1), h.max(axis=1), "slab"), reach))
+        slab, reach = _slabs(p, e, nb)
+        parts.append((grid, slab + ("slab",), reach))
     return parts
+
+
+def _slabs(p, e, nb, slab_factor: float = SWING_SLAB, reach_factor: float = SWING_REACH):
+    """The slabs of the neighbours ``nb`` (m, k) of places (points ``p``, errors ``e``) for
+    :func:`_domain_checks`: ((centre, normal, lowest and highest neighbour along it), how
+    far a surface point may be off it: ``3 max e + max(slab_factor (t + 0.05 w),
+    reach_factor r)``)."""
+    Q = p[nb]
+    c = Q.mean(axis=1)
+    X = Q - c[:, None]
+    _, R = np.linalg.eigh(np.einsum("mki,mkj->mij", X, X))  # axes by ascending spread
+    nrm = R[:, :, 0]
+    h = np.einsum("mki,mi->mk", X, nrm)
+    along = np.einsum("mki,mi->mk", X, R[:, :, 2])
+    thick, width = np.ptp(h, axis=1), np.ptp(along, axis=1)
+    radius = np.linalg.norm(X, axis=2).max(axis=1)
+    reach = 3.0 * e[nb].max(axis=1) + np.maximum(slab_factor * (thick + 0.05 * width),
+                                                 reach_factor * radius)
+    return (c, nrm, h.min(axis=1), h.max(axis=1)), reach
+
+
+def _slab_distance(S, c, nrm, lo, hi):
+    """How far the points ``S`` (m, 3) are outside their slabs (:func:`_slabs`), along the
+    slabs' normals (negative inside)."""
+    h = np.einsum("ij,ij->i", S - c, nrm)
+    return np.maximum(h - hi, lo - h)
 
 
 def _gap_checks(knot_tree, x, p, e, T, seed):

@@ -751,6 +751,32 @@ def test_a_mesh_flaring_out_at_its_border_is_reported(smoothness, beyond):
     assert np.ptp(v, axis=0).max() > (1 + beyond) * np.ptp(points, axis=0).max()  # it is there
 
 
+def test_a_steep_surface_bending_between_points_of_its_hull_is_no_swing():
+    """Renka's F7 with 3x its heights on 5000 random points: between neighbouring points of
+    the convex hull 0.3 apart the surface bends up to 5.9 off their chord, as the function
+    does. The chord rule alone flagged 6 such places, and a default fit then had its
+    smoothness replaced by 100 (1.0 RMS off the function instead of 0.03). A hull place is
+    flagged only when the surface is also outside the slab of its nearest data points (the
+    flaring mesh above still is)."""
+    xy = np.random.default_rng(0).random((5000, 2))  # benchmarks/datasets.py's sample
+
+    def f7(x, y):
+        return 3.0 * (2.0 * np.cos(10 * x) * np.sin(10 * y) + np.sin(10 * x * y))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        surf = fit_surface(np.c_[xy, f7(*xy.T)], smoothness=1e-3)
+    assert surf.report["swings"]["places"] == 0 and surf.report["swings"]["checked"] > 5000
+    g = np.linspace(0.02, 0.98, 60)
+    grid = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    truth = np.c_[grid, f7(*grid.T)]
+    uv = surf.parameterization.project(truth)
+    ok = surf.covers(uv)
+    d = surf(uv[ok])[:, 2] - truth[ok, 2]
+    assert ok.mean() > 0.99
+    assert np.sqrt(np.mean(d**2)) < 0.03 and np.abs(d).max() < 0.2  # of 15 (0.015, 0.083)
+
+
 def test_an_insertion_that_makes_the_surface_swing_is_taken_back(monkeypatch):
     """The step tile of the test above: each insertion after which the surface swings between
     the data (core.refine.swing_places) is taken back and made again away from the places
