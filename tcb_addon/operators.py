@@ -357,6 +357,10 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
                   "value set by hand follows the points more closely)")
     elif reason == "cancelled":
         op.report({"WARNING"}, f"{text}; stopped early (cancelled): the best surface so far")
+    elif reason == _core().refine.STALLED and _core().surface.far_stall(rep):
+        # not noise: the engine's warning (among the notes) says why and what to do
+        op.report({"WARNING"}, f"{text}; the tolerance was not reached: {reason} far above "
+                  "the data's noise")
     elif reason == _core().refine.STALLED:
         opts = surf.options  # the settings of this fit
         what = "max" if str(opts.criterion).lower() == "max" else "RMS"
