@@ -540,8 +540,7 @@ def _domain_checks(x, p, e, tree) -> list:
     times its ends' largest error of the edge; flagged only when it is also outside the slab
     of the place's SWING_SLAB_NEIGHBOURS nearest points, see below, by more than 3 times their
     largest error), and a grid of SWING_GRID places per side inside the hull, within
-    SWING_NEAR
-    data spacings (or a grid step) of a data point: the surface within
+    SWING_NEAR data spacings (or a grid step) of a data point: the surface within
     ``3 max e + max(SWING_SLAB (t + 0.05 w), SWING_REACH r)`` of the slab of the place's
     SWING_SLAB_NEIGHBOURS nearest points (their principal frame: ``t`` their thickness along
     the normal, ``w`` their width along the first axis, ``r`` their largest distance from
