@@ -857,7 +857,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
     bl_label = "Deviation Map"
     bl_options = {"REGISTER", "UNDO"}
     # the distances are computed on a thread, with the progress in the status bar and Esc to
-    # cancel (1e6 points of a cloud take about 15 s: it had blocked Blender with no progress)
+    # cancel (1e6 points of a cloud take about 13 s: it had blocked Blender with no progress)
     _what = "Deviation Map"
 
     points_copy: BoolProperty(
