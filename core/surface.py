@@ -1595,9 +1595,10 @@ SMOOTHER_MAX_LOSS = 3.0
 # data: 0.07% at most, though up to 21x), the folded one 3.2% and 8.1x
 # Noise larger than the data's spacing makes the scatter too small (local_scatter): it is
 # trusted when at least FAR_STALL_DISKS of the neighbourhoods are thin disks. The review's
-# noise clouds that set off the warning (a plane and Franke's function, 3000-20 000 points,
-# noise 1-5% of the extent, and a DEM tile with 2%: 4.1-5.8x) had 5-9%; the folded one 31%,
-# the same grid not turned 32%, Franke 3000 with 1% noise 48% (/tmp/s20/rel.py)
+# noise clouds (a plane and Franke's function, 3000-20 000 points, noise 1-5% of the extent,
+# and a DEM tile with 2%; those with 3-5% and the tile had set off the warning at 4.1-5.8x)
+# have 5-9%; the folded one 31%, the same grid not turned 32%, Franke 3000 with 1% noise 48%
+# (/tmp/s20/rel.py)
 FAR_STALL_RMS = 0.01
 FAR_STALL_SCATTER = 4.0
 FAR_STALL_DISKS = 0.2
@@ -1703,8 +1704,9 @@ def far_stall_warning(report: dict) -> str:
     return (f"the error stopped falling with the data {d:.4g} from the surface (RMS of their "
             f"distances, {100 * d / report['diagonal']:.1f}% of the diagonal), "
             f"{d / max(report['scatter'], 1e-300):.0f} times their scatter about their local "
-            f"planes ({report['scatter']:.3g}): that is not noise. The cloud may fold over the plane it was projected on (parts of it "
-            "seen edge-on, or overlapping in projection): give the direction it faces "
+            f"planes ({report['scatter']:.3g}): that is not noise. The cloud may fold over "
+            "the plane it was projected on (parts of it seen edge-on, or overlapping in "
+            "projection): give the direction it faces "
             "(projection=, on the command line --projection, in Blender the Projection "
             "option), split it into patches that each face one direction, or supply a mesh of "
             "disk topology (with faces)")
