@@ -180,6 +180,7 @@ def fit_control_points(
         raise InvalidInputError("weights must be N finite nonnegative numbers, one per point")
     smoothness = check_smoothness(smoothness)
 
+    unit = bool((weights == 1.0).all())
     AtA = sp.csr_matrix((n, n))
     AtP = np.zeros((n, 3))
     chunks, keep, kept_bytes = [], True, 0
@@ -196,7 +197,8 @@ def fit_control_points(
             dev = np.abs(np.asarray(A.sum(axis=1)).ravel() - 1.0)
             worst = max(worst, float(dev.max(initial=0.0)))
             n_bad += int((~(dev < PARTITION_TOL)).sum())
-        WA = sp.diags(weights[s : s + CHUNK]) @ A
+        # (equal weights of one: A itself, the same products without the diagonal's pass)
+        WA = A if unit else sp.diags(weights[s : s + CHUNK]) @ A
         AtA = AtA + A.T @ WA
         AtP += WA.T @ points[s : s + CHUNK]
         if keep and kept_bytes + A.data.nbytes + A.indices.nbytes + A.indptr.nbytes <= KEEP_BYTES:

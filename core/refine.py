@@ -305,7 +305,7 @@ def place_clear_of_lines(
             y = cand[sel] + t * (fallbacks[sel] - cand[sel])
             pos[sel] = y
             allp = np.concatenate([pool, pos])
-            _, nb = cKDTree(allp).query(y, k=K + 1)
+            _, nb = cKDTree(allp).query(y, k=K + 1, workers=-1)
             nb = nb.reshape(len(sel), K + 1)
             # drop the candidate itself (or the farthest neighbour if it is not among them)
             own = nb == (E + sel)[:, None]
@@ -321,7 +321,7 @@ def place_clear_of_lines(
             break
         # a later move may have put an earlier candidate next to a line: one more sweep for those
         allp = np.concatenate([pool, pos])
-        _, nb = cKDTree(allp).query(pos, k=K + 1)
+        _, nb = cKDTree(allp).query(pos, k=K + 1, workers=-1)
         nb = nb.reshape(M, K + 1)
         own = nb == (E + np.arange(M))[:, None]
         own[~own.any(axis=1), K] = True

@@ -1296,7 +1296,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     report["layers"] = 0.0
     if param.faces is None and param.axes is not None:  # (a mesh's faces hold one layer)
         sub = np.random.default_rng(options.seed).permutation(len(uv))[:LAYER_POINTS]
-        across = (points[used][sub] - best.space.evaluate(uv[sub]) @ C) @ np.asarray(param.axes)[2]
+        across = (points[used][sub] - best.space.combine(uv[sub], C)[0]) @ np.asarray(param.axes)[2]
         gap = data_layers(uv[sub], across, options.seed)
         # (layers closer than twice the tolerance are within it: no matter, as for swings)
         if gap > 2.0 * max(options.tolerance, 0.0) * (diagonal if options.relative else 1.0):

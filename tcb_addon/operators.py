@@ -20,8 +20,8 @@ from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
 from . import bridge, live
-from .properties import (DEFAULT_SMOOTHNESS, FIT_KEYS, MAX_RESOLUTION, FitSettings,
-                         draw_fit_settings)
+from .properties import (DEFAULT_SMOOTHNESS, FIT_KEYS, MAX_RESOLUTION, REPLACE_DESCRIPTION,
+                         FitSettings, draw_fit_settings)
 
 # Custom property of the surface object: TCBSurface.to_bytes() as base64 text. (Raw bytes
 # ID properties lose everything after the first NUL byte when an existing one is reassigned.)
@@ -552,6 +552,35 @@ class _EngineOperator:
 
 # --- Fit ----------------------------------------------------------------------------------------
 
+# Custom property of a surface object: when it was fitted (time.time()), so that Fit with
+# Replace Previous Result replaces the latest of several results of the same source
+FITTED_KEY = "tcb_fitted_at"
+
+
+def previous_result(context, sources):
+    """The surface object of the scene fitted to exactly the objects ``sources`` (the latest
+    fitted when there are several), or None."""
+    want = sorted(o.as_pointer() for o in sources)
+    found = [ob for ob in context.scene.objects
+             if ob.tcb.role == "SURFACE" and ob.type == "MESH"
+             and sorted(s.object.as_pointer() for s in ob.tcb.sources if s.object is not None)
+             == want and len(ob.tcb.sources) == len(want)]
+    if not found:
+        return None
+    return max(found, key=lambda ob: (float(ob.get(FITTED_KEY, 0.0)), ob.name))
+
+
+def _new_net(coll, name: str, surf, origin):
+    """A new control-net object of ``surf`` in ``coll``, placed at ``origin`` (the surface's:
+    the live net needs no transform)."""
+    pts, nfaces = surf.control_net()
+    net = bridge.link_new_object(coll, name, bridge.new_mesh(name, pts - origin, nfaces), origin)
+    net.display_type = "WIRE"
+    net.show_in_front = True
+    net.hide_render = True  # a viewport handle: its faces would hide the surface in renders
+    return net
+
+
 
 class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
     """Fit a smooth TCB-spline surface and its control net to the selected meshes / point clouds"""
@@ -566,6 +595,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         description="Moving control-net vertices updates the surface (Geometry Nodes modifier)",
         default=True,
     )
+    replace: BoolProperty(name="Replace Previous Result", description=REPLACE_DESCRIPTION,
+                          default=True)
 
     @classmethod
     def poll(cls, context):
@@ -628,21 +659,38 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         _cache_put(self._key, surf)
         data = self._data
         name = data.name
-        coll = bridge.result_collection(context, f"TCB {name}")
-
-        verts, faces = surf.tessellate(self.resolution)
-        origin = bridge.local_origin(verts)  # (0, 0, 0) unless far from the world origin
-        smesh = bridge.new_mesh(f"{name} TCB Surface", verts - origin, faces)
-        smesh.shade_smooth()
-        surface = bridge.link_new_object(coll, f"{name} TCB Surface", smesh, origin)
-        remember_placement(surface)
-        pts, nfaces = surf.control_net()  # same origin: the live net needs no transform
-        nmesh = bridge.new_mesh(f"{name} TCB Net", pts - origin, nfaces)
-        net = bridge.link_new_object(coll, f"{name} TCB Net", nmesh, origin)
-        net.display_type = "WIRE"
-        net.show_in_front = True
-        net.hide_render = True  # a viewport handle: its faces would hide the surface in renders
-        net.hide_set(not self.show_net)
+        previous = previous_result(context, data.sources) if self.replace else None
+        replaced = []
+        if previous is None:
+            coll = bridge.result_collection(context, f"TCB {name}")
+            verts, faces = surf.tessellate(self.resolution)
+            origin = bridge.local_origin(verts)  # (0, 0, 0) unless far from the world origin
+            smesh = bridge.new_mesh(f"{name} TCB Surface", verts - origin, faces)
+            smesh.shade_smooth()
+            surface = bridge.link_new_object(coll, f"{name} TCB Surface", smesh, origin)
+            remember_placement(surface)
+            net = _new_net(coll, f"{name} TCB Net", surf, origin)
+        else:  # the same objects, rewritten (as Refine does), at the data
+            surface = previous
+            write_surface_mesh(surface, surf, self.resolution)
+            net = live.own_net(surface)
+            if net is None or net.type != "MESH" or not net.users_collection:  # deleted
+                live.relink(surface, surf, self.resolution)  # (drops a deleted net's link)
+                coll = (surface.users_collection[0] if surface.users_collection
+                        else context.scene.collection)
+                net = _new_net(coll, f"{name} TCB Net", surf, np.zeros(3))
+                net.matrix_world = surface.matrix_world.copy()  # the surface's frame
+            write_net_mesh(net, surf)  # (in its own frame)
+            surface.tcb.sources.clear()
+            replaced.append(f"replaced the previous result '{surface.name}' (Ctrl+Z brings "
+                            "it back; turn off Replace Previous Result to keep both)")
+            if drop_deviation_points(surface):
+                replaced.append("its Deviation Points were removed (run Deviation Map again)")
+        try:
+            net.hide_set(not self.show_net)
+        except RuntimeError:  # a replaced result's net outside the current view layer
+            pass
+        surface[FITTED_KEY] = time.time()  # (the latest of several results is replaced)
 
         store_spline(surface, surf)
         st = surface.tcb
@@ -655,6 +703,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         store_stats(st, surf, {k: getattr(self, k) for k in FIT_KEYS})
         if self.live_net:
             live.attach(surface, net, surf, self.resolution)
+        else:
+            live.detach(surface)  # (a replaced result's live link)
 
         for obj in context.selected_objects:
             obj.select_set(False)
@@ -662,7 +712,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
         context.view_layer.objects.active = surface
         reused = ["the same input and settings as the last fit: its result was reused (the "
                   "seconds are that fit's)"] if getattr(self, "_reused", False) else []
-        report_result(self, surf, list(data.notes) + self._ignored + reused,
+        report_result(self, surf, list(data.notes) + self._ignored + reused + replaced,
                       _engine_notes(self), seconds=None if reused else
                       time.perf_counter() - getattr(self, "_started", time.perf_counter()))
         return {"FINISHED"}

@@ -141,6 +141,15 @@ FIT_KEYS = (
 )  # fmt: skip
 
 
+# Fit Surface run again on the same source updates its result in place (user test: every run
+# added a surface, a net and a collection, each with its stored spline, to the file)
+REPLACE_DESCRIPTION = (
+    "Fit into the existing TCB result of the same source objects: its surface, net and "
+    "collection are updated in place (materials and the object's own modifiers stay; Ctrl+Z "
+    "brings the old result back). Off: add a new result beside it"
+)
+
+
 class TCB_PG_settings(FitSettings, bpy.types.PropertyGroup):
     """Fit settings shown in the sidebar (``scene.tcb_settings``)."""
 
@@ -150,6 +159,8 @@ class TCB_PG_settings(FitSettings, bpy.types.PropertyGroup):
         description="Moving control-net vertices updates the surface (Geometry Nodes modifier)",
         default=True,
     )
+    replace: BoolProperty(name="Replace Previous Result", description=REPLACE_DESCRIPTION,
+                          default=True)
 
 
 class TCB_PG_source(bpy.types.PropertyGroup):
@@ -229,7 +240,7 @@ def draw_fit_settings(layout, owner, short_labels: bool = False) -> None:
     row.prop(owner, "relative", text="", icon="DRIVER_DISTANCE")
     for key in ("criterion", "max_control_points", "max_iterations", "degree", "mode",
                 "smoothness", "drop_outliers", "projection", "resolution", "show_net",
-                "live_net"):  # fmt: skip
+                "live_net", "replace"):  # fmt: skip
         if short_labels and key == "max_control_points":
             col.prop(owner, key, text="Max Control Pts")
         elif key == "smoothness":

@@ -39,6 +39,7 @@ class TCB_PT_fit(_TCBPanel, bpy.types.Panel):
             setattr(op, key, getattr(settings, key))
         op.show_net = settings.show_net
         op.live_net = settings.live_net
+        op.replace = settings.replace
         if problem:
             layout.label(text=problem, icon="INFO")
 

@@ -161,7 +161,7 @@ def test_results_are_not_input_and_a_hidden_source_still_works(clean_scene, addo
     assert fit(bpy, scan) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
     net = surface.tcb.net
-    assert fit(bpy, surface, net, scan) == {"FINISHED"}
+    assert fit(bpy, surface, net, scan, replace=False) == {"FINISHED"}  # (a second result)
     again = bpy.context.view_layer.objects.active
     assert again != surface and [s.object for s in again.tcb.sources] == [scan]
     assert spline_of(again).report["points"] == len(verts)
@@ -701,14 +701,74 @@ def test_redo_with_new_resolution_reuses_the_fit(clean_scene, addon, monkeypatch
     obj = add_mesh(bpy, "Patch", verts, faces)
     assert fit(bpy, obj, resolution=10, tolerance=3e-3) == {"FINISHED"}
     first = bpy.context.view_layer.objects.active
+    coarse = len(first.data.vertices)
     assert "result was reused" not in capfd.readouterr().out
     assert fit(bpy, obj, resolution=20, tolerance=3e-3) == {"FINISHED"}
     second = bpy.context.view_layer.objects.active
     assert len(calls) == 1  # same input and fit settings: the cached surface is re-tessellated
     assert "its result was reused (the seconds are that fit's)" in capfd.readouterr().out
-    assert len(second.data.vertices) > len(first.data.vertices)
+    assert second == first and len(second.data.vertices) > coarse  # (replaced in place)
     assert fit(bpy, obj, resolution=20, tolerance=1e-3) == {"FINISHED"}
     assert len(calls) == 2  # a fit setting changed: fitted again
+
+
+def test_fitting_the_same_source_again_replaces_its_result_in_place(clean_scene, addon, capfd):
+    """User test: every Fit of the same scan added a surface, a net and a collection (each
+    with its stored spline). Now the latest result of the same source objects is updated in
+    place, keeping the user's material; Replace Previous Result off adds one beside it."""
+    bpy = clean_scene
+    verts, faces = grid(16, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y))
+    obj = add_mesh(bpy, "Scan", verts, faces)
+    before = snapshot(obj)
+    assert fit(bpy, obj, tolerance=2e-3, max_control_points=50) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    mat = bpy.data.materials.new("Clay")
+    surface.data.materials.append(mat)
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
+    loose = surface.tcb.control_points
+    n_objects, n_colls = len(bpy.data.objects), len(bpy.data.collections)
+    capfd.readouterr()
+
+    assert fit(bpy, obj, tolerance=2e-3, max_control_points=300) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert f"replaced the previous result '{surface.name}'" in out
+    assert "its Deviation Points were removed" in out
+    assert bpy.context.view_layer.objects.active == surface
+    assert surface.tcb.net == net and net.tcb.surface == surface
+    assert surface.tcb.deviation_points is None
+    assert len(bpy.data.objects) == n_objects - 1 and len(bpy.data.collections) == n_colls
+    assert surface.tcb.control_points > loose and surface.tcb.max_control_points == 300
+    assert mat in list(surface.data.materials)  # (the user's material stays)
+    check_result(bpy, addon, "Scan", verts, 2e-3)  # mesh, net and live link of the new spline
+    assert [s.object for s in surface.tcb.sources] == [obj] and snapshot(obj) == before
+
+    # off: a second result beside it; the next replacing fit takes the latest one
+    assert fit(bpy, obj, tolerance=2e-2, max_control_points=300, replace=False) == {"FINISHED"}
+    other = bpy.context.view_layer.objects.active
+    assert other != surface and other.tcb.net != net
+    assert len(bpy.data.collections) == n_colls + 1
+    assert fit(bpy, obj, tolerance=5e-3, max_control_points=300, live_net=False) == {"FINISHED"}
+    assert bpy.context.view_layer.objects.active == other
+    assert other.tcb.tolerance == pytest.approx(5e-3)
+    assert surface.tcb.tolerance == pytest.approx(2e-3)  # the older one as it was
+    assert other.modifiers.get("TCB Live Net") is None and other.tcb.weights is None
+
+    # a result whose net was deleted gets a new one
+    old_net = other.tcb.net
+    bpy.data.objects.remove(old_net)
+    assert fit(bpy, obj, tolerance=2e-2, max_control_points=300) == {"FINISHED"}
+    assert bpy.context.view_layer.objects.active == other
+    new_net = other.tcb.net
+    assert new_net is not None and new_net.tcb.surface == other
+    assert new_net.name in other.users_collection[0].objects
+    surf = spline_of(other)
+    assert np.allclose(positions(new_net), surf.control_points, atol=1e-5)
+    assert other.modifiers.get("TCB Live Net") is not None  # (Live Net on again)
+    assert np.allclose(evaluated_positions(bpy, other),
+                       surf.tessellate(other.tcb.resolution)[0], atol=1e-5)
+    assert snapshot(obj) == before
 
 
 def test_background_invoke_runs_synchronously(clean_scene, addon):
