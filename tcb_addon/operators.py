@@ -558,10 +558,11 @@ FITTED_KEY = "tcb_fitted_at"
 
 
 def previous_result(context, sources):
-    """The surface object of the scene fitted to exactly the objects ``sources`` (the latest
-    fitted when there are several), or None."""
+    """The surface object of the view layer fitted to exactly the objects ``sources`` (the
+    latest fitted when there are several), or None. (One in an excluded collection stays as
+    it is: it cannot be made active.)"""
     want = sorted(o.as_pointer() for o in sources)
-    found = [ob for ob in context.scene.objects
+    found = [ob for ob in context.view_layer.objects
              if ob.tcb.role == "SURFACE" and ob.type == "MESH"
              and sorted(s.object.as_pointer() for s in ob.tcb.sources if s.object is not None)
              == want and len(ob.tcb.sources) == len(want)]

@@ -768,6 +768,14 @@ def test_fitting_the_same_source_again_replaces_its_result_in_place(clean_scene,
     assert other.modifiers.get("TCB Live Net") is not None  # (Live Net on again)
     assert np.allclose(evaluated_positions(bpy, other),
                        surf.tessellate(other.tcb.resolution)[0], atol=1e-5)
+    # results in excluded collections (which cannot be made active) stay as they are
+    for ob in (surface, other):
+        layer = bpy.context.view_layer.layer_collection.children[ob.users_collection[0].name]
+        layer.exclude = True
+    kept = other.tcb.tolerance  # (2e-2)
+    assert fit(bpy, obj, tolerance=1e-2, max_control_points=300) == {"FINISHED"}
+    third = bpy.context.view_layer.objects.active
+    assert third not in (surface, other) and other.tcb.tolerance == kept
     assert snapshot(obj) == before
 
 
