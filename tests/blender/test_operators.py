@@ -820,10 +820,16 @@ def test_deviation_map_runs_in_chunks_with_progress_and_esc(clean_scene, addon, 
     surface = bpy.context.view_layer.objects.active
     surf = ops.stored_surface(surface)
     monkeypatch.setattr(core.surface, "CLOSEST_CHUNK", 100)
-    job = ops._Job(ops._data_distances, dict(surf=surf, points=verts, cloud=True)).start()
+    mesh_verts = positions(surface)  # (at the origin: world = local)
+    job = ops._Job(ops._data_distances, dict(surf=surf, points=verts, cloud=True,
+                                             vertices=mesh_verts)).start()
     job.thread.join(120)
     assert job.done and job.error is None
-    feet, dist = job.result
+    feet, dist, shading = job.result
+    # the surface's colours are computed on the job's thread too (0.9 s for 1e6 points)
+    values, has_data = core.geometry.distances_at_vertices(mesh_verts, feet, dist)
+    assert np.array_equal(shading[0], mesh_verts) and np.array_equal(shading[1], values)
+    assert np.array_equal(shading[2], has_data)
     assert job.progress == {"points_done": 256, "points": 256}
     np.testing.assert_array_equal(dist, np.linalg.norm(surf.closest_points(verts) - verts, axis=1))
     half = {"points_done": 128, "points": 256}
@@ -837,8 +843,13 @@ def test_deviation_map_runs_in_chunks_with_progress_and_esc(clean_scene, addon, 
     job.thread.join(120)
     assert isinstance(job.error, core.CancelledError) and job.result is None
     capfd.readouterr()
+    calls = []
+    real = core.geometry.distances_at_vertices
+    monkeypatch.setattr(core.geometry, "distances_at_vertices",
+                        lambda *a, **k: calls.append(1) or real(*a, **k))
     with bpy.context.temp_override(**select(bpy, surface)):
         assert bpy.ops.tcb.deviation_map(points_copy=False) == {"FINISHED"}
+    assert len(calls) == 1  # on the job's thread only: finish took its colours
     out = capfd.readouterr().out
     for done in ("0%", "39%", "78%", "99%"):
         assert f"TCB: Deviation Map, {done} of 256 points\n" in out, out
