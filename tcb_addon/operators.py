@@ -20,8 +20,8 @@ from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
 from . import bridge, live
-from .properties import (DEFAULT_SMOOTHNESS, FIT_KEYS, MAX_RESOLUTION, REPLACE_DESCRIPTION,
-                         FitSettings, draw_fit_settings)
+from .properties import (DEFAULT_SMOOTHNESS, FIT_KEYS, MAX_RESOLUTION, FitSettings,
+                         ResultSettings, draw_fit_settings)
 
 # Custom property of the surface object: TCBSurface.to_bytes() as base64 text. (Raw bytes
 # ID properties lose everything after the first NUL byte when an existing one is reassigned.)
@@ -582,22 +582,12 @@ def _new_net(coll, name: str, surf, origin):
     return net
 
 
-
-class TCB_OT_fit_surface(_EngineOperator, FitSettings, bpy.types.Operator):
+class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types.Operator):
     """Fit a smooth TCB-spline surface and its control net to the selected meshes / point clouds"""
 
     bl_idname = "tcb.fit_surface"
     bl_label = "Fit Surface"
     bl_options = {"REGISTER", "UNDO"}
-
-    show_net: BoolProperty(name="Show Net", default=True)
-    live_net: BoolProperty(
-        name="Live Net",
-        description="Moving control-net vertices updates the surface (Geometry Nodes modifier)",
-        default=True,
-    )
-    replace: BoolProperty(name="Replace Previous Result", description=REPLACE_DESCRIPTION,
-                          default=True)
 
     @classmethod
     def poll(cls, context):

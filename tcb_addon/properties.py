@@ -141,17 +141,9 @@ FIT_KEYS = (
 )  # fmt: skip
 
 
-# Fit Surface run again on the same source updates its result in place (user test: every run
-# added a surface, a net and a collection, each with its stored spline, to the file)
-REPLACE_DESCRIPTION = (
-    "Fit into the existing TCB result of the same source objects: its surface, net and "
-    "collection are updated in place (materials and the object's own modifiers stay; Ctrl+Z "
-    "brings the old result back). Off: add a new result beside it"
-)
-
-
-class TCB_PG_settings(FitSettings, bpy.types.PropertyGroup):
-    """Fit settings shown in the sidebar (``scene.tcb_settings``)."""
+class ResultSettings:
+    """What a fit makes of its result (annotations only; mixed into the sidebar's settings
+    and the fit operator, which the panel's button copies them to)."""
 
     show_net: BoolProperty(name="Show Net", default=True)
     live_net: BoolProperty(
@@ -159,8 +151,24 @@ class TCB_PG_settings(FitSettings, bpy.types.PropertyGroup):
         description="Moving control-net vertices updates the surface (Geometry Nodes modifier)",
         default=True,
     )
-    replace: BoolProperty(name="Replace Previous Result", description=REPLACE_DESCRIPTION,
-                          default=True)
+    # Fit Surface run again on the same source updates its result in place (user test: every
+    # run added a surface, a net and a collection, each with its stored spline, to the file)
+    replace: BoolProperty(
+        name="Replace Previous Result",
+        description=(
+            "Fit into the existing TCB result of the same source objects: its surface, net and "
+            "collection are updated in place (materials and the object's own modifiers stay; "
+            "Ctrl+Z brings the old result back). Off: add a new result beside it"
+        ),
+        default=True,
+    )  # fmt: skip
+
+
+RESULT_KEYS = ("show_net", "live_net", "replace")
+
+
+class TCB_PG_settings(FitSettings, ResultSettings, bpy.types.PropertyGroup):
+    """Fit settings shown in the sidebar (``scene.tcb_settings``)."""
 
 
 class TCB_PG_source(bpy.types.PropertyGroup):
@@ -239,8 +247,7 @@ def draw_fit_settings(layout, owner, short_labels: bool = False) -> None:
     row.prop(owner, "tolerance")
     row.prop(owner, "relative", text="", icon="DRIVER_DISTANCE")
     for key in ("criterion", "max_control_points", "max_iterations", "degree", "mode",
-                "smoothness", "drop_outliers", "projection", "resolution", "show_net",
-                "live_net", "replace"):  # fmt: skip
+                "smoothness", "drop_outliers", "projection", "resolution", *RESULT_KEYS):
         if short_labels and key == "max_control_points":
             col.prop(owner, key, text="Max Control Pts")
         elif key == "smoothness":

@@ -9,7 +9,7 @@ import bpy
 from . import bridge
 from .operators import (NO_DATA_KEY, SPLINE_KEY, is_max, live_link_problem, live_moved_problem,
                         net_copy_note, net_vertex_problem, result_objects, uneven_density)
-from .properties import FIT_KEYS, draw_fit_settings
+from .properties import FIT_KEYS, RESULT_KEYS, draw_fit_settings
 
 
 class _TCBPanel:
@@ -35,11 +35,8 @@ class TCB_PT_fit(_TCBPanel, bpy.types.Panel):
         row.scale_y = 1.4
         row.enabled = problem is None
         op = row.operator("tcb.fit_surface", icon="MOD_SMOOTH")
-        for key in FIT_KEYS:
+        for key in FIT_KEYS + RESULT_KEYS:
             setattr(op, key, getattr(settings, key))
-        op.show_net = settings.show_net
-        op.live_net = settings.live_net
-        op.replace = settings.replace
         if problem:
             layout.label(text=problem, icon="INFO")
 
