@@ -979,6 +979,30 @@ def _spiky_terrain(n: int = 10_000, spikes: int = 100, seed: int = 3):
     return np.c_[xy, z], truth
 
 
+def test_spike_passes_that_reuse_the_last_kd_tree_find_the_same_spikes(monkeypatch) -> None:
+    """A pass whose pool lost a few points (the spikes of the pass before) queries the last
+    KD-tree for that many more neighbours instead of building a new one: the same spikes as
+    with a tree per pass, with and without ``only`` (the check after a fit), over several
+    passes (spikes among each other's neighbours)."""
+    import core.parameterize as pz
+
+    pts, _ = _spiky_terrain(spikes=60)
+    q = (pts - pts.mean(axis=0)) / 200.0
+    only = np.random.default_rng(0).choice(len(q), 300, replace=False)
+    built = []
+    real = pz.cKDTree
+    monkeypatch.setattr(pz, "cKDTree", lambda *a, **k: built.append(1) or real(*a, **k))
+    reused = [pz.spike_points(q), pz.spike_points(q, only=only)]
+    trees = len(built)
+    monkeypatch.setattr(pz, "_SPIKE_REUSE", 0)  # a new tree every pass
+    built.clear()
+    fresh = [pz.spike_points(q), pz.spike_points(q, only=only)]
+    assert len(built) > trees  # (passes did reuse a tree)
+    assert len(reused[0]) >= 50
+    for a, b in zip(reused, fresh):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_drop_outliers_also_leaves_out_spikes_inside_the_cloud() -> None:
     """Spikes and pits of a terrain scan are not isolated points (ground points lie a few
     metres away): drop_outliers=True left all 300 of N(0, 20 m) in a 3e4-point tile in, and
