@@ -49,8 +49,13 @@ from .simplex import orient2d
 __all__ = ["TCBSurface", "fit_surface", "FORMAT_VERSION"]
 
 # 2: the options may hold smoothness "auto" (older readers refuse such files with "update the
-# add-on" instead of failing in refine()); files without it are still written as 1
-FORMAT_VERSION = 2
+# add-on" instead of failing in refine()); files without it are still written as 1.
+# 3: compact (``to_bytes(compact=True)``): the data's parameters and errors in float32, which
+# older readers would hand on as such; files without either are written as before
+FORMAT_VERSION = 3
+# compact files: these arrays are stored as float32 (the data's parameters and fitted errors, a
+# mesh's vertex stretch) and read back as float64; a mesh's faces as "param_faces_delta"
+_COMPACT_FLOAT = ("param_uv", "param_stretch", "errors")
 # Larger inputs are fitted on a seeded random subset of this size (a RuntimeWarning says so);
 # 1e6 points fit in about 0.4 GiB, so this keeps the peak well under the 4 GiB budget.
 MAX_FIT_POINTS = 2_000_000
@@ -784,10 +789,22 @@ class TCBSurface:
                     history=self._report.get("history", []), start_degree=self.degree)
 
     # ---- files -------------------------------------------------------------------------
-    def to_bytes(self) -> bytes:
-        """The surface as a versioned ``.npz`` archive in memory (see :meth:`save`)."""
+    def to_bytes(self, compact: bool = False) -> bytes:
+        """The surface as a versioned ``.npz`` archive in memory (see :meth:`save`).
+
+        ``compact``: the data's parameters and fitted errors (and a mesh's vertex stretch) are
+        stored in 32-bit floats and a mesh's faces as 32-bit differences, about half the size
+        (a point cloud: 11 instead of 23 bytes per point). Those are the only per-point arrays;
+        the knots, configurations, control points and parameterization map stay exact.
+        Reading such bytes gives float64 arrays of the float32 values (parameters rounded by
+        at most 6e-8 of the domain's half-width: below the float32 precision of the
+        coordinates that Blender, or most scan files, hold anyway), so a compact archive of
+        a compact archive's surface is the same; otherwise the round trip is bit-exact.
+        Format 3: readers before it refuse compact bytes with "update the add-on".
+        """
         arrays = {
-            "format_version": np.array(2 if self._options.smoothness == "auto" else 1),
+            "format_version": np.array(3 if compact else
+                                       2 if self._options.smoothness == "auto" else 1),
             "degree": np.array(self.degree),
             "mode": np.array(self.mode),
             "knots": self.knots,
@@ -811,6 +828,18 @@ class TCBSurface:
             value = getattr(self._param, name)
             if value is not None:
                 arrays[f"param_{name}"] = value
+        if compact:
+            for key in _COMPACT_FLOAT:
+                if key in arrays:
+                    arrays[key] = np.asarray(arrays[key], dtype=np.float32)
+            faces = arrays.get("param_faces")
+            if faces is not None and len(faces) and faces.max() < 2**31:
+                # int32 deltas: the first corner from the previous face's, the others from
+                # the first (a mesh's faces are mostly in order: a grid's compress 100x)
+                del arrays["param_faces"]
+                arrays["param_faces_delta"] = np.column_stack(
+                    [np.diff(faces[:, 0], prepend=0), faces[:, 1:] - faces[:, :1]]
+                ).astype(np.int32)
         buf = io.BytesIO()
         np.savez_compressed(buf, **arrays)
         return buf.getvalue()
@@ -843,6 +872,14 @@ class TCBSurface:
                 f"{what} was written by a newer TCB Surface (format {version}; this version "
                 f"reads up to {FORMAT_VERSION}): update the add-on"
             )
+        for key in _COMPACT_FLOAT:  # (compact bytes: float32)
+            if key in arrays and arrays[key].dtype == np.float32:
+                arrays[key] = arrays[key].astype(np.float64)
+        if "param_faces_delta" in arrays:
+            delta = arrays.pop("param_faces_delta").astype(np.int64)
+            if delta.ndim == 2 and delta.shape[1] == 3:
+                first = np.cumsum(delta[:, 0])
+                arrays["param_faces"] = np.column_stack([first, first[:, None] + delta[:, 1:]])
         try:
             degree = int(arrays["degree"])
             knots = arrays["knots"]
@@ -875,10 +912,12 @@ class TCBSurface:
         except Exception as exc:
             raise FileFormatError(f"{what} is damaged or incomplete ({type(exc).__name__}: {exc})") from None
 
-    def save(self, path) -> None:
+    def save(self, path, compact: bool = False) -> None:
         """Write a versioned ``.npz`` (the path, a str, bytes or path object in which ``~``
         means the home folder, must end in ``.npz``); atomically (temporary file, then rename),
-        with the permissions a new file gets from the umask (an existing file keeps its own)."""
+        with the permissions a new file gets from the umask (an existing file keeps its own).
+        ``compact``: the data's per-point arrays in 32 bits, about half the size (see
+        :meth:`to_bytes`)."""
         path = _user_path(path)
         if path.suffix.lower() != ".npz":
             raise InvalidInputError(
@@ -892,7 +931,7 @@ class TCBSurface:
             raise InvalidInputError(
                 f"cannot save to {path}: that is a folder; give the name of a .npz file"
             )
-        data = self.to_bytes()
+        data = self.to_bytes(compact=compact)
         # the temporary file is created with mode 0666 and the kernel applies the umask (what
         # a plain open() gives; mkstemp makes 0600); an existing file keeps its own mode
         flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)

@@ -13,6 +13,7 @@ import base64
 import threading
 import time
 import warnings as _warnings
+import weakref
 
 import bpy
 import numpy as np
@@ -23,8 +24,10 @@ from . import bridge, live
 from .properties import (DEFAULT_SMOOTHNESS, FIT_KEYS, MAX_RESOLUTION, FitSettings,
                          ResultSettings, draw_fit_settings)
 
-# Custom property of the surface object: TCBSurface.to_bytes() as base64 text. (Raw bytes
-# ID properties lose everything after the first NUL byte when an existing one is reassigned.)
+# Custom property of the surface object: TCBSurface.to_bytes(compact=True) as base64 text (the
+# data's parameters and errors in float32: half the .blend size of float64, and the
+# coordinates Blender holds are float32 anyway). (Raw bytes ID properties lose everything
+# after the first NUL byte when an existing one is reassigned.)
 SPLINE_KEY = "tcb_spline"
 # the surface object's world matrix when its mesh was last written from the spline (16 floats)
 PLACED_KEY = "tcb_placed_at"
@@ -215,8 +218,32 @@ def net_vertex_problem(surface_obj) -> str | None:
             "Fit Surface makes a new one")
 
 
+# the SPLINE_KEY text of surfaces that :func:`_as_stored` made (encoded on the job's thread)
+_STORED_TEXT: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _encoded(surf) -> str:
+    return base64.b64encode(surf.to_bytes(compact=True)).decode("ascii")
+
+
 def store_spline(surface_obj, surf) -> None:
-    surface_obj[SPLINE_KEY] = base64.b64encode(surf.to_bytes()).decode("ascii")
+    text = _STORED_TEXT.get(surf)
+    surface_obj[SPLINE_KEY] = text if text is not None else _encoded(surf)
+
+
+def _as_stored(fn, resolution: int):
+    """``fn``, returning the spline as :func:`store_spline` keeps it (compact: the data's
+    parameters and errors rounded to float32) instead of the engine's, so that the mesh written
+    now is the one a later Re-tessellate or Refine makes from the stored spline; its text and
+    its tessellation at ``resolution`` are made here too, on the job's thread (for 1e6 points
+    the archive took 1.2 s of Blender's main thread)."""
+    def run(**kw):
+        text = _encoded(fn(**kw))
+        surf = _core().TCBSurface.from_bytes(base64.b64decode(text))
+        _STORED_TEXT[surf] = text
+        surf.tessellation_uv(resolution)
+        return surf
+    return run
 
 
 def source_data(context, surface_obj) -> bridge.InputData:
@@ -643,7 +670,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 raise type(ex)(f"{ex} ({'; '.join(extra)})") from None
 
         self._engine = []
-        return ("run", _recording(fit, self._engine),
+        return ("run", _as_stored(_recording(fit, self._engine), self.resolution),
                 dict(points=data.points, faces=data.faces, **kwargs))
 
     def finish(self, context, surf):
@@ -803,7 +830,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                           "replaced (Refine fits the data again; Ctrl+Z brings the edits back)"
                           ] if edited else []
         self._engine = []
-        return ("run", _recording(surf.refine, self._engine),
+        return ("run", _as_stored(_recording(surf.refine, self._engine), st.resolution),
                 dict(points=data.points, faces=data.faces, **self._settings))
 
     def finish(self, context, surf):

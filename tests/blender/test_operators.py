@@ -109,6 +109,45 @@ def test_fit_point_cloud_object(clean_scene, addon):
     assert snapshot(cloud) == before
 
 
+def test_the_stored_spline_is_compact_and_the_mesh_is_its_tessellation(clean_scene, addon):
+    """What a result adds to the .blend: the spline with the data's parameters and errors in
+    float32 (format 3), under 17 bytes per input point (about 31 with float64); the surface mesh is
+    the tessellation of that stored spline, before and after Refine. A spline stored in
+    float64 (a .blend from before) still works, and Refine stores it compact."""
+    import base64
+
+    bpy = clean_scene
+    rng = np.random.default_rng(5)
+    xy = rng.random((20000, 2))
+    pts = np.c_[xy, 0.3 * np.sin(4 * xy[:, 0]) * np.cos(3 * xy[:, 1])]
+    cloud = add_point_cloud(bpy, "Big", pts)
+    assert fit(bpy, cloud, tolerance=1e-4, max_iterations=2) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    text = surface["tcb_spline"]
+    assert len(text) < 17 * len(pts)
+    surf = spline_of(surface)
+    uv = surf.parameterization.uv
+    np.testing.assert_array_equal(uv, uv.astype(np.float32))
+    np.testing.assert_array_equal(surf.errors, surf.errors.astype(np.float32))
+    verts, faces = surf.tessellate(surface.tcb.resolution)
+    assert len(surface.data.vertices) == len(verts) and len(surface.data.polygons) == len(faces)
+    assert np.allclose(positions(surface), verts, atol=1e-5)
+    # a float64 spline (as stored before): Re-tessellate and Refine read it; Refine writes it
+    # compact, and its mesh is the stored spline's
+    surface["tcb_spline"] = base64.b64encode(surf.to_bytes()).decode("ascii")
+    assert len(surface["tcb_spline"]) > 1.1 * len(text)
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.retessellate(resolution=30) == {"FINISHED"}
+        assert len(surface.data.vertices) == len(surf.tessellate(30)[0])
+        assert bpy.ops.tcb.refine(max_iterations=2) == {"FINISHED"}
+    assert len(surface["tcb_spline"]) < 17 * len(pts)
+    refined = spline_of(surface)
+    assert len(refined.control_points) > len(surf.control_points)
+    verts, faces = refined.tessellate(surface.tcb.resolution)
+    assert len(surface.data.vertices) == len(verts) and len(surface.data.polygons) == len(faces)
+    assert np.allclose(positions(surface), verts, atol=1e-5)
+
+
 def test_fit_with_auto_smoothness_stores_the_chosen_value(clean_scene, addon):
     bpy = clean_scene
     cloud, _ = noisy_grid_cloud(bpy, "Noisy", 2e-3, 2)

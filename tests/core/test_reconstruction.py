@@ -4,6 +4,7 @@ meshes, local control, files, cancellation and bad input."""
 import io
 import re
 import warnings
+import zipfile
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ from core import (
 from core.fit import fit_control_points
 from core import refine
 import core.surface
+from core.surface import FORMAT_VERSION
 from core.surface import data_swings
 from core.refine import UNEVEN_DENSITY, area_weights, automatic_start, next_start
 from core.meshio import read_geometry
@@ -362,6 +364,68 @@ def test_save_load_round_trips_bit_exactly(nefertiti, tmp_path):
     # a path given as a str: the error says to load() it (it raised TypeError: user test)
     with pytest.raises(FileFormatError, match=r"must be the bytes .* got str; .*load\(path\)"):
         TCBSurface.from_bytes(str(path))
+
+
+def _per_point_bytes(data: bytes) -> int:
+    """Compressed size of a surface file's per-point arrays (parameters, errors, faces, ...)."""
+    with zipfile.ZipFile(io.BytesIO(data)) as z:
+        return sum(i.compress_size for i in z.infolist()
+                   if i.filename.split(".")[0] in ("param_uv", "errors", "param_stretch",
+                                                   "param_faces", "param_faces_delta"))
+
+
+def test_compact_bytes_keep_the_spline_and_round_only_the_data_arrays_to_32_bits(nefertiti, tmp_path):
+    """``to_bytes(compact=True)`` / ``save(compact=True)`` (what Blender stores): the knots,
+    configurations and control points exact, the data's parameters, errors and stretch rounded
+    to float32 (read back as float64), the faces exact; about half the size or less; the
+    same bytes' surface again when written compact twice; readable by refine()."""
+    cloud = ridge_cloud(4000)
+    for points, faces, surf in (nefertiti, (cloud, None, fit_surface(cloud, max_iterations=2))):
+        full, compact = surf.to_bytes(), surf.to_bytes(compact=True)
+        assert len(compact) < len(full)
+        assert _per_point_bytes(compact) < 0.6 * _per_point_bytes(full)
+        back = TCBSurface.from_bytes(compact)
+        np.testing.assert_array_equal(back.coefficients, surf.coefficients)
+        np.testing.assert_array_equal(back.knots, surf.knots)
+        for a, b in zip(back.configurations.triangles + back.configurations.interior,
+                        surf.configurations.triangles + surf.configurations.interior):
+            np.testing.assert_array_equal(a, b)
+        assert back.report == surf.report
+        p, q = back.parameterization, surf.parameterization
+        for name in ("uv", "stretch"):
+            if getattr(q, name) is None:
+                assert getattr(p, name) is None
+                continue
+            assert getattr(p, name).dtype == np.float64
+            np.testing.assert_array_equal(getattr(p, name),
+                                          getattr(q, name).astype(np.float32).astype(np.float64))
+        assert np.abs(p.uv - q.uv)[q.used].max() <= 6e-8 * np.abs(q.uv[q.used]).max()
+        np.testing.assert_array_equal(back.errors, surf.errors.astype(np.float32).astype(np.float64))
+        if faces is None:
+            assert p.faces is None
+        else:
+            assert p.faces.dtype == np.int64
+            np.testing.assert_array_equal(p.faces, q.faces)
+        np.testing.assert_array_equal(p.domain_polygon, q.domain_polygon)
+        np.testing.assert_array_equal(p.used, q.used)
+        # compact again: the same surface (float32 values survive float64 and back)
+        again = TCBSurface.from_bytes(back.to_bytes(compact=True))
+        np.testing.assert_array_equal(again.parameterization.uv, p.uv)
+        np.testing.assert_array_equal(again.errors, back.errors)
+        # the tessellation depends on the data's parameters only through distances: the same
+        # mesh here, and the same surface on it
+        v1, f1 = surf.tessellate(48)
+        v2, f2 = back.tessellate(48)
+        np.testing.assert_array_equal(f1, f2)
+        np.testing.assert_allclose(v1, v2, rtol=0, atol=1e-12 * np.abs(v1).max())
+        assert back.fitted_to(points)
+        assert len(back.refine(points, faces, max_iterations=1).control_points) > 0
+        with zipfile.ZipFile(io.BytesIO(compact)) as z, z.open("format_version.npy") as fh:
+            assert int(np.lib.format.read_array(fh)) == 3 == FORMAT_VERSION
+    path = tmp_path / "small.npz"
+    surf.save(path, compact=True)
+    assert path.stat().st_size < len(full)
+    np.testing.assert_array_equal(TCBSurface.load(path).errors, back.errors)
 
 
 def test_save_names_what_is_wrong_and_gives_the_file_the_umask_permissions(nefertiti, tmp_path):
