@@ -70,3 +70,16 @@ def test_bench_closest_quick():
     assert [r[:2] for r in rows] == [[d, w] for d in ("franke", "dem") for w in ("data", "around")]
     for r in rows:
         assert float(r[8]) <= 1e-4 and float(r[12]) >= -1e-12, r
+
+
+def test_bench_stored_quick():
+    """``benchmarks/bench_stored.py --quick`` prints a cloud row and a mesh row, each compact
+    form under 0.6x the full one's bytes per point."""
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_stored.py"), "--quick"],
+                         capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = [r.split("|")[1:-1] for r in res.stdout.splitlines()
+            if r.startswith("| ") and not r.startswith("| data")]
+    assert [r[0].strip() for r in rows] == ["cloud", "grid mesh"]
+    for r in rows:
+        assert float(r[4]) < 0.6 * float(r[3]), r
