@@ -1731,9 +1731,11 @@ def boundary_corners(b: np.ndarray) -> np.ndarray | None:
     """The four corners of a boundary loop ``b`` (its points in order, (B, 3)) that is a
     quadrilateral's (sorted positions in the loop), or None.
 
-    Each vertex turns by the angle between its incoming and outgoing edge, signed by the
-    loop's normal (Newell's); a bend out of the loop's plane (a crease crossing the boundary
-    of patch-01.off) has no sign and counts 0. Vertices that turn by RECTANGLE_SMOOTH degrees
+    Each vertex turns by the angle between its incoming and outgoing edge, or by the angle
+    between their projections on the loop's plane (normal: Newell's) where that is smaller,
+    signed by the normal; a bend out of the loop's plane (a crease crossing the boundary of
+    patch-01.off, the terrain along a DEM mesh's sides: the Jacksboro DEM as a grid mesh went
+    to the circle) counts little or nothing. Vertices that turn by RECTANGLE_SMOOTH degrees
     or more form groups: such vertices at most CORNER_GAP edges apart (a chamfer's two
     45-degree turns, a notch's +90, -90, +90 where a corner cell is missing), except that two
     sharp turns (above CORNER_TURN) the same way are two corners (a short side). A group is a
@@ -1758,9 +1760,17 @@ def boundary_corners(b: np.ndarray) -> np.ndarray | None:
     turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
     normal = np.cross(b, np.roll(b, -1, axis=0)).sum(axis=0)  # (Newell: twice the area vector)
     normal /= max(float(np.linalg.norm(normal)), 1e-300)
-    across = np.einsum("ij,j->i", np.cross(d_in, d_out), normal)
-    small = 1e-9 * np.linalg.norm(d_in, axis=1) * np.linalg.norm(d_out, axis=1)
-    signed = turn * np.where(np.abs(across) > small, np.sign(across), 0.0)
+    # the turn within the loop's plane (the edges projected on it), signed by the normal; a
+    # vertex turns by the smaller of that and its 3D turn: a bend out of the plane (a crease
+    # crossing the boundary, a terrain's ups and downs along a DEM mesh's straight sides)
+    # counts little or nothing, and a sheet curled beyond a half cylinder, whose projected
+    # arcs double back, keeps its small 3D turns there
+    p_in = d_in - np.outer(d_in @ normal, normal)
+    p_out = d_out - np.outer(d_out @ normal, normal)
+    flat = np.degrees(np.arctan2(np.einsum("ij,j->i", np.cross(p_in, p_out), normal),
+                                 np.einsum("ij,ij->i", p_in, p_out)))
+    turn = np.minimum(turn, np.abs(flat))
+    signed = turn * np.sign(flat)
     seg = np.linalg.norm(d_out, axis=1)
     sig = np.flatnonzero(turn >= RECTANGLE_SMOOTH)
     if len(sig) < 4:
