@@ -1767,9 +1767,13 @@ def boundary_corners(b: np.ndarray) -> np.ndarray | None:
     # arcs double back, keeps its small 3D turns there
     p_in = d_in - np.outer(d_in @ normal, normal)
     p_out = d_out - np.outer(d_out @ normal, normal)
-    flat = np.degrees(np.arctan2(np.einsum("ij,j->i", np.cross(p_in, p_out), normal),
-                                 np.einsum("ij,ij->i", p_in, p_out)))
-    turn = np.minimum(turn, np.abs(flat))
+    across = np.einsum("ij,j->i", np.cross(p_in, p_out), normal)
+    flat = np.degrees(np.arctan2(across, np.einsum("ij,ij->i", p_in, p_out)))
+    # a bend with no part across the normal counts 0: where a wall leans over the floor its
+    # edge's projection points back (a turn of 180 in the plane; review: a channel with
+    # leaning walls lost its corners)
+    small = 1e-9 * np.linalg.norm(d_in, axis=1) * np.linalg.norm(d_out, axis=1)
+    turn = np.where(np.abs(across) > small, np.minimum(turn, np.abs(flat)), 0.0)
     signed = turn * np.sign(flat)
     seg = np.linalg.norm(d_out, axis=1)
     sig = np.flatnonzero(turn >= RECTANGLE_SMOOTH)

@@ -794,12 +794,13 @@ class TCBSurface:
 
         ``compact``: the data's parameters and fitted errors (and a mesh's vertex stretch) are
         stored in 32-bit floats and a mesh's faces as 32-bit differences, about half the size
-        (a point cloud: 11 instead of 23 bytes per point). Those are the only per-point arrays;
-        the knots, configurations, control points and parameterization map stay exact.
-        Reading such bytes gives float64 arrays of the float32 values (parameters rounded by
-        at most 6e-8 of the domain's half-width: below the float32 precision of the
-        coordinates that Blender, or most scan files, hold anyway), so a compact archive of
-        a compact archive's surface is the same; otherwise the round trip is bit-exact.
+        (a point cloud: 11 instead of 23 bytes per point); the knots, configurations, control
+        points, domain polygon and the map's frame stay exact. Reading such bytes gives
+        float64 arrays of the float32 values (parameters rounded by at most 6e-8 of the
+        domain's half-width: below the float32 precision of the coordinates that Blender, or
+        most scan files, hold anyway; a mesh's boundary rows are set back to its domain
+        polygon), so a compact archive of a compact archive's surface is the same; otherwise
+        the round trip is bit-exact.
         Format 3: readers before it refuse compact bytes with "update the add-on".
         """
         arrays = {
@@ -872,14 +873,27 @@ class TCBSurface:
                 f"{what} was written by a newer TCB Surface (format {version}; this version "
                 f"reads up to {FORMAT_VERSION}): update the add-on"
             )
+        if "param_faces_delta" in arrays:
+            delta = arrays.pop("param_faces_delta")
+            if delta.ndim != 2 or delta.shape[1] != 3 or delta.dtype.kind not in "iu":
+                raise FileFormatError(f"{what} is damaged or incomplete (its faces have shape "
+                                      f"{delta.shape} and type {delta.dtype})")
+            first = np.cumsum(delta[:, 0].astype(np.int64))
+            arrays["param_faces"] = np.column_stack([first, first[:, None] + delta[:, 1:]])
+        if arrays.get("param_uv") is not None and arrays["param_uv"].dtype == np.float32:
+            uv = arrays["param_uv"].astype(np.float64)
+            boundary, polygon = arrays.get("param_boundary"), arrays.get("param_domain_polygon")
+            if (boundary is not None and polygon is not None and boundary.ndim == 1
+                    and polygon.shape == (len(boundary), 2)):
+                try:  # a mesh's boundary rows are its domain polygon's corners, exactly
+                    uv[boundary] = polygon
+                except IndexError:
+                    raise FileFormatError(f"{what} is damaged or incomplete (its boundary "
+                                          "indices are out of range)") from None
+            arrays["param_uv"] = uv
         for key in _COMPACT_FLOAT:  # (compact bytes: float32)
             if key in arrays and arrays[key].dtype == np.float32:
                 arrays[key] = arrays[key].astype(np.float64)
-        if "param_faces_delta" in arrays:
-            delta = arrays.pop("param_faces_delta").astype(np.int64)
-            if delta.ndim == 2 and delta.shape[1] == 3:
-                first = np.cumsum(delta[:, 0])
-                arrays["param_faces"] = np.column_stack([first, first[:, None] + delta[:, 1:]])
         try:
             degree = int(arrays["degree"])
             knots = arrays["knots"]

@@ -238,7 +238,10 @@ def _as_stored(fn, resolution: int):
     its tessellation at ``resolution`` are made here too, on the job's thread (for 1e6 points
     the archive took 1.2 s of Blender's main thread)."""
     def run(**kw):
-        text = _encoded(fn(**kw))
+        result = fn(**kw)
+        if (result.report or {}).get("stop_reason") == "cancelled":
+            return result  # (Esc: thrown away; the tessellation could take seconds: review)
+        text = _encoded(result)
         surf = _core().TCBSurface.from_bytes(base64.b64decode(text))
         _STORED_TEXT[surf] = text
         surf.tessellation_uv(resolution)

@@ -146,6 +146,19 @@ def test_the_stored_spline_is_compact_and_the_mesh_is_its_tessellation(clean_sce
     verts, faces = refined.tessellate(surface.tcb.resolution)
     assert len(surface.data.vertices) == len(verts) and len(surface.data.polygons) == len(faces)
     assert np.allclose(positions(surface), verts, atol=1e-5)
+    # the job makes the stored form and its tessellation, except for a cancelled fit (Esc:
+    # the result is thrown away, and a fine tessellation could take seconds; review)
+    ops = sys.modules[ADDON + ".tcb_addon.operators"]
+    core = core_module()
+    for cancel in (False, True):
+        fitted = core.fit_surface(pts, max_iterations=2, callback=lambda r, c=cancel: c)
+        stored = ops._as_stored(lambda **kw: fitted, 40)()
+        if cancel:
+            assert stored is fitted and fitted.report["stop_reason"] == "cancelled"
+            assert stored not in ops._STORED_TEXT and 40 not in stored._tess_cache
+        else:
+            assert stored is not fitted and ops._STORED_TEXT[stored] == ops._encoded(stored)
+            assert 40 in stored._tess_cache
 
 
 def test_fit_with_auto_smoothness_stores_the_chosen_value(clean_scene, addon):

@@ -585,7 +585,8 @@ def test_a_terrain_mesh_keeps_its_four_corners_although_its_sides_go_up_and_down
     corners (it went to the circle: corners fitted 2.5-4.8e-3 of the diagonal off, 717
     control points at the default tolerance); the turns are taken in the loop's plane where
     that is less. On the rectangle: 0.01-0.93e-3 with 638. A square loop with its heights
-    jittered by 40% of its spacing likewise; the same jitter in the plane keeps the circle."""
+    jittered by 40% of its spacing likewise; the same jitter in the plane keeps the circle;
+    a channel with leaning walls keeps its corners."""
     from core import fit_surface
 
     pts, _ = read_geometry(DATA / "jacksboro_fault_dem.npz")
@@ -608,6 +609,15 @@ def test_a_terrain_mesh_keeps_its_four_corners_although_its_sides_go_up_and_down
     np.testing.assert_array_equal(boundary_corners(bumpy), [0, 20, 40, 60])
     jitter = np.c_[square + 0.02 * rng.standard_normal((80, 2)), np.zeros(80)]
     assert boundary_corners(jitter) is None
+    # a channel whose walls lean over its floor: the walls' edges project backwards (a turn
+    # of 180 degrees in the plane) but bend nowhere across the normal, and count 0 (review:
+    # the first version of the rule lost these corners)
+    for lean in (0.1, 0.6):
+        poly = np.array([[lean, 0, 1], [0, 0, 0], [6, 0, 0], [6 - lean, 0, 1],
+                         [6 - lean, 4, 1], [6, 4, 0], [0, 4, 0], [lean, 4, 1]], float)
+        loop = np.vstack([a + t * (b - a) for a, b in zip(poly, np.roll(poly, -1, axis=0))
+                          for t in np.arange(10) / 10])
+        np.testing.assert_array_equal(boundary_corners(loop), [0, 30, 40, 70])
 
 
 def test_the_corners_of_a_grid_mesh_are_fitted_as_well_as_the_same_points_as_a_cloud() -> None:
