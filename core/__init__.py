@@ -18,6 +18,7 @@ from .configurations import (
 from .errors import (
     BorderError,
     FileFormatError,
+    HolesError,
     InvalidInputError,
     InvalidKnotsError,
     OutlierError,
@@ -55,6 +56,7 @@ __all__ = [
     "TopologyError",
     "ParameterizationError",
     "OutlierError",
+    "HolesError",
     "FileFormatError",
     "BorderError",
     "SingularSystemError",

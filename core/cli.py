@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InvalidInputError, OutlierError, TCBError
+from .errors import HolesError, InvalidInputError, OutlierError, TCBError
 from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 from .parameterize import projection_direction
@@ -67,6 +67,10 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--drop-outliers", action="store_true",
                    help="leave out points far from all others instead of refusing the cloud, "
                    "and spikes and pits inside it (point clouds only: refused for a mesh)")
+    f.add_argument("--fill-holes", action="store_true",
+                   help="meshes with holes (boundary loops besides the outer one): map them as "
+                   "if the holes were filled, so that the surface spans them, instead of "
+                   "refusing them (meshes only: refused for a point cloud)")
     f.add_argument("--projection", type=_projection, default=None, metavar="x|y|z|DX,DY,DZ",
                    help="point clouds: project along this direction (a height field over the "
                    "plane across it) instead of choosing it; still checked for folds. Its sign "
@@ -211,7 +215,7 @@ def _progress(quiet: bool):
 
 
 def _fit(args) -> int:
-    from .parameterize import outlier_error
+    from .parameterize import holes_error, outlier_error
     from .surface import MAX_RESOLUTION, fit_surface
 
     _check_output(args.output, "surface")
@@ -229,6 +233,11 @@ def _fit(args) -> int:
         raise TCBError(
             f"--projection applies to point clouds; {args.input} is a mesh, which is "
             "parameterized by its faces: leave the option out"
+        )
+    if faces is None and args.fill_holes:
+        raise TCBError(
+            f"--fill-holes applies to meshes; {args.input} is a point cloud, whose surface is "
+            "trimmed to where its points are: leave the option out"
         )
     if faces is not None and args.drop_outliers:
         raise TCBError(
@@ -263,7 +272,10 @@ def _fit(args) -> int:
             max_iterations=args.max_iterations, smoothness=args.smoothness,
             criterion=args.criterion, callback=_progress(args.quiet),
             drop_outliers=args.drop_outliers, projection=args.projection,
+            fill_holes=args.fill_holes,
         )
+    except HolesError as exc:
+        raise holes_error(exc.loops, advice="pass --fill-holes") from None
     except OutlierError as exc:
         # number the outliers as in the file (not among the points left after --drop-invalid),
         # with this command's option
@@ -280,7 +292,10 @@ def _fit(args) -> int:
     r = surf.report
     rows = [
         ("input", f"{args.input} ({r['points']} points"
-                  + (f", {r['outliers']} outliers left out)" if r.get("outliers") else ")")),
+                  + (f", {r['outliers']} outliers left out" if r.get("outliers") else "")
+                  + (f", {r['holes_filled']} hole{'s' if r['holes_filled'] > 1 else ''} spanned"
+                     if r.get("holes_filled") else "")
+                  + ")"),
         ("mode / degree", f"{r['mode']} / {r['degree']}"),
     ]
     param = surf.parameterization

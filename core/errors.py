@@ -24,6 +24,16 @@ class TopologyError(InvalidInputError):
     """A mesh whose topology is not a disk (closed, several boundary loops, non-manifold)."""
 
 
+class HolesError(TopologyError):
+    """A mesh with holes (boundary loops besides its outer one), given without ``fill_holes``.
+    ``loops``: its number of boundary loops (callers with their own spelling of the option
+    word the message again with :func:`core.parameterize.holes_error`)."""
+
+    def __init__(self, message: str, loops: int = 2):
+        super().__init__(message)
+        self.loops = loops
+
+
 class ParameterizationError(InvalidInputError):
     """The data cannot be mapped to a plane without folds (e.g. a strongly curved cloud)."""
 

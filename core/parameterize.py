@@ -29,7 +29,7 @@ from scipy.sparse.linalg import splu
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .errors import (
-    InvalidInputError, OutlierError, ParameterizationError, TCBError, TopologyError,
+    HolesError, InvalidInputError, OutlierError, ParameterizationError, TCBError, TopologyError,
 )
 from .geometry import column_bounds
 from .parallel import pmap, row_blocks
@@ -295,6 +295,9 @@ class Parameterization:
             length over its mesh edges (NaN for unused vertices); the map to the disk
             compresses steep and outlying parts of a mesh, and the tessellation refines there.
             None for a point cloud (and for files written before it existed).
+        holes: ``(h,) int64`` (disk only, ``parameterize_mesh(..., fill_holes=True)``): the
+            number of boundary vertices of each hole of the mesh that was filled for the map
+            (the surface spans it, held by the fairing); None when there were none.
     """
 
     uv: np.ndarray
@@ -307,6 +310,7 @@ class Parameterization:
     axes: np.ndarray | None = None
     scale: float | None = None
     stretch: np.ndarray | None = None
+    holes: np.ndarray | None = None
 
     def contains(self, uv: np.ndarray, tol: float = 1e-12) -> np.ndarray:
         """Mask of parameters inside ``domain_polygon`` (points on its edges count as inside).
@@ -1831,8 +1835,13 @@ def _rectangle_boundary(seg: np.ndarray, corners: np.ndarray) -> np.ndarray:
     return out
 
 
-def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization:
+def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
+                      fill_holes: bool = False) -> Parameterization:
     """Parameterize a triangle (or quad) mesh of disk topology over the unit disk.
+
+    ``fill_holes``: a mesh with holes (boundary loops besides the outer one, each at most
+    half its length) is mapped as if they were filled (:func:`_with_holes_filled`), instead
+    of refused; the surface then spans them.
 
     Boundary (method.md section 4): the boundary loop ``b_0, ..., b_{B-1}`` (in the direction of
     the oriented faces) goes to the unit circle by chord length,
@@ -1957,13 +1966,7 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
     _, blabel = connected_components(bgraph, directed=False)
     n_loops = len(np.unique(blabel[bf]))
     if n_loops > 1:
-        raise TopologyError(
-            f"the mesh has {n_loops} boundary loops (separate borders: an outer one and "
-            f"{n_loops - 1} hole{'s' if n_loops > 2 else ''}, or the two ends of a tube); a "
-            "disk-like patch with exactly one border is needed: fill the holes or cut the patch "
-            "open, or fit its vertices alone as a point cloud (without the faces) if it is a "
-            "height field"
-        )
+        return _with_holes_filled(p, tris, bf, bt, blabel, fill_holes)
     euler = int(np.count_nonzero(used)) - len(ekey) + len(tris)
     if euler != 1:
         raise TopologyError(
@@ -2026,14 +2029,6 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
             "parameter domain; this happens with zero-area (sliver) triangles: clean up the mesh "
             "(Blender: Mesh > Clean Up > Degenerate Dissolve) and try again"
         )
-    # how much the map compresses each vertex's surroundings: 3D over uv length of its edges
-    ratio = np.linalg.norm(p[ea] - p[eb], axis=1) / np.maximum(
-        np.linalg.norm(uv[ea] - uv[eb], axis=1), 1e-300
-    )
-    stretch = np.zeros(n)
-    np.maximum.at(stretch, ea, ratio)
-    np.maximum.at(stretch, eb, ratio)
-    stretch[~used] = np.nan
     return Parameterization(
         uv=_readonly(uv),
         kind="disk",
@@ -2041,13 +2036,97 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray) -> Parameterization
         used=_readonly(used),
         boundary=_readonly(loop.astype(np.int64)),
         faces=_readonly(tris),
-        stretch=_readonly(stretch),
+        stretch=_readonly(_vertex_stretch(p, uv, ea, eb, used)),
+    )
+
+
+def _vertex_stretch(p, uv, ea, eb, used) -> np.ndarray:
+    """How much a mesh's map compresses each vertex's surroundings: the largest ratio of 3D to
+    uv length over the edges ``ea[i] - eb[i]`` at the vertex (NaN where not ``used``)."""
+    ratio = np.linalg.norm(p[ea] - p[eb], axis=1) / np.maximum(
+        np.linalg.norm(uv[ea] - uv[eb], axis=1), 1e-300
+    )
+    stretch = np.zeros(len(p))
+    np.maximum.at(stretch, ea, ratio)
+    np.maximum.at(stretch, eb, ratio)
+    stretch[~used] = np.nan
+    return stretch
+
+
+def _loops_text(loops: int) -> str:
+    return (f"the mesh has {loops} boundary loops (separate borders: an outer one and "
+            f"{loops - 1} hole{'s' if loops > 2 else ''}, or the two ends of a tube)")
+
+
+def holes_error(loops: int, advice: str = "fill_holes=True") -> HolesError:
+    """The error for a mesh with ``loops`` boundary loops given without filling its holes;
+    ``advice``: how to ask for that (the command line and Blender word it their way)."""
+    return HolesError(
+        f"{_loops_text(loops)}; a disk-like patch with exactly one border is needed: fill the "
+        f"holes, or let the surface span them ({advice}), or cut the patch open, or fit its "
+        "vertices alone as a point cloud (without the faces) if it is a height field", loops)
+
+
+# fill_holes: a boundary loop is a hole when at most this share of the longest loop's length
+# (a tube's two ends are not holes of one another)
+HOLE_MAX_SHARE = 0.5
+
+
+def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameterization:
+    """The map of a mesh with several boundary loops (``bf -> bt``: its boundary half-edges,
+    ``blabel``: the loop of each vertex): with ``fill_holes``, every loop but the longest
+    (in 3D) is a hole when it is at most HOLE_MAX_SHARE of the longest. Each hole is closed by
+    a fan of triangles around a new vertex at the mean of its boundary vertices, the filled
+    mesh (one boundary loop) is mapped by :func:`parameterize_mesh`, and the new vertices and
+    fans are left out again: the map of the mesh's own vertices and faces, over a domain
+    that spans the holes (method.md section 4 has one boundary loop; not in it). Mean-value
+    weights are positive on the fans as on any triangle, so the map stays an embedding."""
+    n = len(p)
+    length = np.bincount(blabel[bf], weights=np.linalg.norm(p[bt] - p[bf], axis=1),
+                         minlength=int(blabel.max()) + 1)
+    loops = np.unique(blabel[bf])
+    outer = loops[np.argmax(length[loops])]
+    holes = loops[loops != outer]
+    share = float(length[holes].max() / length[outer])
+    if not fill_holes:
+        raise holes_error(len(loops))
+    if share > HOLE_MAX_SHARE:
+        raise TopologyError(
+            f"{_loops_text(len(loops))}, and the second longest is {share:.0%} as long as the "
+            "longest: that is no hole (the two ends of a tube, a strip closed into a ring); "
+            "cut the mesh open into a disk-like patch with one border"
+        )
+    # a fan per hole: for each of its boundary half-edges a -> b (faces on its left) the
+    # triangle (b, a, centre), so that the fans are oriented as the faces
+    on_hole = blabel[bf] != outer
+    a, b = bf[on_hole], bt[on_hole]
+    which = np.searchsorted(holes, blabel[a])
+    count = np.bincount(which, minlength=len(holes))
+    centre = np.column_stack([np.bincount(which, weights=p[a, k], minlength=len(holes))
+                              for k in range(3)]) / count[:, None]
+    fans = np.column_stack([b, a, n + which])
+    filled = parameterize_mesh(np.vstack([p, centre]), np.vstack([tris, fans]))
+    own = np.all(filled.faces < n, axis=1)
+    faces = filled.faces[own]
+    uv = np.array(filled.uv[:n])
+    used = np.array(filled.used[:n])
+    edges = np.unique(np.sort(np.vstack([faces[:, [0, 1]], faces[:, [1, 2]],
+                                         faces[:, [2, 0]]]), axis=1), axis=0)
+    return Parameterization(
+        uv=_readonly(uv),
+        kind="disk",
+        domain_polygon=filled.domain_polygon,
+        used=_readonly(used),
+        boundary=filled.boundary,
+        faces=_readonly(faces),
+        stretch=_readonly(_vertex_stretch(p, uv, edges[:, 0], edges[:, 1], used)),
+        holes=_readonly(count.astype(np.int64)),
     )
 
 
 def parameterize(
     points: np.ndarray, faces: np.ndarray | None = None, drop_outliers: bool = False,
-    projection=None,
+    projection=None, fill_holes: bool = False,
 ) -> Parameterization:
     """Parameterize a point cloud (``faces is None``) or a disk-like mesh (method.md section 4).
 
@@ -2062,4 +2141,4 @@ def parameterize(
             "a projection direction applies to point clouds; a mesh is parameterized by its "
             "faces (over the unit disk): leave the projection automatic (in Blender: Auto)"
         )
-    return parameterize_mesh(points, faces)
+    return parameterize_mesh(points, faces, fill_holes=fill_holes)

@@ -86,7 +86,8 @@ TESSELLATION_CACHE = 4
 # the spline is defined where its basis sums to 1 to within this (TCBSurface.covers)
 _COVER_TOL = 1e-9
 _OPTION_NAMES = tuple(f.name for f in dataclasses.fields(RefineOptions))
-_PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes", "stretch")
+_PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes", "stretch",
+                 "holes")
 
 
 def _readonly(a):
@@ -1280,6 +1281,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         "outliers": int(len(used) - used.sum()) if param.faces is None else 0,
         # vertices of a mesh that are in no face: a mesh is fitted through its faces
         "loose_vertices": int(len(used) - used.sum()) if param.faces is not None else 0,
+        # holes of a mesh that the surface spans (fill_holes=True)
+        "holes_filled": 0 if param.holes is None else int(len(param.holes)),
         "knots": int(len(best.knots)),
         "interior_knots": int(best.n_interior),
         "control_points": int(best.n_control),
@@ -1426,6 +1429,7 @@ def fit_surface(
     seed: int = 0,
     drop_outliers: bool = False,
     projection=None,
+    fill_holes: bool = False,
 ) -> TCBSurface:
     """Fit a TCB-spline surface to a point cloud or a disk-like mesh (method.md sections 4-6).
 
@@ -1501,6 +1505,11 @@ def fit_surface(
         which the cloud is less steep; ``core.parameterize.parameterize_points``). A given
         direction is still checked for folds; it also lets through clouds too noisy for the
         check to be trusted, which are otherwise refused.
+    fill_holes : bool
+        Meshes only: a mesh with holes (boundary loops besides the outer one, each at most half
+        as long) is refused by default (TopologyError); with True it is mapped as if the holes
+        were filled and the surface spans them, held by the fairing
+        (``core.parameterize.parameterize_mesh``; ``report["holes_filled"]`` counts them).
 
     Counts (``degree``, ``max_control_points``, ...) are whole numbers (``2.0`` is 2), flags
     (``relative``, ``feature_sensitive``) Python or numpy bools; anything else is refused.
@@ -1520,8 +1529,9 @@ def fit_surface(
     )
     options.validate()
     check_callback(callback)
-    if not isinstance(drop_outliers, (bool, np.bool_)):
-        raise InvalidInputError(f"drop_outliers must be True or False, got {drop_outliers!r}")
+    for name, flag in (("drop_outliers", drop_outliers), ("fill_holes", fill_holes)):
+        if not isinstance(flag, (bool, np.bool_)):
+            raise InvalidInputError(f"{name} must be True or False, got {flag!r}")
     coarse = float32_rounding(points, "pass float64 coordinates, or subtract an offset before "
                                       "converting to 32 bits")
     try:
@@ -1529,7 +1539,8 @@ def fit_surface(
     except (TypeError, ValueError):
         raise InvalidInputError("points must be an (N, 3) array of numbers") from None
     try:
-        param = parameterize(points, faces, drop_outliers=drop_outliers, projection=projection)
+        param = parameterize(points, faces, drop_outliers=drop_outliers, projection=projection,
+                             fill_holes=bool(fill_holes))
     except TCBError as exc:
         if coarse is None:
             raise
@@ -1540,6 +1551,10 @@ def fit_surface(
         warnings.warn("drop_outliers applies to point clouds: a mesh's vertices are held by its "
                       "faces, so none were left out (leave the option out for meshes)",
                       RuntimeWarning, stacklevel=2)
+    if faces is None and fill_holes:
+        warnings.warn("fill_holes applies to meshes: a point cloud's surface is trimmed to "
+                      "where its data are, so gaps in it stay open (leave the option out for "
+                      "point clouds)", RuntimeWarning, stacklevel=2)
     return _run(points, param, options, callback, checked=faces is None,
                 faces_key=None if faces is None else faces_digest(faces),
                 spikes=faces is None and not drop_outliers)

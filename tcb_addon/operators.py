@@ -634,6 +634,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             relative=self.relative, max_control_points=self.max_control_points,
             max_iterations=self.max_iterations, smoothness=smoothness,
             criterion=self.criterion.lower(), drop_outliers=self.drop_outliers,
+            fill_holes=self.fill_holes,
             projection=None if self.projection == "AUTO" else self.projection.lower(),
         )  # fmt: skip
 
@@ -647,6 +648,10 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             kwargs["drop_outliers"] = False
             self._ignored = [f"Drop Outliers applies to point clouds: '{data.name}' is a mesh, "
                              "whose faces hold its vertices, so none were left out"]
+        if data.faces is None and kwargs.get("fill_holes"):  # (a setting left on)
+            kwargs["fill_holes"] = False
+            self._ignored.append(f"Fill Holes applies to meshes: '{data.name}' is fitted as a "
+                                 "point cloud, whose surface keeps to where its points are")
         self._key = (data.digest(), tuple(sorted(kwargs.items())))
         cached = _cache_get(self._key)
         self._reused = cached is not None
@@ -661,6 +666,9 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 raise core.parameterize.outlier_error(
                     data.points, ex.indices, data.label,
                     advice="turn on Drop Outliers in the fit settings") from None
+            except core.HolesError as ex:
+                raise core.parameterize.holes_error(
+                    ex.loops, advice="turn on Fill Holes in the fit settings") from None
             except core.InvalidInputError as ex:  # the shape may be the modifiers' doing
                 mods = data.modifier_note()
                 extra = ([f"the input is read after its modifiers: {mods}; turn them off in "
@@ -733,7 +741,10 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         context.view_layer.objects.active = surface
         reused = ["the same input and settings as the last fit: its result was reused (the "
                   "seconds are that fit's)"] if getattr(self, "_reused", False) else []
-        report_result(self, surf, list(data.notes) + self._ignored + reused + replaced,
+        holes = int((surf.report or {}).get("holes_filled", 0))
+        spanned = [f"the surface spans the mesh's {holes} hole{'s' if holes > 1 else ''} "
+                   "(Fill Holes)"] if holes else []
+        report_result(self, surf, list(data.notes) + self._ignored + reused + replaced + spanned,
                       _engine_notes(self), seconds=None if reused else
                       time.perf_counter() - getattr(self, "_started", time.perf_counter()))
         return {"FINISHED"}

@@ -110,6 +110,15 @@ class FitSettings:
         ),
         default=False,
     )  # fmt: skip
+    fill_holes: BoolProperty(
+        name="Fill Holes",
+        description=(
+            "Meshes with holes (borders inside the outer one, as a scan's gaps): let the "
+            "surface span them, held smooth, instead of stopping with an error (meshes only; a "
+            "point cloud's surface keeps to where its points are)"
+        ),
+        default=False,
+    )  # fmt: skip
     projection: EnumProperty(
         name="Projection",
         description=(
@@ -137,7 +146,7 @@ class FitSettings:
 
 FIT_KEYS = (
     "tolerance", "relative", "criterion", "max_control_points", "max_iterations", "degree", "mode",
-    "smoothness", "auto_smoothness", "drop_outliers", "projection", "resolution",
+    "smoothness", "auto_smoothness", "drop_outliers", "fill_holes", "projection", "resolution",
 )  # fmt: skip
 
 
@@ -247,7 +256,8 @@ def draw_fit_settings(layout, owner, short_labels: bool = False) -> None:
     row.prop(owner, "tolerance")
     row.prop(owner, "relative", text="", icon="DRIVER_DISTANCE")
     for key in ("criterion", "max_control_points", "max_iterations", "degree", "mode",
-                "smoothness", "drop_outliers", "projection", "resolution", *RESULT_KEYS):
+                "smoothness", "drop_outliers", "fill_holes", "projection", "resolution",
+                *RESULT_KEYS):
         if short_labels and key == "max_control_points":
             col.prop(owner, key, text="Max Control Pts")
         elif key == "smoothness":

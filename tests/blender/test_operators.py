@@ -686,6 +686,38 @@ def test_fit_mesh_object_nefertiti(clean_scene, addon):
     assert snapshot(obj) == before
 
 
+def test_a_mesh_with_a_hole_is_refused_unless_fill_holes_is_on(clean_scene, addon, capfd):
+    """A scan-like grid mesh with a hole: by default an ERROR that says to turn on Fill Holes
+    (nothing made); with it the surface spans the hole, close to the shape there, and the
+    report says so; on a point cloud the setting is ignored with a note."""
+    bpy = clean_scene
+    verts, faces = grid(24)
+    centre = verts[faces].mean(axis=1)
+    faces = faces[np.hypot(centre[:, 0] - 0.2, centre[:, 1] + 0.1) > 0.3]
+    obj = add_mesh(bpy, "Holed", verts, faces)
+    before, n_objects = snapshot(obj), len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match=r"2 boundary loops .* \(turn on Fill Holes in the "
+                       r"fit settings\)"):
+        fit(bpy, obj)
+    assert len(bpy.data.objects) == n_objects
+    capfd.readouterr()
+    assert fit(bpy, obj, fill_holes=True) == {"FINISHED"}
+    assert "the surface spans the mesh's 1 hole (Fill Holes)" in capfd.readouterr().out
+    used = np.unique(faces)
+    surface, _, surf = check_result(bpy, addon, "Holed", verts[used], 2e-3)
+    assert surf.report["holes_filled"] == 1
+    # the surface mesh covers the hole, within 1% of the shape's height range there
+    v = positions(surface)
+    inside = np.hypot(v[:, 0] - 0.2, v[:, 1] + 0.1) < 0.2
+    assert inside.sum() >= 12  # (a disk of radius 0.2 at resolution 24: about 18 vertices)
+    truth = 0.3 * (v[inside, 0] ** 2 - 0.5 * v[inside, 1] ** 2)
+    assert np.abs(v[inside, 2] - truth).max() < 0.01 * np.ptp(verts[:, 2])
+    assert snapshot(obj) == before
+    cloud = add_point_cloud(bpy, "Cloud", verts[used])
+    assert fit(bpy, cloud, fill_holes=True) == {"FINISHED"}
+    assert "Fill Holes applies to meshes" in capfd.readouterr().out
+
+
 def test_fit_mesh_with_modifier_uses_evaluated_geometry(clean_scene, addon):
     bpy = clean_scene
     verts, faces = grid(12)

@@ -318,6 +318,33 @@ def test_drop_outliers_on_a_mesh_is_refused(tmp_path):
     assert not (tmp_path / "s.obj").exists()
 
 
+def test_a_mesh_with_holes_names_fill_holes_and_is_fitted_with_it(tmp_path):
+    """A grid mesh with a hole: one line naming --fill-holes; with it the surface spans the
+    hole and the table says so; the option on a point cloud is refused."""
+    g = np.linspace(0, 1, 16)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    pts = np.c_[x, y, 0.2 * np.sin(3 * x) * y]
+    i = np.arange(256).reshape(16, 16)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel(), i[1:, :-1].ravel()
+    faces = np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+    centre = pts[faces].mean(axis=1)
+    faces = faces[np.hypot(centre[:, 0] - 0.5, centre[:, 1] - 0.5) > 0.15]
+    src = tmp_path / "holed.obj"
+    write_mesh(src, pts, faces)
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--quiet")
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0, r.stderr
+    assert "2 boundary loops" in r.stderr and "(pass --fill-holes)" in r.stderr
+    assert "fill_holes=True" not in r.stderr
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--fill-holes", "--spline", tmp_path / "s.npz")
+    assert r.returncode == 0, r.stderr
+    assert "1 hole spanned" in r.stdout
+    assert TCBSurface.load(tmp_path / "s.npz").report["holes_filled"] == 1
+    cloud = tmp_path / "cloud.xyz"
+    np.savetxt(cloud, pts)
+    r = run("fit", cloud, "-o", tmp_path / "c.obj", "--quiet", "--fill-holes")
+    assert r.returncode == 2 and "--fill-holes applies to meshes" in r.stderr
+
+
 def test_corrupt_input_files_give_one_line_and_exit_2(tmp_path):
     """An empty .npy, a damaged .npz and a PLY announcing 10**12 faces on a 100-byte body:
     one line naming the file, exit 2, no traceback (they were EOFError, BadZipFile and

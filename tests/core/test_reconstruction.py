@@ -1229,6 +1229,71 @@ def grid_with_hole(n=6):
     return v, np.array(faces)
 
 
+def test_fill_holes_spans_a_mesh_s_holes_and_keeps_its_own_vertices_and_faces(tmp_path):
+    """A 31 x 31 grid mesh of a smooth function with two holes (the faces near two centres
+    removed, their inner vertices left loose): refused with a HolesError that names
+    fill_holes; with it the surface meets the tolerance at the vertices, spans the holes
+    within 1% of the function's range there, and the parameterization keeps the mesh's own
+    vertices and faces (no fan vertex or face left), counting each hole's border. A tube's
+    second loop is no hole; a cloud warns that the option applies to meshes."""
+    from core import HolesError
+
+    m = 31
+    g = np.linspace(0, 1, m)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    f = lambda x, y: 0.3 * np.sin(3 * x) * np.cos(2 * y)  # noqa: E731
+    P = np.c_[x, y, f(x, y)]
+    i = np.arange(m * m).reshape(m, m)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel(), i[1:, :-1].ravel()
+    F = np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+    cen = P[F].mean(axis=1)
+    F = F[(np.hypot(cen[:, 0] - 0.5, cen[:, 1] - 0.45) > 0.12)
+          & (np.hypot(cen[:, 0] - 0.2, cen[:, 1] - 0.75) > 0.07)]
+    with pytest.raises(HolesError, match=r"3 boundary loops .*\(fill_holes=True\)"):
+        fit_surface(P, F)
+    with pytest.warns(RuntimeWarning, match="vertices are in no face"):
+        surf = fit_surface(P, F, fill_holes=True)
+    par = surf.parameterization
+    assert surf.report["holes_filled"] == 2 and surf.report["rms_rel"] <= 1e-3
+    assert par.uv.shape == (len(P), 2) and np.array_equal(par.used, np.isin(np.arange(len(P)), F))
+    assert len(par.faces) == len(F) and par.faces.max() < len(P)
+    np.testing.assert_array_equal(np.sort(np.sort(par.faces, axis=1), axis=0),
+                                  np.sort(np.sort(F, axis=1), axis=0))
+    # each hole's border: the vertices of edges in one face, away from the grid's border
+    e = np.sort(np.r_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1)
+    edges, count = np.unique(e, axis=0, return_counts=True)
+    border = np.unique(edges[count == 1])
+    inner = border[(x[border] > 0) & (x[border] < 1) & (y[border] > 0) & (y[border] < 1)]
+    near_first = np.hypot(x[inner] - 0.5, y[inner] - 0.45) < 0.25
+    assert sorted(par.holes) == sorted([int(near_first.sum()), int((~near_first).sum())])
+    assert np.all(orient2d(*(par.uv[par.faces[:, k]] for k in range(3))) > 0)
+    for cx, cy, r in ((0.5, 0.45, 0.08), (0.2, 0.75, 0.04)):
+        t = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+        q = np.c_[cx + r * np.cos(t), cy + r * np.sin(t)]
+        near = surf.closest_points(np.c_[q, f(*q.T)])
+        assert np.abs(near[:, 2] - f(near[:, 0], near[:, 1])).max() < 0.01 * 0.6
+    V, _ = surf.tessellate(64)
+    assert np.count_nonzero(np.hypot(V[:, 0] - 0.5, V[:, 1] - 0.45) < 0.08) > 10  # spanned
+    back = TCBSurface.from_bytes(surf.to_bytes(compact=True))
+    np.testing.assert_array_equal(back.parameterization.holes, par.holes)
+    with pytest.warns(RuntimeWarning, match="vertices are in no face"):
+        assert len(back.refine(P, F, max_iterations=1).control_points) > 0
+    # a tube: its two ends are equally long, no hole of one another
+    t = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    ring = np.c_[np.cos(t), np.sin(t)]
+    tube = np.vstack([np.c_[ring, np.full(24, z)] for z in np.linspace(0, 2, 8)])
+    k = np.arange(24)
+    quads = [(r * 24 + k, r * 24 + (k + 1) % 24, (r + 1) * 24 + (k + 1) % 24, (r + 1) * 24 + k)
+             for r in range(7)]
+    tf = np.vstack([np.r_[np.c_[q0, q1, q2], np.c_[q0, q2, q3]] for q0, q1, q2, q3 in quads])
+    with pytest.raises(TopologyError, match="is no hole .the two ends of a tube"):
+        fit_surface(tube, tf, fill_holes=True)
+    with pytest.warns(RuntimeWarning, match="fill_holes applies to meshes"):
+        fit_surface(P, fill_holes=True, max_iterations=1)
+    with pytest.raises(InvalidInputError, match="fill_holes must be True or False"):
+        fit_surface(P, F, fill_holes="yes")
+
+
 @pytest.mark.parametrize(
     "case, error, words",
     [
