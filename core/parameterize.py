@@ -1590,7 +1590,8 @@ def _is_cap(tris: np.ndarray, p: np.ndarray, rtol: float) -> tuple[np.ndarray, n
     return np.einsum("ij,ij->i", n, n) <= rtol**2 * length2.max(axis=1) ** 2, length2
 
 
-def _flip_caps(tris: np.ndarray, p: np.ndarray, rtol: float = 1e-10) -> np.ndarray:
+def _flip_caps(tris: np.ndarray, p: np.ndarray, rtol: float = 1e-10,
+               frozen_from: int | None = None) -> np.ndarray:
     """Remove zero-area "cap" triangles ``(a, b, c)`` (``c`` on the segment ``ab``) by flipping
     ``ab``, their longest edge, with the triangle ``(a, b, d)`` across it: ``(a, d, c)`` and
     ``(d, b, c)``. Fanning an n-gon with three collinear vertices makes such caps (a hexagon
@@ -1604,6 +1605,8 @@ def _flip_caps(tris: np.ndarray, p: np.ndarray, rtol: float = 1e-10) -> np.ndarr
     passes repeat until no cap can be flipped (a collinear run of k vertices takes k - 1). Caps
     on the boundary or at non-manifold edges stay (the topology checks report the latter).
     Orientation is made consistent afterwards (:func:`_orient_consistently`).
+    ``frozen_from``: triangles with a vertex of this index or above (the fans that close a
+    mesh's holes, :func:`_with_holes_filled`) take part in no flip.
     """
     n = len(p)
     tris = tris.copy()
@@ -1630,6 +1633,8 @@ def _flip_caps(tris: np.ndarray, p: np.ndarray, rtol: float = 1e-10) -> np.ndarr
         new1, new2 = np.stack([a, d, c], 1), np.stack([d, b, c], 1)
         ok = (d != c) & ~np.isin(np.minimum(c, d) * n + np.maximum(c, d), sorted_keys)
         ok &= ~_is_cap(new1, p, rtol)[0] & ~_is_cap(new2, p, rtol)[0]
+        if frozen_from is not None:
+            ok &= (tris[cap] < frozen_from).all(axis=1) & (tris[other] < frozen_from).all(axis=1)
         cap, other, new1, new2 = cap[ok], other[ok], new1[ok], new2[ok]
         if len(cap) == 0:
             break
@@ -1836,11 +1841,12 @@ def _rectangle_boundary(seg: np.ndarray, corners: np.ndarray) -> np.ndarray:
 
 
 def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
-                      fill_holes: bool = False) -> Parameterization:
+                      fill_holes: bool = False, _fans_from: int | None = None
+                      ) -> Parameterization:
     """Parameterize a triangle (or quad) mesh of disk topology over the unit disk.
 
     ``fill_holes``: a mesh with holes (boundary loops besides the outer one, each at most
-    half its length) is mapped as if they were filled (:func:`_with_holes_filled`), instead
+    half its size) is mapped as if they were filled (:func:`_with_holes_filled`), instead
     of refused; the surface then spans them.
 
     Boundary (method.md section 4): the boundary loop ``b_0, ..., b_{B-1}`` (in the direction of
@@ -1899,7 +1905,7 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
             "as a point cloud, pass them without faces (in Blender: delete the faces)"
         )
     _check_finite(p[used], what="referenced vertices")
-    tris = _flip_caps(tris, p)
+    tris = _flip_caps(tris, p, frozen_from=_fans_from)
 
     # undirected edges and their face counts
     he_from = tris.reshape(-1)
@@ -2067,35 +2073,51 @@ def holes_error(loops: int, advice: str = "fill_holes=True") -> HolesError:
         "vertices alone as a point cloud (without the faces) if it is a height field", loops)
 
 
-# fill_holes: a boundary loop is a hole when at most this share of the longest loop's length
-# (a tube's two ends are not holes of one another)
+# fill_holes: a boundary loop is a hole when its bounding box's diagonal is at most this share
+# of the largest loop's (a tube's two ends are not holes of one another)
 HOLE_MAX_SHARE = 0.5
+# ... and is spanned when at most this share of its fan's area (in the plane of the hole's
+# vector area) faces backwards: a C-shaped gap's fan overlaps the mesh (37% of it backwards,
+# a crescent's 27%, an L's 9%; a round hole in a triangulated grid, whose staircase border
+# makes a few thin backward fan triangles, 0.1%)
+HOLE_BACKWARD = 0.02
 
 
 def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameterization:
     """The map of a mesh with several boundary loops (``bf -> bt``: its boundary half-edges,
-    ``blabel``: the loop of each vertex): with ``fill_holes``, every loop but the longest
-    (in 3D) is a hole when it is at most HOLE_MAX_SHARE of the longest. Each hole is closed by
-    a fan of triangles around a new vertex at the mean of its boundary vertices, the filled
-    mesh (one boundary loop) is mapped by :func:`parameterize_mesh`, and the new vertices and
-    fans are left out again: the map of the mesh's own vertices and faces, over a domain
-    that spans the holes (method.md section 4 has one boundary loop; not in it). Mean-value
-    weights are positive on the fans as on any triangle, so the map stays an embedding."""
+    ``blabel``: the loop of each vertex): with ``fill_holes``, every loop but the largest is
+    a hole when the diagonal of its bounding box is at most HOLE_MAX_SHARE of the largest's
+    (a loop's 3D length would count a border zigzagging down a steep slope as large: review).
+    Each hole is closed by a fan of triangles around a new vertex at the mean of its border
+    vertices, the filled mesh (one boundary loop) is mapped by :func:`parameterize_mesh`
+    (the fans take part in no cap flip), and the new vertices and fans are left out again:
+    the map of the mesh's own vertices and faces, over a domain that spans the holes
+    (method.md section 4 has one boundary loop; not in it). Mean-value weights are positive
+    on the fans as on any triangle, so the map has no folds; but where the centre does not
+    see the whole border (a C-shaped gap) the fans overlap the mesh and squeeze its map (a
+    C-shaped hole in a grid: max error 0.082 of the diagonal instead of 1e-3; review), so a
+    hole more than HOLE_BACKWARD of whose fan area, in the plane of the hole's vector area,
+    faces backwards is refused with advice."""
     n = len(p)
-    length = np.bincount(blabel[bf], weights=np.linalg.norm(p[bt] - p[bf], axis=1),
-                         minlength=int(blabel.max()) + 1)
     loops = np.unique(blabel[bf])
-    outer = loops[np.argmax(length[loops])]
+    lo = np.full((int(blabel.max()) + 1, 3), np.inf)
+    hi = np.full((int(blabel.max()) + 1, 3), -np.inf)
+    np.minimum.at(lo, blabel[bf], p[bf])
+    np.maximum.at(hi, blabel[bf], p[bf])
+    size = np.linalg.norm(hi - lo, axis=1)
+    outer = loops[np.argmax(size[loops])]
     holes = loops[loops != outer]
-    share = float(length[holes].max() / length[outer])
+    share = float(size[holes].max() / size[outer])
+    if share > HOLE_MAX_SHARE:  # (with or without fill_holes: no hole to fill)
+        raise TopologyError(
+            f"{_loops_text(len(loops))}; a disk-like patch with exactly one border is "
+            f"needed, and the second largest border is {share:.2f} times the size of the "
+            "largest, too large for a hole to be spanned (the two ends of a tube, a strip "
+            "closed into a ring): cut the mesh open into a patch with one border, or fill the "
+            "holes in the mesh"
+        )
     if not fill_holes:
         raise holes_error(len(loops))
-    if share > HOLE_MAX_SHARE:
-        raise TopologyError(
-            f"{_loops_text(len(loops))}, and the second longest is {share:.0%} as long as the "
-            "longest: that is no hole (the two ends of a tube, a strip closed into a ring); "
-            "cut the mesh open into a disk-like patch with one border"
-        )
     # a fan per hole: for each of its boundary half-edges a -> b (faces on its left) the
     # triangle (b, a, centre), so that the fans are oriented as the faces
     on_hole = blabel[bf] != outer
@@ -2105,7 +2127,25 @@ def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameteriz
     centre = np.column_stack([np.bincount(which, weights=p[a, k], minlength=len(holes))
                               for k in range(3)]) / count[:, None]
     fans = np.column_stack([b, a, n + which])
-    filled = parameterize_mesh(np.vstack([p, centre]), np.vstack([tris, fans]))
+    normal = np.cross(p[a] - centre[which], p[b] - centre[which])  # (of (b, a, c), negated)
+    vector_area = np.column_stack([np.bincount(which, weights=normal[:, k],
+                                               minlength=len(holes)) for k in range(3)])
+    unit = vector_area / np.maximum(np.linalg.norm(vector_area, axis=1), 1e-300)[:, None]
+    along = np.einsum("ij,ij->i", normal, unit[which])  # twice the fan's area in the hole's plane
+    back = np.bincount(which, weights=np.maximum(-along, 0.0), minlength=len(holes))
+    total = np.bincount(which, weights=np.abs(along), minlength=len(holes))
+    bad = np.flatnonzero(back > HOLE_BACKWARD * np.maximum(total, 1e-300))
+    if len(bad):
+        h = int(bad[0])
+        where = ", ".join(f"{c:.6g}" for c in centre[h])
+        raise ParameterizationError(
+            f"{len(bad)} of the mesh's {len(holes)} holes cannot be spanned from their centre "
+            f"(the first: a border of {int(count[h])} vertices around ({where})): the gap is "
+            "C-shaped or winds, and the map would be squeezed there; fill such holes in the "
+            "mesh first (Blender: select the hole's border, then Face > Grid Fill or F) and fit "
+            "again"
+        )
+    filled = parameterize_mesh(np.vstack([p, centre]), np.vstack([tris, fans]), _fans_from=n)
     own = np.all(filled.faces < n, axis=1)
     faces = filled.faces[own]
     uv = np.array(filled.uv[:n])

@@ -1507,9 +1507,11 @@ def fit_surface(
         check to be trusted, which are otherwise refused.
     fill_holes : bool
         Meshes only: a mesh with holes (boundary loops besides the outer one, each at most half
-        as long) is refused by default (TopologyError); with True it is mapped as if the holes
-        were filled and the surface spans them, held by the fairing
-        (``core.parameterize.parameterize_mesh``; ``report["holes_filled"]`` counts them).
+        its size) is refused by default (HolesError, a TopologyError); with True it is mapped
+        as if each hole were closed by a fan around its border's mean, and the surface spans
+        them, held by the fairing (``core.parameterize._with_holes_filled``;
+        ``report["holes_filled"]`` counts them). A hole whose fan would overlap the mesh (a
+        C- or L-shaped gap) is refused with advice (ParameterizationError).
 
     Counts (``degree``, ``max_control_points``, ...) are whole numbers (``2.0`` is 2), flags
     (``relative``, ``feature_sensitive``) Python or numpy bools; anything else is refused.
@@ -1544,7 +1546,8 @@ def fit_surface(
     except TCBError as exc:
         if coarse is None:
             raise
-        raise type(exc)(f"{exc} (note: {coarse})") from None
+        exc.args = (f"{exc} (note: {coarse})",)  # (the same error: its fields, such as
+        raise exc from None  # an OutlierError's indices, stay; review)
     if coarse is not None:
         warnings.warn(coarse, RuntimeWarning, stacklevel=2)
     if faces is not None and drop_outliers:  # (the CLI refuses the option for a mesh)

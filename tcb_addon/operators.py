@@ -666,19 +666,19 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 raise core.parameterize.outlier_error(
                     data.points, ex.indices, data.label,
                     advice="turn on Drop Outliers in the fit settings") from None
-            except core.HolesError as ex:
-                raise core.parameterize.holes_error(
-                    ex.loops, advice="turn on Fill Holes in the fit settings") from None
             except core.InvalidInputError as ex:  # the shape may be the modifiers' doing
+                if isinstance(ex, core.HolesError):  # (in Blender's words)
+                    ex = core.parameterize.holes_error(
+                        ex.loops, advice="turn on Fill Holes in the fit settings")
                 mods = data.modifier_note()
                 extra = ([f"the input is read after its modifiers: {mods}; turn them off in "
                           "the viewport to fit the mesh without them"] if mods else [])
                 # and how the selection was read (a mesh with loose vertices fitted as a point
                 # cloud, objects merged: user test, the error spoke of a cloud only)
                 extra += list(data.notes)
-                if not extra:
-                    raise
-                raise type(ex)(f"{ex} ({'; '.join(extra)})") from None
+                if extra:
+                    ex.args = (f"{ex} ({'; '.join(extra)})",)
+                raise ex from None
 
         self._engine = []
         return ("run", _as_stored(_recording(fit, self._engine), self.resolution),

@@ -14,6 +14,7 @@ from core import (
     CancelledError,
     FileFormatError,
     InvalidInputError,
+    ParameterizationError,
     TCBError,
     TCBSurface,
     TopologyError,
@@ -1251,6 +1252,10 @@ def test_fill_holes_spans_a_mesh_s_holes_and_keeps_its_own_vertices_and_faces(tm
           & (np.hypot(cen[:, 0] - 0.2, cen[:, 1] - 0.75) > 0.07)]
     with pytest.raises(HolesError, match=r"3 boundary loops .*\(fill_holes=True\)"):
         fit_surface(P, F)
+    # coarse float32 coordinates add a note; the error keeps its fields (review: loops was 2)
+    with pytest.raises(HolesError, match=r"3 boundary loops .*\(note: .*32") as info:
+        fit_surface((P * 100 + 1e6).astype(np.float32), F)
+    assert info.value.loops == 3
     with pytest.warns(RuntimeWarning, match="vertices are in no face"):
         surf = fit_surface(P, F, fill_holes=True)
     par = surf.parameterization
@@ -1286,8 +1291,20 @@ def test_fill_holes_spans_a_mesh_s_holes_and_keeps_its_own_vertices_and_faces(tm
     quads = [(r * 24 + k, r * 24 + (k + 1) % 24, (r + 1) * 24 + (k + 1) % 24, (r + 1) * 24 + k)
              for r in range(7)]
     tf = np.vstack([np.r_[np.c_[q0, q1, q2], np.c_[q0, q2, q3]] for q0, q1, q2, q3 in quads])
-    with pytest.raises(TopologyError, match="is no hole .the two ends of a tube"):
-        fit_surface(tube, tf, fill_holes=True)
+    for fill in (True, False):  # (without the option too: it would not help; review)
+        with pytest.raises(TopologyError, match="1.00 times the size of the largest, too "
+                           "large for a hole to be spanned .the two ends of a tube") as info:
+            fit_surface(tube, tf, fill_holes=fill)
+        assert "fill_holes" not in str(info.value)
+    # a C-shaped hole: its centre does not see its border, the fan would squeeze the map (max
+    # error 0.082 of the diagonal, 319 control points; review): refused with advice
+    cells = np.c_[a, b, c, d]
+    r, q = np.divmod(np.arange(len(cells)), m - 1)
+    ring = np.hypot(r - 14.5, q - 14.5)
+    cut = (ring >= 3.5) & (ring <= 5.0) & ~((q > 14.5) & (np.abs(r - 14.5) < 2))
+    with pytest.raises(ParameterizationError, match=r"1 of the mesh's 1 holes cannot be spanned "
+                       r"from their centre .* C-shaped .* Grid Fill"):
+        fit_surface(P, cells[~cut], fill_holes=True)
     with pytest.warns(RuntimeWarning, match="fill_holes applies to meshes"):
         fit_surface(P, fill_holes=True, max_iterations=1)
     with pytest.raises(InvalidInputError, match="fill_holes must be True or False"):
