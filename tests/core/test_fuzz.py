@@ -17,8 +17,8 @@ OUTCOMES: Counter = Counter()
 
 KINDS = (
     "cloud", "lattice", "near_collinear", "duplicates", "nan", "inf", "tiny", "scale_small",
-    "scale_large", "offset_large", "grid_mesh", "mesh_holes", "non_manifold", "components",
-    "closed", "bad_faces",
+    "scale_large", "offset_large", "grid_mesh", "mesh_holes", "holes_filled", "non_manifold",
+    "components", "closed", "bad_faces",
 )
 
 
@@ -59,9 +59,10 @@ def make_input(kind, seed, n):
         pts = pts * 1e6
     elif kind == "offset_large":
         pts = pts + 1e6
-    elif kind in ("grid_mesh", "mesh_holes", "non_manifold", "components", "closed", "bad_faces"):
+    elif kind in ("grid_mesh", "mesh_holes", "holes_filled", "non_manifold", "components",
+                  "closed", "bad_faces"):
         pts, faces = grid_mesh(rng, int(np.clip(np.sqrt(n), 3, 14)))
-        if kind == "mesh_holes":
+        if kind in ("mesh_holes", "holes_filled"):  # (the second with fill_holes=True)
             keep = np.ones(len(faces), dtype=bool)
             keep[rng.choice(len(faces), size=max(1, len(faces) // 10), replace=False)] = False
             faces = faces[keep]
@@ -93,12 +94,14 @@ def test_any_input_parameterizes_or_raises_a_specific_error(kind, seed, n):
 
     points, faces = make_input(kind, seed, n)
     try:
-        param = parameterize(points, faces)
+        param = parameterize(points, faces, fill_holes=kind == "holes_filled")
     except TCBError as exc:
         assert str(exc)
         OUTCOMES[f"parameterize {kind}: {type(exc).__name__}"] += 1
         return
     OUTCOMES[f"parameterize {kind}: ok"] += 1
+    if faces is not None:  # the mesh's own vertices and faces (no fan of a filled hole)
+        assert len(param.uv) == len(points) and param.faces.max() < len(points)
     uv = param.uv[param.used]
     assert np.all(np.isfinite(uv)) and len(uv) >= 3
     if param.faces is not None:
@@ -115,7 +118,8 @@ def test_any_input_parameterizes_or_raises_a_specific_error(kind, seed, n):
 def test_any_input_gives_a_valid_surface_or_a_specific_error(kind, seed, n):
     points, faces = make_input(kind, seed, n)
     try:
-        surf = fit_surface(points, faces, max_iterations=1, max_control_points=400, tolerance=1e-3)
+        surf = fit_surface(points, faces, max_iterations=1, max_control_points=400, tolerance=1e-3,
+                           fill_holes=kind == "holes_filled")
     except TCBError as exc:
         assert str(exc), "an error must say what is wrong"
         OUTCOMES[f"fit {kind}: {type(exc).__name__}"] += 1
