@@ -264,6 +264,7 @@ def store_stats(tcb, surf, settings: dict) -> None:
     tcb.knots = int(rep.get("knots", 0))
     tcb.control_points = int(rep.get("control_points", len(surf.control_points)))
     tcb.iterations = int(rep.get("iterations", 0))
+    tcb.holes_filled = int(rep.get("holes_filled", 0))
     tcb.stop_reason = str(rep.get("stop_reason", ""))
     for key in ("rms", "max", "rms_rel", "max_rel", "rms_area", "seconds"):
         setattr(tcb, key, float(rep.get(key, 0.0)))

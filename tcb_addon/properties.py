@@ -210,6 +210,7 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     rms_area: FloatProperty(name="RMS over area", precision=6)
     seconds: FloatProperty(name="Seconds", precision=2)
     stop_reason: StringProperty(name="Stopped")  # why the adaptive loop stopped
+    holes_filled: IntProperty(name="Holes Spanned")  # a mesh's holes the surface spans
     # settings of the last fit / refine
     tolerance: FloatProperty(precision=6)
     relative: BoolProperty()

@@ -74,6 +74,7 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
                              " (cross-validated)" if st.smoothness_cross_validated else
                              " (default swung)" if st.smoothness_smoother else ""),
              f"{st.smoothness:.3g}"),
+            *((("Holes Spanned", f"{st.holes_filled}"),) if st.holes_filled else ()),
             ("Seconds", f"{st.seconds:.2f}"),
         ):
             grid.label(text=label)

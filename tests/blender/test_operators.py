@@ -705,7 +705,9 @@ def test_a_mesh_with_a_hole_is_refused_unless_fill_holes_is_on(clean_scene, addo
     assert "the surface spans the mesh's 1 hole (Fill Holes)" in capfd.readouterr().out
     used = np.unique(faces)
     surface, _, surf = check_result(bpy, addon, "Holed", verts[used], 2e-3)
-    assert surf.report["holes_filled"] == 1
+    assert surf.report["holes_filled"] == 1 and surface.tcb.holes_filled == 1
+    log = draw_panels(bpy, [surface])  # the panel's statistics say so
+    assert ("label", "Holes Spanned") in log
     # the surface mesh covers the hole, within 1% of the shape's height range there
     v = positions(surface)
     inside = np.hypot(v[:, 0] - 0.2, v[:, 1] + 0.1) < 0.2
@@ -1532,6 +1534,7 @@ def test_panels_draw_for_any_selection(clean_scene):
     log = draw_panels(bpy, [surface])
     assert sum(e[0] == "label" and e[1].endswith("(max)") for e in log) == 1
     assert ("label", "no data nearby") not in log
+    assert ("label", "Holes Spanned") not in log  # (only where there were holes)
 
 
 # --- live control net -----------------------------------------------------------------------------
