@@ -241,9 +241,9 @@ def _as_stored(fn, resolution: int):
         result = fn(**kw)
         if (result.report or {}).get("stop_reason") == "cancelled":
             return result  # (Esc: thrown away; the tessellation could take seconds: review)
-        text = _encoded(result)
-        surf = _core().TCBSurface.from_bytes(base64.b64decode(text))
-        _STORED_TEXT[surf] = text
+        data = result.to_bytes(compact=True)
+        surf = _core().TCBSurface.from_bytes(data)
+        _STORED_TEXT[surf] = base64.b64encode(data).decode("ascii")
         surf.tessellation_uv(resolution)
         return surf
     return run

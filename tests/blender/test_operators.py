@@ -157,7 +157,10 @@ def test_the_stored_spline_is_compact_and_the_mesh_is_its_tessellation(clean_sce
             assert stored is fitted and fitted.report["stop_reason"] == "cancelled"
             assert stored not in ops._STORED_TEXT and 40 not in stored._tess_cache
         else:
-            assert stored is not fitted and ops._STORED_TEXT[stored] == ops._encoded(stored)
+            assert stored is not fitted  # its text: its own compact bytes (zip times vary)
+            again = core.TCBSurface.from_bytes(base64.b64decode(ops._STORED_TEXT[stored]))
+            np.testing.assert_array_equal(again.parameterization.uv, stored.parameterization.uv)
+            np.testing.assert_array_equal(again.coefficients, stored.coefficients)
             assert 40 in stored._tess_cache
 
 
