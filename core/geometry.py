@@ -7,7 +7,8 @@ centres (the ``k`` nearest) and takes the smallest exact distance among them.
 ``column_bounds`` is the per-column minimum and maximum of a long ``(n, d)`` array;
 ``float32_rounding`` says when 32-bit coordinates are already coarsely rounded.
 ``distances_at_vertices`` carries the data-to-surface distances of a point cloud to the vertices
-of the surface mesh (the deviation map of a cloud).
+of the surface mesh (the deviation map of a cloud). ``simple_polygon`` and ``ear_clipping`` test
+and triangulate a simple polygon (the holes of a mesh that ``fill_holes`` spans).
 """
 
 from __future__ import annotations
@@ -15,8 +16,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .configurations import _segments_cross
+from .simplex import orient2d
+
 __all__ = ["closest_point_on_triangles", "column_bounds", "distances_at_vertices",
-           "float32_rounding", "point_mesh_distance"]
+           "ear_clipping", "float32_rounding", "point_mesh_distance", "simple_polygon"]
 
 
 def column_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -193,3 +197,112 @@ def _spacing(points: np.ndarray, tree=None, sample: int = 20_000) -> float:
     dist = np.where(dist > 0, dist, np.inf).min(axis=1)
     dist = dist[np.isfinite(dist)]
     return float(np.median(dist)) if len(dist) else 0.0
+
+
+def simple_polygon(xy: np.ndarray) -> bool:
+    """Whether the closed polygon ``xy`` (m, 2), ``m >= 3``, is simple: no zero-length edge, no
+    two edges that are not neighbours touching (closed segments), and no two neighbours
+    folding back onto each other (a vertex of angle 0). Only edges whose midpoints are within
+    the longest edge of each other can touch: those pairs come from a KD-tree, then the exact
+    test (:func:`core.configurations._segments_cross`)."""
+    xy = np.asarray(xy, dtype=np.float64)
+    m = len(xy)
+    if m < 3 or not np.isfinite(xy).all():
+        return False
+    nxt = np.roll(xy, -1, axis=0)
+    prv = np.roll(xy, 1, axis=0)
+    if np.any(np.all(nxt == xy, axis=1)):
+        return False
+    fold = (orient2d(prv, xy, nxt) == 0) & (np.einsum("ij,ij->i", prv - xy, nxt - xy) > 0)
+    if np.any(fold):
+        return False
+    if m == 3:
+        return bool(orient2d(xy[0], xy[1], xy[2]) != 0)
+    longest = float(np.sqrt(((nxt - xy) ** 2).sum(axis=1).max()))
+    pairs = cKDTree(0.5 * (xy + nxt)).query_pairs(longest * (1 + 1e-9), output_type="ndarray")
+    ii, jj = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
+    keep = (jj > ii + 1) & ~((ii == 0) & (jj == m - 1))  # neighbours share an end
+    ii, jj = ii[keep], jj[keep]
+    return not (len(ii) and np.any(_segments_cross(xy[ii], nxt[ii], xy[jj], nxt[jj])))
+
+
+def _min_sine(A: np.ndarray, T: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Sine of the smallest angle of the triangles ``A T B`` (k, d), d = 2 or 3: twice the
+    area over the product of the two longer sides (the smallest angle is opposite the
+    shortest); 0 for a degenerate one."""
+    u, v = T - A, B - A
+    if A.shape[1] == 2:
+        area2 = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    else:
+        area2 = np.linalg.norm(np.cross(u, v), axis=1)
+    e2 = np.stack([(u * u).sum(1), ((B - T) ** 2).sum(1), (v * v).sum(1)], axis=1)
+    e2.sort(axis=1)
+    return area2 / np.maximum(np.sqrt(e2[:, 1] * e2[:, 2]), 1e-300)
+
+
+def ear_clipping(xy: np.ndarray, shape: np.ndarray | None = None) -> np.ndarray | None:
+    """A triangulation (m - 2, 3) of the simple counter-clockwise polygon ``xy`` (m, 2) by its
+    own vertices, or None when the clipping gets stuck (a polygon that is not simple, or
+    clockwise). Each step clips, of the ears (a strictly convex vertex whose triangle with
+    its two neighbours holds no other remaining vertex, its sides included), the one with the
+    largest smallest-angle sine (of the triangle of the points ``shape`` (m, d) when given: the
+    polygon's vertices in 3D, clipped in a plane they map to); only the two neighbours of a clipped ear are tested again
+    (O(m^2) in all, a step vectorized over the remaining vertices). Every simple polygon has
+    an ear (Meisters' two-ears theorem), so the clipping gets stuck on none. The triangles
+    are counter-clockwise, ``(previous, tip, next)`` in the polygon's order. Only vertices
+    that are not strictly convex can lie in an ear's triangle, so only those are tested (a
+    vertex never turns reflex as its neighbours are clipped)."""
+    xy = np.asarray(xy, dtype=np.float64)
+    m = len(xy)
+    if m < 3:
+        return None
+    nxt = np.roll(np.arange(m), -1)
+    prv = np.roll(np.arange(m), 1)
+    alive = np.ones(m, dtype=bool)
+    span = float(np.ptp(xy, axis=0).max()) if m else 0.0
+    floor = 1e-12 * span * span
+    reflex = orient2d(xy[prv], xy, xy[nxt]) <= floor
+    S = xy if shape is None else np.asarray(shape, dtype=np.float64)
+
+    def quality(tips: np.ndarray) -> np.ndarray:
+        a, b = prv[tips], nxt[tips]
+        A, T, B = xy[a], xy[tips], xy[b]
+        area2 = orient2d(A, T, B)
+        q = np.full(len(tips), -1.0)
+        convex = np.flatnonzero(area2 > floor)
+        if len(convex) == 0:
+            return q
+        live = np.flatnonzero(alive & reflex)
+        J = xy[live]
+        for s in range(0, len(convex), 256):
+            c = convex[s : s + 256]
+            Ac, Tc, Bc = A[c, None], T[c, None], B[c, None]
+            inside = orient2d(Ac, Tc, J[None]) >= 0
+            inside &= orient2d(Tc, Bc, J[None]) >= 0
+            inside &= orient2d(Bc, Ac, J[None]) >= 0
+            own = (live[None] == a[c, None]) | (live[None] == tips[c, None])
+            own |= live[None] == b[c, None]
+            free = ~(inside & ~own).any(axis=1)
+            q[c] = np.where(free, _min_sine(S[a[c]], S[tips[c]], S[b[c]]), -1.0)
+        return q
+
+    q = quality(np.arange(m))
+    tris = np.empty((m - 2, 3), dtype=np.int64)
+    for step in range(m - 3):
+        tip = int(np.argmax(q))
+        if q[tip] < 0:
+            return None
+        a, b = int(prv[tip]), int(nxt[tip])
+        tris[step] = (a, tip, b)
+        alive[tip] = False
+        q[tip] = -np.inf
+        nxt[a], prv[b] = b, a
+        ab = np.array([a, b])
+        reflex[ab] = orient2d(xy[prv[ab]], xy[ab], xy[nxt[ab]]) <= floor
+        q[ab] = quality(ab)
+    a = int(np.flatnonzero(alive)[0])
+    last = (a, int(nxt[a]), int(nxt[nxt[a]]))
+    if orient2d(xy[last[0]], xy[last[1]], xy[last[2]]) <= floor:
+        return None
+    tris[m - 3] = last
+    return tris

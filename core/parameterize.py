@@ -31,7 +31,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from .errors import (
     HolesError, InvalidInputError, OutlierError, ParameterizationError, TCBError, TopologyError,
 )
-from .geometry import column_bounds
+from .geometry import column_bounds, ear_clipping, simple_polygon
 from .parallel import pmap, row_blocks
 from .simplex import orient2d
 
@@ -1591,7 +1591,7 @@ def _is_cap(tris: np.ndarray, p: np.ndarray, rtol: float) -> tuple[np.ndarray, n
 
 
 def _flip_caps(tris: np.ndarray, p: np.ndarray, rtol: float = 1e-10,
-               frozen_from: int | None = None) -> np.ndarray:
+               frozen: np.ndarray | None = None) -> np.ndarray:
     """Remove zero-area "cap" triangles ``(a, b, c)`` (``c`` on the segment ``ab``) by flipping
     ``ab``, their longest edge, with the triangle ``(a, b, d)`` across it: ``(a, d, c)`` and
     ``(d, b, c)``. Fanning an n-gon with three collinear vertices makes such caps (a hexagon
@@ -1605,8 +1605,8 @@ def _flip_caps(tris: np.ndarray, p: np.ndarray, rtol: float = 1e-10,
     passes repeat until no cap can be flipped (a collinear run of k vertices takes k - 1). Caps
     on the boundary or at non-manifold edges stay (the topology checks report the latter).
     Orientation is made consistent afterwards (:func:`_orient_consistently`).
-    ``frozen_from``: triangles with a vertex of this index or above (the fans that close a
-    mesh's holes, :func:`_with_holes_filled`) take part in no flip.
+    ``frozen``: (f,) True for the triangles that take part in no flip (those that close a
+    mesh's holes, :func:`_with_holes_filled`).
     """
     n = len(p)
     tris = tris.copy()
@@ -1633,8 +1633,8 @@ def _flip_caps(tris: np.ndarray, p: np.ndarray, rtol: float = 1e-10,
         new1, new2 = np.stack([a, d, c], 1), np.stack([d, b, c], 1)
         ok = (d != c) & ~np.isin(np.minimum(c, d) * n + np.maximum(c, d), sorted_keys)
         ok &= ~_is_cap(new1, p, rtol)[0] & ~_is_cap(new2, p, rtol)[0]
-        if frozen_from is not None:
-            ok &= (tris[cap] < frozen_from).all(axis=1) & (tris[other] < frozen_from).all(axis=1)
+        if frozen is not None:
+            ok &= ~frozen[cap] & ~frozen[other]
         cap, other, new1, new2 = cap[ok], other[ok], new1[ok], new2[ok]
         if len(cap) == 0:
             break
@@ -1841,7 +1841,7 @@ def _rectangle_boundary(seg: np.ndarray, corners: np.ndarray) -> np.ndarray:
 
 
 def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
-                      fill_holes: bool = False, _fans_from: int | None = None
+                      fill_holes: bool = False, _fill_from: int | None = None
                       ) -> Parameterization:
     """Parameterize a triangle (or quad) mesh of disk topology over the unit disk.
 
@@ -1889,13 +1889,14 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     # drop degenerate (repeated index) and repeated faces
     ok = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 2] != tris[:, 0])
     tris = tris[ok]
+    row = np.flatnonzero(ok)  # (the faces' rows: those from _fill_from on close holes)
     if len(tris) == 0:
         raise InvalidInputError(
             "every face of the mesh is degenerate (repeats a vertex); a disk-like patch of "
             "triangles or quads is needed"
         )
     _, first = np.unique(np.sort(tris, axis=1), axis=0, return_index=True)
-    tris = tris[np.sort(first)]
+    tris, row = tris[np.sort(first)], row[np.sort(first)]
 
     used = np.bincount(tris.ravel(), minlength=n) > 0
     if used.sum() < MIN_POINTS <= n:  # the plain "at least 10 points" would contradict n
@@ -1905,7 +1906,7 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
             "as a point cloud, pass them without faces (in Blender: delete the faces)"
         )
     _check_finite(p[used], what="referenced vertices")
-    tris = _flip_caps(tris, p, frozen_from=_fans_from)
+    tris = _flip_caps(tris, p, frozen=None if _fill_from is None else row >= _fill_from)
 
     # undirected edges and their face counts
     he_from = tris.reshape(-1)
@@ -2076,12 +2077,61 @@ def holes_error(loops: int, advice: str = "fill_holes=True") -> HolesError:
 # fill_holes: a boundary loop is a hole when its bounding box's diagonal is at most this share
 # of the largest loop's (a tube's two ends are not holes of one another)
 HOLE_MAX_SHARE = 0.5
-# ... and is spanned when at most this share of its fan's area (in the plane of the hole's
-# vector area) faces backwards: a C-shaped gap's fan overlaps the mesh (37% of it backwards,
-# a crescent's 27%, an L's 9%: 319-560 control points where a round hole needs 147); a round
+# ... and is closed by a fan around its border's mean when at most this share of the fan's
+# area (in the plane of the hole's vector area) faces backwards, else by ear clipping of its
+# border (:func:`_clipped_hole`): a C-shaped gap's fan overlaps the mesh (37% of it backwards,
+# a crescent's 27%, an L's 9%: 319-616 control points where a round hole needs 147); a round
 # hole in a triangulated grid, whose staircase border makes a few thin backward fan
-# triangles, 0.1%; holes punched into three_peaks.off 2-4.5%, fitted as well as the whole
+# triangles, 0.1%; holes punched into three_peaks.off 2-4.5%, fitted as well as the whole.
+# Fans span large round holes better than clipped borders (a hole of 912 cells in an 80 x 80
+# grid: 0.0066 of the diagonal off the function inside it against 0.011)
 HOLE_BACKWARD = 0.05
+
+
+def _clipped_hole(uv, p, a, b, normal, mesh_edges) -> np.ndarray | None:
+    """Triangles (m - 2, 3) closing a hole whose boundary half-edges are ``a -> b`` (the faces on
+    their left), by its own border vertices, oriented as the faces; None when none is found.
+    The border is walked against the half-edges (the hole then on its left, as a fan
+    triangle ``(b, a, centre)`` has it) and clipped into ears
+    (:func:`core.geometry.ear_clipping`, each ear chosen by its shape in 3D, ``p``) in the
+    plane through the hole with unit ``normal`` when the border is a simple polygon there
+    (C-, L-, S-shaped holes and crescents in a grid: 147-150 control points and max errors
+    of 4.7-7.3e-4 of the diagonal, as for a round hole, where fans needed 558-616 and missed
+    by 0.012-0.079), else in the parameter domain ``uv`` of the mesh mapped with the hole
+    closed by its fan (an embedding, so the border is a simple counter-clockwise polygon
+    there; but a squeezed one: a crescent got max 0.017 so, 7.1e-4 in the plane). A diagonal
+    that is an edge of the mesh (``mesh_edges``: sorted pair keys ``i n + j``, ``n =
+    len(uv)``) would make a non-manifold edge: the plane is then not used (in the map, that
+    edge and the diagonal would be one segment, inside and outside the hole: it cannot
+    happen there)."""
+    m, n = len(a), len(uv)
+    order = np.argsort(a)
+    succ = order[np.searchsorted(a, b, sorter=order)]  # position of b[i] in a
+    walk = depth_first_order(sp.csr_matrix((np.ones(m), (np.arange(m), succ)), shape=(m, m)),
+                             0, directed=True, return_predecessors=False)
+    if len(walk) != m:
+        return None
+    r = a[walk][::-1]
+    e1 = np.cross(normal, np.eye(3)[int(np.argmin(np.abs(normal)))])
+    e1 /= np.linalg.norm(e1)
+    q = p[r] - p[r].mean(axis=0)
+    xy = np.column_stack([q @ e1, q @ np.cross(normal, e1)])
+    if np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]) < 0:
+        xy[:, 1] = -xy[:, 1]  # counter-clockwise (the vertex order, so the faces', is kept)
+    side = np.sort(np.column_stack([r, np.roll(r, -1)]), axis=1)
+    for plane in (xy, uv[r]):
+        if not simple_polygon(plane):
+            continue
+        tri = ear_clipping(plane, p[r])
+        if tri is None:
+            continue
+        tri = r[tri]
+        e = np.sort(np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+        key = e[:, 0] * n + e[:, 1]
+        diagonal = ~np.isin(key, side[:, 0] * n + side[:, 1])
+        if not np.isin(key[diagonal], mesh_edges).any():
+            return tri
+    return None
 
 
 def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameterization:
@@ -2091,14 +2141,16 @@ def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameteriz
     (a loop's 3D length would count a border zigzagging down a steep slope as large: review).
     Each hole is closed by a fan of triangles around a new vertex at the mean of its border
     vertices, the filled mesh (one boundary loop) is mapped by :func:`parameterize_mesh`
-    (the fans take part in no cap flip), and the new vertices and fans are left out again:
-    the map of the mesh's own vertices and faces, over a domain that spans the holes
-    (method.md section 4 has one boundary loop; not in it). Mean-value weights are positive
-    on the fans as on any triangle, so the map has no folds; but where the centre does not
-    see the whole border (a C-shaped gap) the fans overlap the mesh and squeeze its map (a
-    C-shaped hole in a grid: max error 0.082 of the diagonal instead of 1e-3; review), so a
-    hole more than HOLE_BACKWARD of whose fan area, in the plane of the hole's vector area,
-    faces backwards is refused with advice."""
+    (the triangles that close holes take part in no cap flip), and the new vertices and
+    triangles are left out again: the map of the mesh's own vertices and faces, over a domain
+    that spans the holes (method.md section 4 has one boundary loop; not in it). Mean-value
+    weights are positive on the fans as on any triangle, so the map has no folds; but where
+    the centre does not see the whole border (a C-shaped gap) the fans overlap the mesh and
+    squeeze its map (a C-shaped hole in a grid: max error 0.082 of the diagonal instead of
+    1e-3; review). A hole more than HOLE_BACKWARD of whose fan area, in the plane of the
+    hole's vector area, faces backwards is closed by triangles of its own border vertices
+    instead (:func:`_clipped_hole`) and the mesh mapped again; one that cannot be (its
+    border crosses itself in that plane and in the fans' map) is refused with advice."""
     n = len(p)
     loops = np.unique(blabel[bf])
     lo = np.full((int(blabel.max()) + 1, 3), np.inf)
@@ -2135,20 +2187,44 @@ def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameteriz
     along = np.einsum("ij,ij->i", normal, unit[which])  # twice the fan's area in the hole's plane
     back = np.bincount(which, weights=np.maximum(-along, 0.0), minlength=len(holes))
     total = np.bincount(which, weights=np.abs(along), minlength=len(holes))
-    bad = np.flatnonzero(back > HOLE_BACKWARD * np.maximum(total, 1e-300))
-    if len(bad):
-        h = int(bad[0])
-        where = ", ".join(f"{c:.6g}" for c in centre[h])
-        raise ParameterizationError(
-            f"{len(bad)} of the mesh's {len(holes)} holes cannot be spanned from their centre "
-            f"(the first: a border of {int(count[h])} vertices around ({where})): the gap is "
-            "C-shaped or winds, and the map would be squeezed there; fill such holes in the "
-            "mesh first (Blender: select the hole's border, then Face > Grid Fill or F) and fit "
-            "again"
-        )
-    filled = parameterize_mesh(np.vstack([p, centre]), np.vstack([tris, fans]), _fans_from=n)
-    own = np.all(filled.faces < n, axis=1)
-    faces = filled.faces[own]
+    # the map with every hole closed by its fan: an embedding (mean-value weights are positive
+    # on any triangle), but one that a fan squeezes where its centre does not see the hole's
+    # border (C-shaped, L-shaped, crescents)
+    filled = parameterize_mesh(np.vstack([p, centre]), np.vstack([tris, fans]),
+                               _fill_from=len(tris))
+    fill = fans
+    clip = np.flatnonzero(back > HOLE_BACKWARD * np.maximum(total, 1e-300))
+    if len(clip):
+        # those holes are closed by their own border vertices instead (ear clipping), and the
+        # mesh is mapped again
+        e = np.sort(np.vstack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+        mesh_edges = np.unique(e[:, 0] * (n + len(holes)) + e[:, 1])
+        uv_fans = np.asarray(filled.uv)
+        fill, refused = [fans[~np.isin(which, clip)]], []
+        for h in clip.tolist():  # (a loop over the holes to clip; each vectorized)
+            on = which == h
+            clipped = _clipped_hole(uv_fans, np.vstack([p, centre]), a[on], b[on], unit[h],
+                                    mesh_edges)
+            if clipped is None:
+                refused.append(h)
+            fill.append(clipped)
+        if refused:
+            h = int(refused[0])
+            where = ", ".join(f"{c:.6g}" for c in centre[h])
+            raise ParameterizationError(
+                f"{len(refused)} of the mesh's {len(holes)} holes cannot be spanned (the "
+                f"first: a border of {int(count[h])} vertices around ({where})): the gap winds "
+                "so that neither a fan from its centre nor a triangulation of its border "
+                "closes it without squeezing the map; fill such holes in the mesh first "
+                "(Blender: select the hole's border, then Face > Grid Fill or F) and fit again"
+            )
+        fill = np.vstack(fill)
+        filled = parameterize_mesh(np.vstack([p, centre]), np.vstack([tris, fill]),
+                                   _fill_from=len(tris))
+    if len(filled.faces) != len(tris) + len(fill):  # (rows kept in order: none is dropped)
+        raise ParameterizationError("filling the mesh's holes changed its faces; fill the "
+                                    "holes in the mesh first and fit again")
+    faces = filled.faces[: len(tris)]
     uv = np.array(filled.uv[:n])
     used = np.array(filled.used[:n])
     edges = np.unique(np.sort(np.vstack([faces[:, [0, 1]], faces[:, [1, 2]],

@@ -83,3 +83,16 @@ def test_bench_stored_quick():
     assert [r[0].strip() for r in rows] == ["cloud", "grid mesh"]
     for r in rows:
         assert float(r[4]) < 0.6 * float(r[3]), r
+
+
+def test_holes_quick():
+    """``benchmarks/holes.py --quick`` prints the round and the C-shaped hole with both rules;
+    the shipped rule spans the C-shaped one with under half the fan's control points."""
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "holes.py"), "--quick"],
+                         capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = [[c.strip() for c in r.split("|")[1:-1]] for r in res.stdout.splitlines()
+            if r.startswith("| ") and not r.startswith("| hole")]
+    assert [r[:2] for r in rows] == [["round (41 grid)", "fan"], ["round (41 grid)", "shipped"],
+                                     ["C", "fan"], ["C", "shipped"]]
+    assert 2 * int(rows[3][2]) < int(rows[2][2]), rows

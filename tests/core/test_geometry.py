@@ -65,3 +65,36 @@ def test_distances_at_vertices_carry_the_data_distances_not_the_gaps():
     assert not has.any() and np.all(values == 0)
     values, has = distances_at_vertices(np.zeros((0, 3)), feet, dist)
     assert values.shape == (0,) and has.shape == (0,)
+
+
+def test_ear_clipping_triangulates_simple_polygons_and_refuses_crossing_ones():
+    """Ear clipping of simple counter-clockwise polygons (a star of 5 lobes, a C, one with
+    collinear runs along its sides) gives m - 2 counter-clockwise triangles of the
+    polygon's own vertices that cover its area exactly; a clockwise or self-crossing
+    polygon gives None, and simple_polygon tells them apart (crossings, a zero-length edge,
+    an edge folding back onto its neighbour)."""
+    from core.geometry import ear_clipping, simple_polygon
+    from core.simplex import orient2d
+
+    def shoelace(xy):
+        return 0.5 * np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1])
+
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    star = np.c_[(1 + 0.5 * np.sin(5 * t)) * np.cos(t), (1 + 0.5 * np.sin(5 * t)) * np.sin(t)]
+    a = np.linspace(0.3, 2 * np.pi - 0.3, 30)
+    c_shape = np.r_[np.c_[np.cos(a), np.sin(a)], 0.6 * np.c_[np.cos(a), np.sin(a)][::-1]]
+    g = np.arange(5.0)
+    steps = np.r_[np.c_[g, 0 * g], np.c_[4 + 0 * g[1:], g[1:]], np.c_[g[::-1][1:], 4 + 0 * g[1:]],
+                  np.c_[0 * g[1:-1], g[::-1][1:-1]]]  # a 4 x 4 square, 16 vertices on its sides
+    for xy in (star, c_shape, steps):
+        assert simple_polygon(xy)
+        tri = ear_clipping(xy)
+        assert tri.shape == (len(xy) - 2, 3) and len(np.unique(tri)) == len(xy)
+        area = orient2d(xy[tri[:, 0]], xy[tri[:, 1]], xy[tri[:, 2]])
+        assert area.min() > 0 and np.isclose(area.sum() / 2, shoelace(xy), rtol=1e-12)
+        assert ear_clipping(xy[::-1]) is None  # clockwise
+    bowtie = np.array([[0, 0], [1, 1], [1, 0], [0, 1.0]])
+    assert not simple_polygon(bowtie) and ear_clipping(bowtie) is None
+    assert not simple_polygon(np.r_[star[:10], star[9:]])  # a zero-length edge
+    assert not simple_polygon(np.array([[0, 0], [2, 0], [1, 0], [1, 1.0]]))  # folds back
+    assert not simple_polygon(np.r_[star, [[0.1, 0.0]], [[2.0, 0.0]]])  # crosses its start
