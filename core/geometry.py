@@ -202,9 +202,10 @@ def _spacing(points: np.ndarray, tree=None, sample: int = 20_000) -> float:
 def simple_polygon(xy: np.ndarray) -> bool:
     """Whether the closed polygon ``xy`` (m, 2), ``m >= 3``, is simple: no zero-length edge, no
     two edges that are not neighbours touching (closed segments), and no two neighbours
-    folding back onto each other (a vertex of angle 0). Only edges whose midpoints are within
-    the longest edge of each other can touch: those pairs come from a KD-tree, then the exact
-    test (:func:`core.configurations._segments_cross`)."""
+    folding back onto each other (a vertex of angle 0). The exact test
+    (:func:`core.configurations._segments_cross`) runs on the pairs of edges up to 4 times
+    the median length whose midpoints are within the longest of them (from a KD-tree), and
+    on each longer edge against all (memory O(m) per block)."""
     xy = np.asarray(xy, dtype=np.float64)
     m = len(xy)
     if m < 3 or not np.isfinite(xy).all():
@@ -218,12 +219,26 @@ def simple_polygon(xy: np.ndarray) -> bool:
         return False
     if m == 3:
         return bool(orient2d(xy[0], xy[1], xy[2]) != 0)
-    longest = float(np.sqrt(((nxt - xy) ** 2).sum(axis=1).max()))
-    pairs = cKDTree(0.5 * (xy + nxt)).query_pairs(longest * (1 + 1e-9), output_type="ndarray")
-    ii, jj = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
-    keep = (jj > ii + 1) & ~((ii == 0) & (jj == m - 1))  # neighbours share an end
-    ii, jj = ii[keep], jj[keep]
-    return not (len(ii) and np.any(_segments_cross(xy[ii], nxt[ii], xy[jj], nxt[jj])))
+    length = np.sqrt(((nxt - xy) ** 2).sum(axis=1))
+    # short edges: pairs from a KD-tree of their midpoints (two touching edges have midpoints
+    # within half their lengths' sum); the few long ones (a border with one long side made
+    # the tree's pairs m^2 / 2: 1.8 GB at m = 8000; review) against all edges, in blocks
+    cut = 4.0 * float(np.median(length))
+    short = np.flatnonzero(length <= cut)
+    pairs = cKDTree(0.5 * (xy + nxt)[short]).query_pairs(float(length[short].max(initial=0.0)),
+                                                          output_type="ndarray")
+    blocks = [short[pairs]]
+    long_ = np.flatnonzero(length > cut)
+    for s in range(0, len(long_), max(1, (1 << 20) // m)):
+        li = long_[s : s + max(1, (1 << 20) // m)]
+        blocks.append(np.column_stack([np.repeat(li, m), np.tile(np.arange(m), len(li))]))
+    for pairs in blocks:
+        ii, jj = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
+        keep = (jj > ii + 1) & ~((ii == 0) & (jj == m - 1))  # neighbours share an end
+        ii, jj = ii[keep], jj[keep]
+        if len(ii) and np.any(_segments_cross(xy[ii], nxt[ii], xy[jj], nxt[jj])):
+            return False
+    return True
 
 
 def _min_sine(A: np.ndarray, T: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -248,7 +263,10 @@ def ear_clipping(xy: np.ndarray, shape: np.ndarray | None = None) -> np.ndarray 
     largest smallest-angle sine (of the triangle of the points ``shape`` (m, d) when given: the
     polygon's vertices in 3D, clipped in a plane they map to); only the two neighbours of a clipped ear are tested again
     (O(m^2) in all, a step vectorized over the remaining vertices). Every simple polygon has
-    an ear (Meisters' two-ears theorem), so the clipping gets stuck on none. The triangles
+    an ear (Meisters' two-ears theorem); vertices within ``1e-12`` of the polygon's extent
+    squared (in ``orient2d`` units) of a line count as on it, so the rounding of a straight
+    border run projected into a plane does not leave three nearly collinear vertices last (a
+    rotated grid's C-shaped hole did: review). The triangles
     are counter-clockwise, ``(previous, tip, next)`` in the polygon's order. Only vertices
     that are not strictly convex can lie in an ear's triangle, so only those are tested (a
     vertex never turns reflex as its neighbours are clipped)."""
@@ -277,9 +295,11 @@ def ear_clipping(xy: np.ndarray, shape: np.ndarray | None = None) -> np.ndarray 
         for s in range(0, len(convex), 256):
             c = convex[s : s + 256]
             Ac, Tc, Bc = A[c, None], T[c, None], B[c, None]
-            inside = orient2d(Ac, Tc, J[None]) >= 0
-            inside &= orient2d(Tc, Bc, J[None]) >= 0
-            inside &= orient2d(Bc, Ac, J[None]) >= 0
+            # (a vertex straight within the floor counts as reflex above, so as on a side
+            # here: else an ear could leave three nearly collinear vertices last; review)
+            inside = orient2d(Ac, Tc, J[None]) >= -floor
+            inside &= orient2d(Tc, Bc, J[None]) >= -floor
+            inside &= orient2d(Bc, Ac, J[None]) >= -floor
             own = (live[None] == a[c, None]) | (live[None] == tips[c, None])
             own |= live[None] == b[c, None]
             free = ~(inside & ~own).any(axis=1)

@@ -2088,7 +2088,7 @@ HOLE_MAX_SHARE = 0.5
 HOLE_BACKWARD = 0.05
 
 
-def _clipped_hole(uv, p, a, b, normal, mesh_edges) -> np.ndarray | None:
+def _clipped_hole(p, a, b, normal, mesh_edges, uv=None) -> np.ndarray | None:
     """Triangles (m - 2, 3) closing a hole whose boundary half-edges are ``a -> b`` (the faces on
     their left), by its own border vertices, oriented as the faces; None when none is found.
     The border is walked against the half-edges (the hole then on its left, as a fan
@@ -2097,14 +2097,14 @@ def _clipped_hole(uv, p, a, b, normal, mesh_edges) -> np.ndarray | None:
     plane through the hole with unit ``normal`` when the border is a simple polygon there
     (C-, L-, S-shaped holes and crescents in a grid: 147-150 control points and max errors
     of 4.7-7.3e-4 of the diagonal, as for a round hole, where fans needed 558-616 and missed
-    by 0.012-0.079), else in the parameter domain ``uv`` of the mesh mapped with the hole
-    closed by its fan (an embedding, so the border is a simple counter-clockwise polygon
-    there; but a squeezed one: a crescent got max 0.017 so, 7.1e-4 in the plane). A diagonal
-    that is an edge of the mesh (``mesh_edges``: sorted pair keys ``i n + j``, ``n =
-    len(uv)``) would make a non-manifold edge: the plane is then not used (in the map, that
-    edge and the diagonal would be one segment, inside and outside the hole: it cannot
+    by 0.012-0.079), else (when given) in the parameter domain ``uv`` of the mesh mapped with
+    the hole closed by its fan (an embedding, so the border is a simple counter-clockwise
+    polygon there; but a squeezed one: a crescent got max 0.017 so, 7.1e-4 in the plane). A
+    diagonal that is an edge of the mesh (``mesh_edges``: sorted pair keys ``i n + j``,
+    ``n = len(p)``) would make a non-manifold edge: the plane is then not used (in the map,
+    that edge and the diagonal would be one segment, inside and outside the hole: it cannot
     happen there)."""
-    m, n = len(a), len(uv)
+    m, n = len(a), len(p)
     order = np.argsort(a)
     succ = order[np.searchsorted(a, b, sorter=order)]  # position of b[i] in a
     walk = depth_first_order(sp.csr_matrix((np.ones(m), (np.arange(m), succ)), shape=(m, m)),
@@ -2119,7 +2119,7 @@ def _clipped_hole(uv, p, a, b, normal, mesh_edges) -> np.ndarray | None:
     if np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]) < 0:
         xy[:, 1] = -xy[:, 1]  # counter-clockwise (the vertex order, so the faces', is kept)
     side = np.sort(np.column_stack([r, np.roll(r, -1)]), axis=1)
-    for plane in (xy, uv[r]):
+    for plane in (xy,) if uv is None else (xy, np.asarray(uv)[r]):
         if not simple_polygon(plane):
             continue
         tri = ear_clipping(plane, p[r])
@@ -2187,29 +2187,31 @@ def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameteriz
     along = np.einsum("ij,ij->i", normal, unit[which])  # twice the fan's area in the hole's plane
     back = np.bincount(which, weights=np.maximum(-along, 0.0), minlength=len(holes))
     total = np.bincount(which, weights=np.abs(along), minlength=len(holes))
-    # the map with every hole closed by its fan: an embedding (mean-value weights are positive
-    # on any triangle), but one that a fan squeezes where its centre does not see the hole's
-    # border (C-shaped, L-shaped, crescents)
-    filled = parameterize_mesh(np.vstack([p, centre]), np.vstack([tris, fans]),
-                               _fill_from=len(tris))
+    # every hole closed by its fan: mean-value weights are positive on any triangle, so the
+    # map is an embedding; but a fan squeezes it where its centre does not see the hole's
+    # border (C-shaped, L-shaped, crescents): those holes are closed by ear clipping of their
+    # border instead (:func:`_clipped_hole`), in their plane or, failing that, in the map of
+    # the mesh with the fans (made only then: a second solve; review)
+    p_all = np.vstack([p, centre])
     fill = fans
     clip = np.flatnonzero(back > HOLE_BACKWARD * np.maximum(total, 1e-300))
     if len(clip):
-        # those holes are closed by their own border vertices instead (ear clipping), and the
-        # mesh is mapped again
         e = np.sort(np.vstack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
-        mesh_edges = np.unique(e[:, 0] * (n + len(holes)) + e[:, 1])
-        uv_fans = np.asarray(filled.uv)
-        fill, refused = [fans[~np.isin(which, clip)]], []
-        for h in clip.tolist():  # (a loop over the holes to clip; each vectorized)
-            on = which == h
-            clipped = _clipped_hole(uv_fans, np.vstack([p, centre]), a[on], b[on], unit[h],
-                                    mesh_edges)
-            if clipped is None:
-                refused.append(h)
-            fill.append(clipped)
+        mesh_edges = np.unique(e[:, 0] * len(p_all) + e[:, 1])
+        on = [which == h for h in clip.tolist()]  # (a loop over the holes to clip)
+        closed = [_clipped_hole(p_all, a[w], b[w], unit[h], mesh_edges) for h, w in zip(clip, on)]
+        if any(c is None for c in closed):
+            try:
+                fan_map = parameterize_mesh(p_all, np.vstack([tris, fans]), _fill_from=len(tris))
+            except TCBError:  # (a fan's centre on its border: the hole is refused below)
+                fan_map = None
+            if fan_map is not None:
+                closed = [c if c is not None else _clipped_hole(
+                    p_all, a[w], b[w], unit[h], mesh_edges, uv=fan_map.uv)
+                    for c, h, w in zip(closed, clip, on)]
+        refused = [int(h) for h, c in zip(clip, closed) if c is None]
         if refused:
-            h = int(refused[0])
+            h = refused[0]
             where = ", ".join(f"{c:.6g}" for c in centre[h])
             raise ParameterizationError(
                 f"{len(refused)} of the mesh's {len(holes)} holes cannot be spanned (the "
@@ -2218,9 +2220,8 @@ def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameteriz
                 "closes it without squeezing the map; fill such holes in the mesh first "
                 "(Blender: select the hole's border, then Face > Grid Fill or F) and fit again"
             )
-        fill = np.vstack(fill)
-        filled = parameterize_mesh(np.vstack([p, centre]), np.vstack([tris, fill]),
-                                   _fill_from=len(tris))
+        fill = np.vstack([fans[~np.isin(which, clip)]] + closed)
+    filled = parameterize_mesh(p_all, np.vstack([tris, fill]), _fill_from=len(tris))
     if len(filled.faces) != len(tris) + len(fill):  # (rows kept in order: none is dropped)
         raise ParameterizationError("filling the mesh's holes changed its faces; fill the "
                                     "holes in the mesh first and fit again")

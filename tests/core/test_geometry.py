@@ -98,3 +98,42 @@ def test_ear_clipping_triangulates_simple_polygons_and_refuses_crossing_ones():
     assert not simple_polygon(np.r_[star[:10], star[9:]])  # a zero-length edge
     assert not simple_polygon(np.array([[0, 0], [2, 0], [1, 0], [1, 1.0]]))  # folds back
     assert not simple_polygon(np.r_[star, [[0.1, 0.0]], [[2.0, 0.0]]])  # crosses its start
+
+
+def test_ear_clipping_survives_the_rounding_of_straight_runs_and_long_edges():
+    """Review: a C-shaped lattice polygon (straight runs of collinear vertices) turned by an
+    arbitrary rotation carries rounding of ~1e-17 along its runs; it is still clipped (each
+    ear's triangle holds no other vertex, by the same tolerance that makes a straight vertex
+    no ear tip), with the 3D shapes given. simple_polygon agrees with a test of all edge
+    pairs on random lattice polygons, some with one far vertex (two long edges, which made
+    the KD-tree's candidate pairs quadratic)."""
+    from core.configurations import _segments_cross
+    from core.geometry import ear_clipping, simple_polygon
+    from core.simplex import orient2d
+
+    steps = [(0, 0), (1, 0), (2, 0), (3, 0), (3, 1), (2, 1), (1, 1), (1, 2), (1, 3), (2, 3),
+             (3, 3), (3, 4), (2, 4), (1, 4), (0, 4), (0, 3), (0, 2), (0, 1)]
+    xy = np.array(steps, dtype=float)
+    for angle in np.linspace(0.1, 3.0, 15):
+        rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+        turned = xy @ rot.T  # rounded: the runs are straight only within ~1e-16
+        assert simple_polygon(turned)
+        tri = ear_clipping(turned, np.c_[xy, np.zeros(len(xy))])
+        assert tri is not None and tri.shape == (len(xy) - 2, 3)
+        area = orient2d(xy[tri[:, 0]], xy[tri[:, 1]], xy[tri[:, 2]])  # in the exact lattice
+        assert area.min() > 0 and np.isclose(area.sum() / 2, 8.0)
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        poly = rng.integers(0, 6, (int(rng.integers(4, 30)), 2)).astype(float)
+        if rng.random() < 0.3:
+            poly[0] = [100.0, 100.0]
+        m = len(poly)
+        nxt = np.roll(poly, -1, axis=0)
+        ii, jj = np.triu_indices(m, 2)
+        keep = ~((ii == 0) & (jj == m - 1))
+        crossing = _segments_cross(poly[ii[keep]], nxt[ii[keep]], poly[jj[keep]], nxt[jj[keep]])
+        prv = np.roll(poly, 1, axis=0)
+        degenerate = np.all(nxt == poly, axis=1).any() or (
+            (orient2d(prv, poly, nxt) == 0) & (np.einsum("ij,ij->i", prv - poly, nxt - poly) > 0)
+        ).any()
+        assert simple_polygon(poly) == (not crossing.any() and not degenerate)

@@ -1235,3 +1235,39 @@ def test_point_in_polygon_keeps_points_at_the_tolerance_below_and_above_a_square
             x = np.c_[np.full(13, h / 2), y0 + np.arange(-6, 7) * np.spacing(abs(y0))]
             np.testing.assert_array_equal(_points_in_polygon(x, poly, tol),
                                           _crossing_number_reference(x, poly, tol))
+
+
+def test_a_clipped_hole_runs_against_its_border_and_avoids_the_mesh_s_edges():
+    """``_clipped_hole`` closes an L-shaped hole (half-edges ``a -> b`` clockwise around it,
+    as a mesh's faces leave them) with m - 2 triangles that traverse every border edge
+    ``b -> a``, as the faces beside it do not; a diagonal that is already an edge of the mesh
+    is not used (it would be non-manifold): without another triangulation the hole gives
+    None. A flat grid whose L-shaped hole has its border's mean on a border vertex (the fan
+    would have a zero-length edge) is spanned by clipping (review)."""
+    from core.parameterize import _clipped_hole
+    from core.simplex import orient2d
+
+    ring = np.array([(0, 0), (2, 0), (2, 1), (1, 1), (1, 2), (0, 2)], dtype=float)  # CCW
+    p = np.c_[ring, 0.1 * ring[:, 0] ** 2]
+    m = len(p)
+    a, b = (np.arange(m) + 1) % m, np.arange(m)  # clockwise half-edges: faces outside
+    none = np.zeros(0, dtype=np.int64)
+    tri = _clipped_hole(p, a, b, np.array([0.0, 0.0, 1.0]), none)
+    assert tri.shape == (m - 2, 3)
+    directed = {(int(t[k]), int(t[(k + 1) % 3])) for t in tri for k in range(3)}
+    assert all((int(v), int(u)) in directed for u, v in zip(a, b))  # b -> a
+    diagonals = [tuple(sorted(e)) for e in directed if (e[1] - e[0]) % m not in (1, m - 1)]
+    used = np.array([i * m + j for i, j in set(diagonals)])
+    assert _clipped_hole(p, a, b, np.array([0.0, 0.0, 1.0]), used) is None
+    n = 21
+    g = np.linspace(0, 1, n)
+    x, y = (c.ravel() for c in np.meshgrid(g, g))
+    i = np.arange(n * n).reshape(n, n)
+    cells = np.c_[i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel(), i[1:, :-1].ravel()]
+    r, q = np.divmod(np.arange(len(cells)), n - 1)
+    cut = ((q == 4) & (r >= 4) & (r < 7)) | ((r == 4) & (q >= 4) & (q < 9))
+    P = np.c_[x, y, 0 * x]
+    border = np.intersect1d(np.unique(cells[cut]), np.unique(cells[~cut]))
+    assert np.isclose(np.linalg.norm(P[border] - P[border].mean(axis=0), axis=1), 0).any()
+    par = parameterize_mesh(P, cells[~cut], fill_holes=True)
+    assert len(par.holes) == 1 and np.all(orient2d(*(par.uv[par.faces[:, k]] for k in range(3))) > 0)
