@@ -74,8 +74,9 @@ def grid_cases(quick: bool):
 
 
 def bent_strip(degrees: float, ns: int = 121, nz: int = 21):
-    """A strip bent by ``degrees`` over s in [1.6, 2.4] of its length 4, with a slot of 2 x
-    (the bend's) cells along the bend; its vertices, faces and removed vertices."""
+    """A strip of ``ns x nz`` vertices bent by ``degrees`` over s in [1.6, 2.4] of its length
+    4, with a slot two cells wide along the bend (s in [1.5, 2.5]) at mid-height; its
+    vertices, faces and removed vertices (tests/core/test_reconstruction.py uses it too)."""
     s = np.linspace(0, 4, ns)
     phi = np.radians(degrees) * np.clip((s - 1.6) / 0.8, 0, 1)
     x = np.r_[0, np.cumsum(np.cos(phi[:-1]) * (s[1] - s[0]))]
@@ -84,7 +85,8 @@ def bent_strip(degrees: float, ns: int = 121, nz: int = 21):
     i = np.arange(ns * nz).reshape(nz, ns)
     cells = np.c_[i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel(), i[1:, :-1].ravel()]
     r, q = np.divmod(np.arange(len(cells)), ns - 1)
-    cut = (r >= 9) & (r < 11) & (s[q] >= 1.5) & (s[q + 1] <= 2.5)
+    row = (nz - 1) // 2 - 1
+    cut = (r >= row) & (r < row + 2) & (s[q] >= 1.5) & (s[q + 1] <= 2.5)
     F = cells[~cut]
     return P, F, np.setdiff1d(np.arange(len(P)), F)
 
