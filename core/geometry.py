@@ -260,14 +260,15 @@ def ear_clipping(xy: np.ndarray, shape: np.ndarray | None = None) -> np.ndarray 
     own vertices, or None when the clipping gets stuck (a polygon that is not simple, or
     clockwise). Each step clips, of the ears (a strictly convex vertex whose triangle with
     its two neighbours holds no other remaining vertex, its sides included), the one with the
-    largest smallest-angle sine (of the triangle of the points ``shape`` (m, d) when given: the
-    polygon's vertices in 3D, clipped in a plane they map to); only the two neighbours of a clipped ear are tested again
-    (O(m^2) in all, a step vectorized over the remaining vertices). Every simple polygon has
+    largest smallest-angle sine (of the triangle of the points ``shape`` (m, d) when given:
+    the polygon's vertices in 3D, clipped in a plane they map to); only the two neighbours
+    of a clipped ear are tested again (O(m^2) in all, a step vectorized over the remaining
+    vertices). Every simple polygon has
     an ear (Meisters' two-ears theorem); vertices within ``1e-12`` of the polygon's extent
     squared (in ``orient2d`` units) of a line count as on it, so the rounding of a straight
     border run projected into a plane does not leave three nearly collinear vertices last (a
-    rotated grid's C-shaped hole did: review). The triangles
-    are counter-clockwise, ``(previous, tip, next)`` in the polygon's order. Only vertices
+    rotated grid's C-shaped hole did: review). The triangles are counter-clockwise,
+    ``(previous, tip, next)`` in the polygon's order. Only vertices
     that are not strictly convex can lie in an ear's triangle, so only those are tested (a
     vertex never turns reflex as its neighbours are clipped)."""
     xy = np.asarray(xy, dtype=np.float64)

@@ -2097,8 +2097,8 @@ def _clipped_hole(p, a, b, normal, mesh_edges, uv=None) -> np.ndarray | None:
     plane through the hole with unit ``normal`` when the border is a simple polygon there
     (C-, L-, S-shaped holes and crescents in a grid: 147-150 control points and max errors
     of 4.7-7.3e-4 of the diagonal, as for a round hole, where fans needed 558-616 and missed
-    by 0.012-0.079), else (when given) in the parameter domain ``uv`` of the mesh mapped with
-    the hole closed by its fan (an embedding, so the border is a simple counter-clockwise
+    by 0.012-0.079); given ``uv`` (the plane failed), in the parameter domain ``uv`` of the
+    mesh mapped with the hole closed by its fan (an embedding, so the border is a simple counter-clockwise
     polygon there; but a squeezed one: a crescent got max 0.017 so, 7.1e-4 in the plane). A
     diagonal that is an edge of the mesh (``mesh_edges``: sorted pair keys ``i n + j``,
     ``n = len(p)``) would make a non-manifold edge: the plane is then not used (in the map,
@@ -2119,7 +2119,7 @@ def _clipped_hole(p, a, b, normal, mesh_edges, uv=None) -> np.ndarray | None:
     if np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]) < 0:
         xy[:, 1] = -xy[:, 1]  # counter-clockwise (the vertex order, so the faces', is kept)
     side = np.sort(np.column_stack([r, np.roll(r, -1)]), axis=1)
-    for plane in (xy,) if uv is None else (xy, np.asarray(uv)[r]):
+    for plane in (xy,) if uv is None else (np.asarray(uv)[r],):
         if not simple_polygon(plane):
             continue
         tri = ear_clipping(plane, p[r])
