@@ -2,8 +2,8 @@
 meshes, local control, files, cancellation and bad input."""
 
 import io
-import sys
 import re
+import sys
 import warnings
 import zipfile
 from pathlib import Path
