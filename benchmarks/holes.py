@@ -1,13 +1,14 @@
 """Meshes with holes (``fit_surface(..., fill_holes=True)``): how the surface fits around and
 across holes of several shapes, with every hole closed by a fan around its border's mean
 ("fan": the rule before the twenty-third session, forced here by making every hole count as
-star-shaped) against the rule shipped (fans for holes their mean sees, ear clipping of the
-border for the others: ``core.parameterize._clipped_hole``), in the same run.
+star-shaped and no fan bulge) against the rule shipped (fans for holes their mean sees, ear
+clipping of the border for the others and where the fan bulges away from the hole:
+``core.parameterize._clipped_hole``, HOLE_BACKWARD, HOLE_BULGE), in the same run.
 
 Cases: holes cut into an ``m x m`` grid mesh of ``0.3 sin 3x cos 2y`` over the unit square
 (a round one, C-, L- and S-shaped ones, a crescent; and large round ones), and a slot along
-the bend of a strip bent by 90 and 240 degrees (the latter's border crosses itself seen
-across the slot: clipped in the map). Columns: control points, RMS and max error at the
+the bend of a strip bent by 30, 90, 180 and 240 degrees (the fan bulges away from it; the
+last two's border crosses itself seen across the slot: clipped in the map). Columns: control points, RMS and max error at the
 vertices over the diagonal, and for the grid the largest distance, over the diagonal, between
 the surface and the function at the centres of the removed cells ("in hole"; for the strip,
 the distance of the removed vertices to the surface). Default settings otherwise.
@@ -92,15 +93,15 @@ def bent_strip(degrees: float, ns: int = 121, nz: int = 21):
 
 
 def run(P, F, rule: str):
-    saved = parameterize_module.HOLE_BACKWARD
+    saved = parameterize_module.HOLE_BACKWARD, parameterize_module.HOLE_BULGE
     if rule == "fan":
-        parameterize_module.HOLE_BACKWARD = np.inf
+        parameterize_module.HOLE_BACKWARD, parameterize_module.HOLE_BULGE = np.inf, 0.0
     try:
         t = time.perf_counter()
         surf = fit_surface(P, F, fill_holes=True)
         return surf, time.perf_counter() - t
     finally:
-        parameterize_module.HOLE_BACKWARD = saved
+        parameterize_module.HOLE_BACKWARD, parameterize_module.HOLE_BULGE = saved
 
 
 def main() -> None:
@@ -110,7 +111,7 @@ def main() -> None:
     warnings.simplefilter("ignore")  # (the removed cells' inner vertices: in no face)
     cases = [(name, P, F, ("grid", at)) for name, P, F, at in grid_cases(args.quick)]
     if not args.quick:
-        for deg in (90, 240):
+        for deg in (30, 90, 180, 240):
             P, F, lost = bent_strip(deg)
             cases.append((f"slot in a {deg} deg bend", P, F, ("strip", lost)))
     print("| hole | rule | control points | RMS | max | in hole | seconds |")

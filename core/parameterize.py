@@ -2086,6 +2086,15 @@ HOLE_MAX_SHARE = 0.5
 # Fans span large round holes better than clipped borders (a hole of 912 cells in an 80 x 80
 # grid: 0.0066 of the diagonal off the function inside it against 0.011)
 HOLE_BACKWARD = 0.05
+# ... and a hole whose fan bulges away from it is closed by ear clipping too: when the clipped
+# border spans it with less than this share of the fan's area (3D). A slot two cells wide along
+# the bend of a strip (benchmarks/holes.py) has 0.93, 0.81, 0.50 of its fan's area clipped at
+# 15, 30, 90 degrees of bend, its fan facing backwards nowhere; clipped, the fit's RMS is
+# 0.07-0.2x and its max 0.12-0.2x the fan's at 15-120 degrees. Round holes have 0.99-1.0 and
+# 29 holes punched into three_peaks.off 0.90-1.12, where clipping is no better (scratch
+# /tmp/s24/area.py of the twenty-fourth session). The clipped area is at least the border's
+# vector area, so a hole whose fan has more than this share of it in that area is not tried
+HOLE_BULGE = 0.85
 
 
 def _clipped_hole(p, a, b, normal, mesh_edges, uv=None) -> np.ndarray | None:
@@ -2150,7 +2159,10 @@ def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameteriz
     1e-3; review). A hole more than HOLE_BACKWARD of whose fan area, in the plane of the
     hole's vector area, faces backwards is closed by triangles of its own border vertices
     instead (:func:`_clipped_hole`) and the mesh mapped again; one that cannot be (its
-    border crosses itself in that plane and in the fans' map) is refused with advice."""
+    border crosses itself in that plane and in the fans' map) is refused with advice. A hole
+    whose fan bulges away from it (a slot along a bend) is clipped too when its border's
+    triangles span it with less than HOLE_BULGE of the fan's area; otherwise, or when no
+    such triangles are found, it keeps its fan."""
     n = len(p)
     loops = np.unique(blabel[bf])
     lo = np.full((int(blabel.max()) + 1, 3), np.inf)
@@ -2194,7 +2206,13 @@ def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameteriz
     # the mesh with the fans (made only then: a second solve; review)
     p_all = np.vstack([p, centre])
     fill = fans
-    clip = np.flatnonzero(back > HOLE_BACKWARD * np.maximum(total, 1e-300))
+    must = back > HOLE_BACKWARD * np.maximum(total, 1e-300)
+    # fans that may bulge away from their hole (a slot along a bend): tried clipped too, and
+    # clipped when that spans the hole with less than HOLE_BULGE of the fan's area
+    fan_area = 0.5 * np.bincount(which, weights=np.linalg.norm(normal, axis=1),
+                                 minlength=len(holes))
+    may = ~must & (0.5 * np.linalg.norm(vector_area, axis=1) < HOLE_BULGE * fan_area)
+    clip = np.flatnonzero(must | may)
     if len(clip):
         e = np.sort(np.vstack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
         mesh_edges = np.unique(e[:, 0] * len(p_all) + e[:, 1])
@@ -2209,6 +2227,16 @@ def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameteriz
                 closed = [c if c is not None else _clipped_hole(
                     p_all, a[w], b[w], unit[h], mesh_edges, uv=fan_map.uv)
                     for c, h, w in zip(closed, clip, on)]
+        # a hole that only may be clipped keeps its fan unless clipping spans it with less area
+        def area(t):
+            return 0.5 * float(np.linalg.norm(np.cross(p_all[t[:, 1]] - p_all[t[:, 0]],
+                                                       p_all[t[:, 2]] - p_all[t[:, 0]]),
+                                              axis=1).sum())
+
+        keep = [must[h] or (c is not None and area(c) < HOLE_BULGE * fan_area[h])
+                for h, c in zip(clip, closed)]
+        clip = clip[np.asarray(keep, dtype=bool)]
+        closed = [c for c, k in zip(closed, keep) if k]
         refused = [int(h) for h, c in zip(clip, closed) if c is None]
         if refused:
             h = refused[0]
