@@ -962,8 +962,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         cloud = data.faces is None
         # a cloud's surface colours are computed on the job's thread too, at the surface's
         # vertices as they are now (finish checks that they did not change meanwhile)
-        verts = (bridge.read_world_positions(surface, context.evaluated_depsgraph_get())
-                 if cloud else None)
+        verts = _painted_vertices(context, surface, surf) if cloud else None
         return ("run", _data_distances, dict(surf=surf, points=data.points, cloud=cloud,
                                              vertices=verts))
 
@@ -987,7 +986,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         counted = _counted(surf, len(data_dist))
         left_out = int(len(data_dist) - counted.sum())
         fitted_dist = data_dist[counted]
-        verts = bridge.read_world_positions(surface, context.evaluated_depsgraph_get())
+        verts = _painted_vertices(context, surface, surf)
         if data.faces is None:
             if shading is not None and np.array_equal(shading[0], verts):
                 surf_dist, has_data = shading[1], shading[2]
@@ -1063,6 +1062,25 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         if changed:
             self.report({"WARNING"}, f"TCB: {changed}")
         return {"FINISHED"}
+
+
+def _painted_vertices(context, surface, surf) -> np.ndarray:
+    """World positions of the vertices of the surface's own mesh, where they are shown: the
+    Deviation Map's colours are written on them (the modifiers carry them on). Evaluated,
+    so with a live net's edits; but a modifier of the user's that changes the vertex count
+    (Subdivision, Solidify, Mirror, Decimate) puts other vertices there (user test: a
+    traceback, 466 values for 2579 vertices): then the spline ``surf`` (with the net's edits)
+    at the tessellation's parameters when the live net drives the mesh, else the mesh's own
+    vertices."""
+    verts = bridge.read_world_positions(surface, context.evaluated_depsgraph_get())
+    n = len(surface.data.vertices)
+    if len(verts) == n:
+        return verts
+    if surface.modifiers.get(live.MODIFIER_NAME) is not None:
+        uv, _ = surf.tessellation_uv(surface.tcb.resolution)
+        if len(uv) == n:
+            return np.asarray(surf(uv), dtype=np.float64)
+    return bridge.read_world_positions(surface)
 
 
 def _counted(surf, n: int) -> np.ndarray:

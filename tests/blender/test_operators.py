@@ -1425,6 +1425,36 @@ def test_a_moved_source_or_surface_is_named(clean_scene, addon, capfd):
             bpy.ops.tcb.refine()
 
 
+@pytest.mark.parametrize("kind", ["mesh", "cloud"])
+def test_deviation_map_paints_a_surface_whose_own_modifier_adds_vertices(clean_scene, addon,
+                                                                         kind):
+    """Blender user test: a Subdivision modifier of the user's on the surface made Deviation
+    Map fail with a traceback (the colours of the 2579 evaluated vertices written on the
+    466 of the mesh). They are painted on the mesh's own vertices where the live net puts
+    them (a dragged net vertex included), as without the modifier, which carries them on."""
+    bpy = clean_scene
+    verts, faces = grid(16)
+    source = add_mesh(bpy, "Scan", verts, faces if kind == "mesh" else None)
+    assert fit(bpy, source) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    move_net_vertex(bpy, surface.tcb.net, 5, np.array([0.0, 0.0, 0.05]))
+
+    def painted():
+        with bpy.context.temp_override(**select(bpy, surface)):
+            assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
+        return _deviation_of(surface)
+
+    plain = painted()
+    surface.modifiers.new("Subdivision", "SUBSURF").levels = 1
+    bpy.context.view_layer.update()
+    n = len(surface.data.vertices)
+    assert len(positions(surface.evaluated_get(bpy.context.evaluated_depsgraph_get()))) > n
+    dev, rgba = painted()
+    assert len(dev) == n and plain[0].max() > 0
+    assert np.allclose(dev, plain[0], atol=1e-5 * plain[0].max())
+    assert np.allclose(rgba, plain[1], atol=1e-4)
+
+
 def test_deviation_map_of_a_cloud_greys_surface_without_data(clean_scene, addon):
     """An L-shaped cloud: the surface vertices in the missing quadrant farther than the
     radius from all data get no value (0) and grey, and the panel's legend says so; the
