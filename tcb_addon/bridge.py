@@ -289,6 +289,11 @@ def read_selection(context, objects=None) -> InputData:
                 f"'{obj.name}' is {_kind(obj)}, not a mesh or point cloud: "
                 "select the mesh or point-cloud object to fit"
             )
+        if obj.type == "FONT":  # (its letters' faces: "4 separate pieces", "a tube": user test)
+            raise SelectionError(
+                f"'{obj.name}' is a text object: its letters make no surface to fit; select "
+                "the mesh or point-cloud object to fit"
+            )
 
     wanted = {o.as_pointer(): o for o in objects}
     depsgraph = context.evaluated_depsgraph_get()
@@ -360,9 +365,12 @@ def read_selection(context, objects=None) -> InputData:
 
     pts = np.concatenate(points) if len(points) > 1 else points[0]
     tri = faces[0] if len(faces) == 1 and faces[0] is not None else None
-    if len(points) > 1:  # (an error about "the point cloud" did not say so: user test)
-        notes.append(f"the {len(points)} selected objects ({', '.join(repr(n) for n in counts)}) "
+    if len(counts) > 1:  # (an error about "the point cloud" did not say so: user test)
+        notes.append(f"the {len(counts)} selected objects ({', '.join(repr(n) for n in counts)}) "
                      "were fitted together as one point cloud")
+    elif len(points) > 1:  # one object's instances (user test: "the 58 selected objects")
+        notes.append(f"the {len(points)} instances that '{next(iter(counts))}' makes were "
+                     "fitted together as one point cloud")
     return InputData(points=pts, faces=None if tri is None else tri.astype(np.int64),
                      sources=list(wanted.values()), counts=counts, notes=notes,
                      modifiers=modifiers)  # fmt: skip

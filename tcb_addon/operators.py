@@ -1009,6 +1009,11 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         st = surface.tcb
         if self.points_copy:
             pts_obj = st.deviation_points
+            if pts_obj is not None and not pts_obj.users_scene:
+                # deleted by the user (X), kept alive by the pointer: a new copy is made
+                # (user test: the next copy went into the deleted one, in no scene)
+                drop_deviation_points(surface)
+                pts_obj = None
             if pts_obj is None:
                 origin = bridge.local_origin(data.points)
                 local = data.points - origin

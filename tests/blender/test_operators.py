@@ -1178,6 +1178,15 @@ def test_refine_removes_deviation_points_of_the_old_surface(clean_scene, capfd):
     d = np.empty(len(verts), np.float32)
     surface.tcb.deviation_points.data.attributes["tcb_deviation"].data.foreach_get("value", d)
     assert np.allclose(d, spline_of(surface).distances(verts), atol=1e-5)
+    # deleted by the user (X): the next map makes a new copy in the scene (user test: it went
+    # into the deleted one, in no scene)
+    with bpy.context.temp_override(**select(bpy, surface.tcb.deviation_points)):
+        assert bpy.ops.object.delete() == {"FINISHED"}
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
+    pts = surface.tcb.deviation_points
+    assert pts.users_scene and pts.name in bpy.context.scene.objects
+    assert sum(o.tcb.role == "DEVIATION" for o in bpy.data.objects) == 1
 
 
 def test_a_net_whose_surface_was_deleted_enables_no_surface_operator(clean_scene):
@@ -1658,6 +1667,28 @@ def test_a_curve_without_geometry_is_refused_with_what_to_do(clean_scene):
                                            r"give it geometry .*Object > Convert > Mesh"):
         fit(bpy, obj)
     assert len(bpy.data.objects) == n_objects  # nothing half built
+    # a text object's letters were fitted: "the mesh has 4 separate pieces", "at least 10
+    # points are needed", "2 boundary loops ... a tube", never saying it is text (user test)
+    text = bpy.data.objects.new("Txt", bpy.data.curves.new("Txt", "FONT"))
+    text.data.body = "Text"
+    bpy.context.scene.collection.objects.link(text)
+    with pytest.raises(RuntimeError, match=r"'Txt' is a text object: its letters make no "
+                                           r"surface to fit"):
+        fit(bpy, text)
+    # one object whose instances (Geometry Nodes, a collection) are fitted together was
+    # "the 58 selected objects ('Inst')" (user test)
+    parts = bpy.data.collections.new("Parts")
+    verts, _ = grid(10)
+    for k, name in enumerate(("PartA", "PartB")):
+        parts.objects.link(bpy.data.objects.new(name, add_mesh(bpy, name, verts[k::2]).data))
+    holder = bpy.data.objects.new("Inst", None)
+    holder.instance_type, holder.instance_collection = "COLLECTION", parts
+    bpy.context.scene.collection.objects.link(holder)
+    bridge = sys.modules[ADDON + ".tcb_addon.bridge"]
+    with bpy.context.temp_override(**select(bpy, holder)):
+        data = bridge.read_selection(bpy.context)
+    assert "the 2 instances that 'Inst' makes were fitted together as one point cloud" in data.notes
+    assert not any("selected objects" in n for n in data.notes) and len(data.points) == 100
     verts, faces = grid(8)
     verts[5] = np.nan
     bad = add_mesh(bpy, "Bad", verts, faces)
