@@ -289,6 +289,11 @@ def read_selection(context, objects=None) -> InputData:
                 f"'{obj.name}' is {_kind(obj)}, not a mesh or point cloud: "
                 "select the mesh or point-cloud object to fit"
             )
+        if obj.mode == "EDIT":  # (its mesh is in the edit mesh: "has no vertices": user test)
+            raise SelectionError(
+                f"'{obj.name}' is in Edit Mode, where its mesh cannot be read: switch it to "
+                "Object Mode (Tab) and try again"
+            )
         if obj.type == "FONT":  # (its letters' faces: "4 separate pieces", "a tube": user test)
             raise SelectionError(
                 f"'{obj.name}' is a text object: its letters make no surface to fit; select "

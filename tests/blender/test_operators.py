@@ -1696,6 +1696,34 @@ def test_a_curve_without_geometry_is_refused_with_what_to_do(clean_scene):
         fit(bpy, bad)
 
 
+def test_a_source_left_in_edit_mode_is_named(clean_scene):
+    """A source in Edit Mode while its surface is active (Lock Object Modes off, a click in
+    the Outliner): Deviation Map, Refine and Fit said "'Wave' has no vertices" (user test)."""
+    bpy = clean_scene
+    verts, faces = grid(12)
+    scan = add_mesh(bpy, "Wave", verts, faces)
+    assert fit(bpy, scan) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, scan)):
+        assert bpy.ops.object.mode_set(mode="EDIT") == {"FINISHED"}
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    bpy.context.view_layer.objects.active = surface  # (the surface in Object Mode)
+    surface.select_set(True)
+    assert bpy.context.mode == "OBJECT" and scan.mode == "EDIT"
+    try:
+        words = r"'Wave' is in Edit Mode, where its mesh cannot be read: switch it to Object Mode"
+        for run, selected in ((bpy.ops.tcb.deviation_map, surface), (bpy.ops.tcb.refine, surface),
+                              (bpy.ops.tcb.fit_surface, scan)):
+            with bpy.context.temp_override(selected_objects=[selected], active_object=surface,
+                                           object=surface):
+                with pytest.raises(RuntimeError, match=words):
+                    run()
+    finally:
+        with bpy.context.temp_override(**select(bpy, scan)):
+            bpy.ops.object.mode_set(mode="OBJECT")
+
+
 def test_a_scan_whose_stored_coordinates_are_rounded_says_so(clean_scene, capfd):
     """A georeferenced patch with Apply Transforms: its vertices are stored at 1e5 m, where
     32-bit floats are 0.0078 m apart, and the fit of that rounded data was 16x worse with
