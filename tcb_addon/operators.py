@@ -130,6 +130,19 @@ def active_surface(context):
     return result_objects(getattr(context, "active_object", None))[0]
 
 
+def _poll_object_mode(op_cls, context, surface: bool = True) -> bool:
+    """The operators' poll: Object Mode and (``surface``) an active TCB surface or net, with
+    Blender's poll message saying which is missing (F3 search or a script got only "poll()
+    failed, context is incorrect" in Edit Mode: user test)."""
+    if context.mode != "OBJECT":
+        op_cls.poll_message_set("Switch to Object Mode (Tab) first")
+        return False
+    if surface and active_surface(context) is None:
+        op_cls.poll_message_set("Select a TCB surface (or its control net)")
+        return False
+    return True
+
+
 def stored_surface(surface_obj, use_net: bool = True):
     """The spline stored with a result; with ``use_net``, the net's current vertices as controls."""
     core = _core()
@@ -624,7 +637,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
     def poll(cls, context):
         # Permissive on purpose: a wrong selection gets a specific error message (the panel
         # disables the button and shows the reason).
-        return context.mode == "OBJECT"
+        return _poll_object_mode(cls, context, surface=False)
 
     def _fit_kwargs(self):
         smoothness = "auto" if self.auto_smoothness else self.smoothness
@@ -785,7 +798,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return context.mode == "OBJECT" and active_surface(context) is not None
+        return _poll_object_mode(cls, context)
 
     def invoke(self, context, event):
         surface = active_surface(context)
@@ -891,7 +904,7 @@ class TCB_OT_retessellate(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return context.mode == "OBJECT" and active_surface(context) is not None
+        return _poll_object_mode(cls, context)
 
     def invoke(self, context, event):
         surface = active_surface(context)
@@ -950,7 +963,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return context.mode == "OBJECT" and active_surface(context) is not None
+        return _poll_object_mode(cls, context)
 
     def prepare(self, context):
         surface = active_surface(context)
@@ -1140,6 +1153,10 @@ class TCB_OT_toggle_net(bpy.types.Operator):
 
     def execute(self, context):
         _, net = result_objects(context.active_object)
+        if not net.users_scene:  # deleted (X), kept alive by the surface's pointer (user test)
+            self.report({"ERROR"}, f"'{net.name}' was deleted: select the source and use Fit "
+                                   "Surface to make a new control net (it replaces the result)")
+            return {"CANCELLED"}
         if net.name not in context.view_layer.objects:
             self.report({"ERROR"}, f"'{net.name}' is not in the current view layer")
             return {"CANCELLED"}

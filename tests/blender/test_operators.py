@@ -1206,6 +1206,17 @@ def test_a_net_whose_surface_was_deleted_enables_no_surface_operator(clean_scene
         for op in (bpy.ops.tcb.retessellate, bpy.ops.tcb.refine, bpy.ops.tcb.deviation_map,
                    bpy.ops.tcb.export_spline, bpy.ops.tcb.toggle_net):
             assert not op.poll(), op.idname()
+    # the other way round: X on the net; Show/Hide Net said it "is not in the current view
+    # layer" (user test)
+    assert fit(bpy, obj, tolerance=2e-2, max_control_points=150) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, surface.tcb.net)):
+        assert bpy.ops.object.delete() == {"FINISHED"}
+    with bpy.context.temp_override(**select(bpy, surface)):
+        with pytest.raises(RuntimeError, match=r"TCB Net(\.\d+)?' was deleted: select the "
+                                               r"source and use Fit Surface to make a new "
+                                               r"control net"):
+            bpy.ops.tcb.toggle_net()
 
 
 def test_a_net_with_a_vertex_per_basis_function_is_rewritten_keeping_its_edits(clean_scene, addon):
@@ -1698,7 +1709,8 @@ def test_a_curve_without_geometry_is_refused_with_what_to_do(clean_scene):
 
 def test_a_source_left_in_edit_mode_is_named(clean_scene):
     """A source in Edit Mode while its surface is active (Lock Object Modes off, a click in
-    the Outliner): Deviation Map, Refine and Fit said "'Wave' has no vertices" (user test)."""
+    the Outliner): Deviation Map, Refine and Fit said "'Wave' has no vertices"; with the
+    source active, Fit said only "poll() failed, context is incorrect" (user test)."""
     bpy = clean_scene
     verts, faces = grid(12)
     scan = add_mesh(bpy, "Wave", verts, faces)
@@ -1706,6 +1718,9 @@ def test_a_source_left_in_edit_mode_is_named(clean_scene):
     surface = bpy.context.view_layer.objects.active
     with bpy.context.temp_override(**select(bpy, scan)):
         assert bpy.ops.object.mode_set(mode="EDIT") == {"FINISHED"}
+        # and the scan active in Edit Mode (F3 search, a script): poll says what to do
+        with pytest.raises(RuntimeError, match=r"Switch to Object Mode \(Tab\) first"):
+            bpy.ops.tcb.fit_surface()
     for o in bpy.context.view_layer.objects:
         o.select_set(False)
     bpy.context.view_layer.objects.active = surface  # (the surface in Object Mode)
