@@ -168,6 +168,7 @@ def with_net_edits(surface_obj, surf):
         if net.mode == "EDIT":  # a drag in Edit Mode is in the edit mesh until it is loaded
             net.update_from_editmode()
         ctrl, rounding = bridge.read_world_positions_and_rounding(net)
+        rounding = rounding + float(net.get(NET_ROUNDING_KEY, 0.0))  # (as written, in its frame then)
         # a net saved before control points left out the border rings' functions has a
         # vertex per basis function: its edits are kept and it is rewritten in today's form
         old_net = len(ctrl) == len(surf.coefficients) != len(surf.control_points)
@@ -351,6 +352,21 @@ def write_net_mesh(net_obj, surf, name: str | None = None):
     pts, faces = surf.control_net()
     mesh = bridge.new_mesh(name or net_obj.data.name, bridge.to_local(net_obj, pts), faces)
     bridge.replace_mesh(net_obj, mesh)
+    _remember_net_rounding(net_obj)
+
+
+# the largest float32 spacing of a net's coordinates when they were written, in world units: a
+# net vertex differs from its control point by at most that plus its spacing now
+NET_ROUNDING_KEY = "tcb_net_rounding"
+
+
+def _remember_net_rounding(net_obj) -> None:
+    """Keep the spacing its coordinates were rounded to as written (:data:`NET_ROUNDING_KEY`):
+    Set Origin on the net (its frame changed, no vertex moved) re-rounds them to a finer
+    spacing, against which the first rounding looked like edits (user test: "41 edited
+    control points were replaced" by Refine, for moves of 6e-8)."""
+    net_obj[NET_ROUNDING_KEY] = float(
+        bridge.read_world_positions_and_rounding(net_obj)[1].max(initial=0.0))
 
 
 def _summary(surf, seconds: float | None = None) -> str:
@@ -623,6 +639,7 @@ def _new_net(coll, name: str, surf, origin):
     net.display_type = "WIRE"
     net.show_in_front = True
     net.hide_render = True  # a viewport handle: its faces would hide the surface in renders
+    _remember_net_rounding(net)
     return net
 
 

@@ -452,6 +452,17 @@ def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
         assert bpy.ops.tcb.refine(max_iterations=1) == {"FINISHED"}
         out = capfd.readouterr()
     assert "Warning: TCB:" in out.out and "4 edited control points were replaced" in out.out, out.out
+    # Set Origin on the net moves no vertex, but re-rounds them in a finer frame: "41 edited
+    # control points were replaced" for moves of 6e-8 (user test; a scan 3 units off the origin)
+    far = add_mesh(bpy, "Far", verts + [3.0, 0.0, 0.0], faces)
+    assert fit(bpy, far, tolerance=5e-3) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, surface.tcb.net)):
+        assert bpy.ops.object.origin_set(type="ORIGIN_GEOMETRY", center="BOUNDS") == {"FINISHED"}
+    with bpy.context.temp_override(**select(bpy, surface)):
+        capfd.readouterr()
+        assert bpy.ops.tcb.refine(max_iterations=1) == {"FINISHED"}
+        assert "edited control point" not in capfd.readouterr().out
 
 
 def test_refine_to_a_budget_below_the_surface_is_an_error_that_changes_nothing(clean_scene):
