@@ -168,7 +168,7 @@ def with_net_edits(surface_obj, surf):
         if net.mode == "EDIT":  # a drag in Edit Mode is in the edit mesh until it is loaded
             net.update_from_editmode()
         ctrl, rounding = bridge.read_world_positions_and_rounding(net)
-        rounding = rounding + float(net.get(NET_ROUNDING_KEY, 0.0))  # (as written, in its frame then)
+        rounding = rounding + float(net.get(NET_ROUNDING_KEY, 0.0))  # (and as written)
         # a net saved before control points left out the border rings' functions has a
         # vertex per basis function: its edits are kept and it is rewritten in today's form
         old_net = len(ctrl) == len(surf.coefficients) != len(surf.control_points)
