@@ -12,8 +12,9 @@ cloud. Supported:
 ``.ply``                   PLY ascii, binary_little_endian, binary_big_endian: vertex ``x, y, z``
                            of any numeric type, face list ``vertex_indices``/``vertex_index``
 ``.xyz .txt .csv .pts``    text columns (whitespace or comma separated); the first three are
-                           ``x, y, z``; an optional header line is skipped, and so is a point
-                           count line (Leica ``.pts``: before each scan)
+                           ``x, y, z`` unless a header line names them (``id,x,y,z``,
+                           ``X [m]``, ``lon,lat,elevation``); a point count line is skipped
+                           (Leica ``.pts``: before each scan)
 ``.npy``                   an ``(n, 3)`` array (more columns: the first three are used)
 ``.npz``                   key ``points`` (and optional ``faces``), or a DEM: key ``elevation``
                            (rows, cols) with ``xmin, xmax, ymin, ymax``
@@ -745,15 +746,52 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
                 lines[0] = lines[0].replace(",", ".")
     else:
         delim = "," if any("," in ln for ln in lines[:2]) else None
+    cols = (0, 1, 2)
     try:
         [float(t) for t in (lines[0].split(delim))[:3]]
     except ValueError:
-        lines = lines[1:]  # a header line such as 'x,y,z'
+        cols = _header_columns(lines[0], delim)  # a header line such as 'x,y,z'
+        lines = lines[1:]
     if not lines:
         raise _MalformedError("the file has no data lines")
-    if len(lines[0].split(delim)) < 3:
-        raise _MalformedError("each line needs at least three numbers (x, y, z)")
-    return _loadtxt(lines, "line", usecols=(0, 1, 2), delimiter=delim), None
+    if len(lines[0].split(delim)) < max(cols) + 1:
+        raise _MalformedError("each line needs at least three numbers (x, y, z)"
+                              if cols == (0, 1, 2) else
+                              f"the header names x, y, z in columns {', '.join(str(c + 1) for c in cols)}, "
+                              f"but the line {lines[0].strip()[:60]!r} has fewer")
+    return _loadtxt(lines, "line", usecols=cols, delimiter=delim), None
+
+
+# header names of the coordinate columns (lowercase, after units such as '[m]' are cut off):
+# the letters first, then the words GIS exports use
+_AXIS_NAMES = (("x", "lon", "long", "longitude", "easting", "east"),
+               ("y", "lat", "latitude", "northing", "north"),
+               ("z", "elev", "elevation", "height", "alt", "altitude", "h"))
+
+
+def _header_columns(header: str, delim: str | None) -> tuple[int, int, int]:
+    """The columns of x, y, z that a text file's header line names (``x``, ``X [m]``,
+    ``//X`` as CloudCompare writes it, ``point_x``, ``lon``/``lat``/``elevation`` ...), or the
+    first three when it names none of them. A header ``id,x,y,z`` (GIS exports; pandas'
+    ``to_csv`` writes ``,x,y,z``) had been read as x = id, y = x, z = y and fitted with no
+    word (user test). One that names only some of the three is refused: which column is the
+    third cannot be told."""
+    names = [re.match(r"[\s\"'/#]*(\w*)", f).group(1).lower() for f in header.split(delim)]
+    names = [n[-2:].lstrip("_") if re.fullmatch(r"\w+_[xyz]", n) else n for n in names]
+    found = []
+    for words in _AXIS_NAMES:
+        at = next((names.index(w) for w in words if w in names), None)
+        found.append(at)
+    if all(a is None for a in found):
+        return (0, 1, 2)
+    if any(a is None for a in found) or len(set(found)) < 3:
+        named = ", ".join(f"{'xyz'[k]} in column {a + 1}" for k, a in enumerate(found)
+                          if a is not None)
+        raise _MalformedError(
+            f"the header line {header.strip()[:60]!r} names {named} but not all three "
+            "coordinates: name the columns x, y and z (or remove the header to use the "
+            "first three columns)")
+    return tuple(found)
 
 
 _NPY_MAGIC = b"\x93NUMPY"

@@ -704,3 +704,38 @@ def test_files_of_coarsely_rounded_32_bit_coordinates_are_named(tmp_path: Path) 
         if warned:
             assert said[0].startswith("mixed.ply: the points' x and y are 32-bit floats, which "
                                       "far from the origin are 0.5 apart")
+
+
+@pytest.mark.parametrize(
+    ("header", "order", "extra"),
+    [
+        ("id,x,y,z", (1, 2, 3), 1),  # GIS exports: an id first
+        (",x,y,z", (1, 2, 3), 1),  # pandas' to_csv: an unnamed index column
+        ("//X,Y,Z,R,G,B", (0, 1, 2), 0),  # CloudCompare
+        ("name;X [m];Y [m];Z [m]", (1, 2, 3), 1),
+        ("fid,point_x,point_y,point_z", (1, 2, 3), 1),  # ArcGIS
+        ("id,lon,lat,elevation", (1, 2, 3), 1),
+        ("z,y,x", (2, 1, 0), 0),
+        ("a,b,c", (0, 1, 2), 0),  # no names: the first three
+    ],
+)
+def test_a_text_header_that_names_the_columns_chooses_them(tmp_path: Path, header, order,
+                                                           extra) -> None:
+    """A header ``id,x,y,z`` had been skipped and x = id, y = x, z = y read (user test: a
+    grid fitted "perfectly" over the wrong axes, exit 0)."""
+    delim = ";" if ";" in header else ","
+    cols = len(header.split(delim))
+    rows = []
+    for k, (x, y, z) in enumerate(ROWS):
+        row = [7.0 + k] * cols
+        for axis, at in enumerate(order):
+            row[at] = (x, y, z)[axis]
+        rows.append(delim.join(repr(v) for v in row) + "\n")
+    (tmp_path / "p.csv").write_text(header + "\n" + "".join(rows))
+    pts, _ = read_geometry(tmp_path / "p.csv")
+    np.testing.assert_array_equal(pts, VERTS)
+    # a header naming only some of the three is refused: the third cannot be told
+    (tmp_path / "q.csv").write_text(delim.join(["id", "x", "y", "value"]) + "\n" + "".join(rows))
+    with pytest.raises(FileFormatError, match=r"names x in column 2, y in column 3 but not all "
+                                              r"three coordinates: name the columns x, y and z"):
+        read_geometry(tmp_path / "q.csv")
