@@ -24,6 +24,8 @@ Writers: :func:`write_mesh` for ``.obj`` (ASCII) and ``.ply`` (binary little end
 
 Bulk data are parsed with numpy (``np.loadtxt``, structured dtypes on the raw bytes); only OBJ
 files and binary PLY files with mixed polygon sizes use a Python loop over lines / faces.
+Polygons are split into triangles by fans from their first vertex, except concave ones (an
+L-shaped n-gon), which are ear-clipped in their plane (a loop over those only).
 Every problem with a file raises :class:`~.errors.FileFormatError` naming the file.
 Text (and PLY headers) may start with a UTF-8 byte-order mark; UTF-16 text is refused.
 """
@@ -42,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FileFormatError, InvalidInputError
-from .geometry import float32_rounding
+from .geometry import ear_clipping, float32_rounding
 
 __all__ = ["READ_EXTENSIONS", "WRITE_EXTENSIONS", "read_geometry", "write_mesh"]
 
@@ -181,8 +183,11 @@ def _fan(polys: np.ndarray) -> np.ndarray:
     return np.stack([first, polys[:, j], polys[:, j + 1]], axis=-1).reshape(-1, 3)
 
 
-def _fan_groups(groups: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
-    """Fan triangles of polygons given in groups of equal size, in the original face order.
+def _fan_groups(groups: list[tuple[np.ndarray, np.ndarray]], verts: np.ndarray | None = None
+                ) -> np.ndarray:
+    """Fan triangles of polygons given in groups of equal size, in the original face order;
+    with the vertices ``verts``, the polygons that are not convex are split by their own
+    vertices instead (:func:`_concave_split`).
 
     Args:
         groups: ``(face_numbers (m,), polygons (m, k))`` per polygon size ``k``.
@@ -191,12 +196,43 @@ def _fan_groups(groups: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
     for ids, polys in groups:
         k = polys.shape[1]
         if k >= 3:
-            tris.append(_fan(polys))
+            tris.append(_fan(polys) if verts is None else _concave_split(verts, polys))
             where.append(np.repeat(ids, k - 2))
     if not tris:
         return np.empty((0, 3), dtype=np.int64)
     order = np.argsort(np.concatenate(where), kind="stable")
     return np.concatenate(tris)[order]
+
+
+def _concave_split(verts: np.ndarray, polys: np.ndarray) -> np.ndarray:
+    """Triangles ``(m (k-2), 3)`` of ``(m, k)`` polygons of the vertices ``verts``: fans
+    ``(v0, v_j, v_j+1)``, except for a polygon that is not convex, which is ear-clipped
+    (:func:`core.geometry.ear_clipping`) in the plane of its Newell normal, keeping its
+    winding. A fan from the first vertex of a concave polygon overlaps itself: an L-shaped
+    8-gon, as Blender's Dissolve Faces makes and its OBJ export writes, gave a flipped
+    triangle and 575 control points instead of 150 (user test). Convexity: every vertex
+    turns the polygon's way about the normal, to rounding (vectorized over the polygons; a
+    loop over the concave ones only). A polygon that does not clip (it crosses itself)
+    keeps its fan, as do polygons with indices out of range (refused afterwards)."""
+    polys = np.asarray(polys, dtype=np.int64)
+    tris = _fan(polys)
+    m, k = polys.shape
+    if k < 4 or m == 0 or polys.min() < 0 or polys.max() >= len(verts):
+        return tris
+    P = verts[polys]  # (m, k, 3)
+    normal = np.cross(P, np.roll(P, -1, axis=1)).sum(axis=1)  # (Newell: twice the area vector)
+    e = np.roll(P, -1, axis=1) - P
+    turn = np.einsum("mkj,mj->mk", np.cross(np.roll(e, 1, axis=1), e), normal)
+    size = np.einsum("mkj,mkj->mk", e, e).max(axis=1) * np.linalg.norm(normal, axis=1)
+    for i in np.flatnonzero((turn < -1e-9 * size[:, None]).any(axis=1)):
+        n = normal[i] / np.linalg.norm(normal[i])
+        e1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+        e1 /= np.linalg.norm(e1)
+        q = P[i] - P[i].mean(axis=0)
+        clip = ear_clipping(np.column_stack([q @ e1, q @ np.cross(n, e1)]), P[i])
+        if clip is not None:
+            tris[i * (k - 2) : (i + 1) * (k - 2)] = polys[i][clip]
+    return tris
 
 
 def _loadtxt(lines: list[str], what: str, **kw) -> np.ndarray:
@@ -217,14 +253,21 @@ def _loadtxt(lines: list[str], what: str, **kw) -> np.ndarray:
         raise _MalformedError(f"bad {what}: {msg}") from None
 
 
-def _polygons_from_lines(lines: list[str], what: str, first_col: int = 0) -> np.ndarray:
-    """Triangles from text lines ``... n i0 i1 ... i_{n-1} [extra]`` (count at ``first_col``).
+def _polygons_from_lines(lines: list[str], what: str, first_col: int = 0,
+                         verts: np.ndarray | None = None) -> np.ndarray:
+    """Triangles of the polygons of :func:`_polygon_groups` (:func:`_fan_groups`)."""
+    return _fan_groups(_polygon_groups(lines, what, first_col), verts)
+
+
+def _polygon_groups(lines: list[str], what: str, first_col: int = 0) -> list:
+    """Polygons from text lines ``... n i0 i1 ... i_{n-1} [extra]`` (count at ``first_col``):
+    ``(line numbers, (m, n) indices)`` per count ``n``.
 
     Lines are grouped by their count (a loop over the few distinct polygon sizes only) and each
     group is parsed by ``np.loadtxt``; polygons with fewer than 3 vertices are dropped.
     """
     if not lines:
-        return np.empty((0, 3), dtype=np.int64)
+        return []
     counts = _loadtxt(lines, what, usecols=(first_col,), dtype=np.int64)[:, 0]
     if counts.min() < 0:
         raise _MalformedError(f"bad {what}: negative vertex count")
@@ -242,7 +285,7 @@ def _polygons_from_lines(lines: list[str], what: str, first_col: int = 0) -> np.
         sel = np.flatnonzero(counts == n)
         cols = tuple(range(first_col + 1, first_col + 1 + int(n)))
         groups.append((sel, _loadtxt(list(arr[sel]), what, usecols=cols, dtype=np.int64)))
-    return _fan_groups(groups)
+    return groups
 
 
 _UTF8_BOM = b"\xef\xbb\xbf"
@@ -313,7 +356,7 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
             "follow (the file is truncated)"
         )
     verts = _loadtxt(lines[body : body + nv], "vertex line", usecols=(0, 1, 2))
-    faces = _polygons_from_lines(lines[body + nv : body + nv + nf], "face line")
+    faces = _polygons_from_lines(lines[body + nv : body + nv + nf], "face line", verts=verts)
     return verts, (faces if nf else None)
 
 
@@ -361,7 +404,7 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
         (np.array(ids), np.array([polys[i] for i in ids], dtype=np.int64))
         for ids in by_size.values()
     ]
-    return verts, _fan_groups(groups)
+    return verts, _fan_groups(groups, verts)
 
 
 def _write_obj(path: Path, v: np.ndarray, f: np.ndarray) -> None:
@@ -465,7 +508,7 @@ def _ply_vertices_and_faces(
     ft = tables.get("face")
     if ft is None:
         return verts, None, single
-    return verts, ft.get("__triangles__", np.empty((0, 3), dtype=np.int64)), single
+    return verts, _fan_groups(ft.get("__polygons__", []), verts), single
 
 
 def _face_list_name(el: _PlyElement) -> str | None:
@@ -531,7 +574,7 @@ def _ply_ascii_element(el: _PlyElement, block: list[str]) -> dict[str, np.ndarra
         first = [n for n, _ in el.props].index(lname)
         if first != len(fixed):
             raise _MalformedError("a list property before 'vertex_indices' is not supported")
-        out["__triangles__"] = _polygons_from_lines(block, "face line", first_col=first)
+        out["__polygons__"] = _polygon_groups(block, "face line", first_col=first)
     return out
 
 
@@ -603,9 +646,9 @@ def _ply_binary_element(
             raise _MalformedError("the face element has no list 'vertex_indices' / 'vertex_index'")
         idx = out[lname]
         if isinstance(idx, np.ndarray):
-            out["__triangles__"] = _fan(idx.reshape(el.count, -1))
+            out["__polygons__"] = [(np.arange(el.count), idx.reshape(el.count, -1))]
         else:  # ragged: size -> (face numbers, (m, size) indices)
-            out["__triangles__"] = _fan_groups(list(idx.values()))
+            out["__polygons__"] = list(idx.values())
     return out, end
 
 
@@ -899,7 +942,7 @@ def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
                         raise _MalformedError(
                             f"'faces' must hold whole vertex indices; got {f[bad].flat[0]!r} "
                             f"({int(bad.sum())} such values)")
-                return pts, _fan(f.astype(np.int64))
+                return pts, _concave_split(pts, f.astype(np.int64))
             if "elevation" in keys:
                 return _dem_points({k: _npz_array(z, k) for k in keys}), None
     except (zipfile.BadZipFile, zlib.error, EOFError) as exc:

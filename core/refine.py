@@ -406,6 +406,11 @@ SWING_SLAB_NEIGHBOURS = 8
 SWING_SLAB = 3.0
 SWING_REACH = 0.5
 SWING_NEAR = 3.0  # ... at grid places at most this many data spacings from a data point
+# ... whose nearest points spread across their line at least this share of their width along
+# it: the nearest points of a place between the lines of a scan made in lines are on one line,
+# whose slab does not bound the surface beside it (20 profiles of a smooth function, fitted
+# within 6e-4 of it, were flagged at 1826 places by up to 0.0146: user test)
+SWING_LINE = 0.1
 
 
 def swing_places(space, C, uv, points, errors, seed: int = 0,
@@ -615,10 +620,13 @@ def _slabs(p, e, nb, slab_factor: float = SWING_SLAB, reach_factor: float = SWIN
     nrm = R[:, :, 0]
     h = np.einsum("mki,mi->mk", X, nrm)
     along = np.einsum("mki,mi->mk", X, R[:, :, 2])
+    across = np.einsum("mki,mi->mk", X, R[:, :, 1])
     thick, width = np.ptp(h, axis=1), np.ptp(along, axis=1)
     radius = np.linalg.norm(X, axis=2).max(axis=1)
     reach = 3.0 * e[nb].max(axis=1) + np.maximum(slab_factor * (thick + 0.05 * width),
                                                  reach_factor * radius)
+    # neighbours along a line (a scan made in lines) make no slab: no bound (SWING_LINE)
+    reach[np.ptp(across, axis=1) < SWING_LINE * width] = np.inf
     return (c, nrm, h.min(axis=1), h.max(axis=1)), reach
 
 

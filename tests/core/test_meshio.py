@@ -56,8 +56,18 @@ def test_written_meshes_read_back_equal(
     write_mesh(path, verts, faces)
     pts, tris = read_geometry(path)
     np.testing.assert_array_equal(pts, verts)  # bit-exact coordinates
-    expected = faces if k == 3 else np.stack([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]], 1)
-    np.testing.assert_array_equal(tris, expected.reshape(-1, 3))
+    if k == 3:
+        np.testing.assert_array_equal(tris, faces)
+        return
+    # a quad is split along one of its diagonals, keeping its winding: the fan's where it is
+    # convex, else by ear clipping (_concave_split); in the local order of its four corners
+    # (distinct here) each triangle runs forwards and the two cover all four
+    pairs = tris.reshape(-1, 2, 3)
+    distinct = np.array([len(set(f)) == 4 for f in faces])  # (repeated corners: no order)
+    local = np.argmax(pairs[distinct][..., None] == faces[distinct][:, None, None, :], axis=-1)
+    steps = (np.roll(local, -1, axis=-1) - local) % 4
+    assert (steps.sum(axis=-1) == 4).all()
+    assert all(set(p.ravel()) == {0, 1, 2, 3} for p in local)
 
 
 def test_sample_off_files_read_with_announced_counts() -> None:
@@ -739,3 +749,39 @@ def test_a_text_header_that_names_the_columns_chooses_them(tmp_path: Path, heade
     with pytest.raises(FileFormatError, match=r"names x in column 2, y in column 3 but not all "
                                               r"three coordinates: name the columns x, y and z"):
         read_geometry(tmp_path / "q.csv")
+
+
+@pytest.mark.parametrize("ext", [".obj", ".off", ".ply"])
+def test_a_concave_polygon_is_split_by_its_own_vertices(tmp_path: Path, ext: str) -> None:
+    """An L-shaped 8-gon (Blender's Dissolve Faces; its OBJ export writes n-gons) fan-split
+    from a vertex next to its reflex corner gave a flipped triangle overlapping the others
+    (user test: 575 control points instead of 150): it is ear-clipped in its plane, keeping
+    its winding; convex polygons keep their fans."""
+    g = np.arange(4.0)
+    x, y = np.meshgrid(g, g)
+    verts = np.c_[x.ravel(), y.ravel(), 0.1 * x.ravel() * y.ravel()]
+    v = lambda i, j: 4 * i + j  # noqa: E731  (row i, column j)
+    # the L over cells (0,0), (0,1), (1,0) counter-clockwise from next to its reflex corner
+    ell = [v(1, 2), v(1, 1), v(2, 1), v(2, 0), v(1, 0), v(0, 0), v(0, 1), v(0, 2)]
+    quad = [v(1, 1), v(1, 2), v(2, 2), v(2, 1)]  # (convex)
+    polys = [ell, quad]
+    if ext == ".obj":
+        text = "".join(f"v {a!r} {b!r} {c!r}\n" for a, b, c in verts)
+        text += "".join("f " + " ".join(str(i + 1) for i in p) + "\n" for p in polys)
+    elif ext == ".off":
+        text = f"OFF\n{len(verts)} {len(polys)} 0\n"
+        text += "".join(f"{a!r} {b!r} {c!r}\n" for a, b, c in verts)
+        text += "".join(f"{len(p)} " + " ".join(map(str, p)) + "\n" for p in polys)
+    else:
+        text = (f"ply\nformat ascii 1.0\nelement vertex {len(verts)}\nproperty double x\n"
+                "property double y\nproperty double z\nelement face 2\n"
+                "property list uchar int vertex_indices\nend_header\n")
+        text += "".join(f"{a!r} {b!r} {c!r}\n" for a, b, c in verts)
+        text += "".join(f"{len(p)} " + " ".join(map(str, p)) + "\n" for p in polys)
+    (tmp_path / f"m{ext}").write_text(text)
+    pts, tris = read_geometry(tmp_path / f"m{ext}")
+    assert len(tris) == 6 + 2
+    a, b, c = (pts[tris[:, k], :2] for k in range(3))
+    area = 0.5 * ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
+    assert (area > 0).all() and area[:6].sum() == pytest.approx(3.0)  # none flipped
+    np.testing.assert_array_equal(tris[6:], [quad[:3], [quad[0], quad[2], quad[3]]])
