@@ -125,6 +125,12 @@ def parse_args(args: list[str]) -> argparse.Namespace:
                     "is cross-validated as in Blender's panel)")
     ap.add_argument("--drop-outliers", action="store_true",
                     help="leave out points far from all others (point clouds; refused otherwise)")
+    ap.add_argument("--fill-holes", action="store_true",
+                    help="meshes with holes: let the surface span them (Blender's Fill Holes)")
+    ap.add_argument("--projection", choices=("auto", "x", "y", "z"), default="auto",
+                    help="point clouds: project along this world axis (z for terrain tiles that "
+                    "meet their neighbours) instead of choosing the direction (default "
+                    "%(default)s)")
     ap.add_argument("--resolution", type=int, default=64,
                     help="subdivisions of the output surface mesh per side (default %(default)s)")
     ap.add_argument("--no-live-net", dest="live_net", action="store_false",
@@ -342,14 +348,16 @@ def fit(bpy, objs, ns):
         degree=str(ns.degree), mode=ns.mode.upper(),
         smoothness=1e-4 if ns.smoothness == "auto" else ns.smoothness,
         auto_smoothness=ns.smoothness == "auto", drop_outliers=ns.drop_outliers,
+        fill_holes=ns.fill_holes, projection=ns.projection.upper(),
         resolution=ns.resolution, show_net=True, live_net=ns.live_net,
     )  # fmt: skip
     override = dict(selected_objects=list(objs), active_object=objs[0], object=objs[0])
     try:
         with bpy.context.temp_override(**override):
             bpy.ops.tcb.fit_surface(**props)
-    except (RuntimeError, TypeError) as ex:
-        raise ScriptError(first_line(ex)) from None
+    except (RuntimeError, TypeError) as ex:  # (the panel's words for the script's options)
+        raise ScriptError(first_line(ex).replace("turn on Fill Holes in the fit settings",
+                                                 "pass --fill-holes")) from None
     surfaces = [o for o in bpy.data.objects if o not in before and o.tcb.role == "SURFACE"]
     if len(surfaces) != 1:
         raise ScriptError("the fit produced no surface object")

@@ -74,7 +74,7 @@ def test_fit_point_cloud_xyz_without_render(tmp_path):
     blend, ply = tmp_path / "saddle.blend", tmp_path / "saddle.ply"
     proc = run_script(src, "-o", blend, "--tolerance", "1e-2", "--max-control-points", "80",
                       "--resolution", "8", "--export", ply, "--no-deviation",
-                      "--smoothness", "auto")  # fmt: skip
+                      "--smoothness", "auto", "--projection", "z")  # fmt: skip
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert blend.is_file() and ply.is_file() and ply.read_bytes().startswith(b"ply")
     row = [ln for ln in proc.stdout.splitlines() if ln.startswith("smoothness")]
@@ -110,3 +110,22 @@ def test_closed_mesh_fails_with_one_line(tmp_path):
     assert "closed" in line, line
     assert "Traceback" not in proc.stderr
     assert not (tmp_path / "t.blend").exists()
+
+
+def test_a_mesh_with_a_hole_is_fitted_with_fill_holes(tmp_path):
+    """The script's error said "turn on Fill Holes in the fit settings" and it had no such
+    option (user test)."""
+    g = range(12)
+    verts = [(x / 11, y / 11, 0.1 * ((x - 5) ** 2 - (y - 5) ** 2) / 25) for y in g for x in g]
+    cells = [(y, x) for y in range(11) for x in range(11) if not (4 <= x <= 5 and 4 <= y <= 5)]
+    quads = [(12 * y + x, 12 * y + x + 1, 12 * y + x + 13, 12 * y + x + 12) for y, x in cells]
+    src = tmp_path / "holed.off"
+    src.write_text(f"OFF\n{len(verts)} {len(quads)} 0\n"
+                   + "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in verts)
+                   + "".join("4 " + " ".join(map(str, q)) + "\n" for q in quads))
+    proc = run_script(src, "-o", tmp_path / "h.blend", "--resolution", "8", "--no-deviation")
+    assert "pass --fill-holes" in _error_line(proc)
+    proc = run_script(src, "-o", tmp_path / "h.blend", "--resolution", "8", "--no-deviation",
+                      "--fill-holes")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert (tmp_path / "h.blend").is_file()
