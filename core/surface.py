@@ -857,6 +857,11 @@ class TCBSurface:
             value = getattr(self._param, name)
             if value is not None:
                 arrays[f"param_{name}"] = value
+        if not np.array_equal(self._c, self._fitted_c):
+            # an edited surface (with_control_points) keeps the fit's control points: refine()
+            # says it replaces the edits, and fitted_to() and the errors measure the fit (they
+            # were forgotten on saving: user test); readers that do not know the array ignore it
+            arrays["fitted_control_points"] = self._fitted_c
         if compact:
             for key in _COMPACT_FLOAT:
                 if key in arrays:
@@ -945,6 +950,13 @@ class TCBSurface:
             report = json.loads(str(arrays["report"]))
             surf = cls(space, arrays["control_points"], param, arrays["errors"], report,
                        int(arrays["n_interior"]), options)
+            if "fitted_control_points" in arrays:  # (an edited surface: to_bytes)
+                fitted = np.asarray(arrays["fitted_control_points"], dtype=np.float64)
+                if fitted.shape != surf._c.shape or not np.isfinite(fitted).all():
+                    raise FileFormatError(f"{what} is damaged or incomplete (its fitted control "
+                                          f"points have shape {fitted.shape})")
+                fitted.setflags(write=False)
+                surf._fitted_c = fitted
             if "functions" not in report:  # saved when every basis function counted
                 report["functions"] = int(space.n_basis)
                 report["control_points"] = len(surf.active)

@@ -553,6 +553,12 @@ def test_refine_checks_the_faces_and_says_that_edits_are_replaced(nefertiti):
                                             r"are replaced: refine\(\) fits the data again"):
         again = edited.refine(points, faces, max_iterations=1)
     np.testing.assert_array_equal(again.control_points, same.control_points)
+    # and after a save and a load (user test: the edits were then replaced with no word)
+    for compact in (False, True):
+        kept = TCBSurface.from_bytes(edited.to_bytes(compact=compact))
+        assert kept.fitted_to(points) and (compact or kept.to_bytes() == edited.to_bytes())
+        with pytest.warns(RuntimeWarning, match="edited control points are replaced"):
+            kept.refine(points, faces, max_iterations=1)
 
 
 def test_refine_continues_with_a_tighter_tolerance():
