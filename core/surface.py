@@ -1355,9 +1355,10 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     if report["loose_vertices"]:
         warnings.warn(
             f"{report['loose_vertices']} of the {len(used)} vertices "
-            f"{'is' if report['loose_vertices'] == 1 else 'are'} in no face and were left "
-            "out: a mesh is fitted through its faces (fit the vertices without faces to use "
-            "them as a point cloud)", RuntimeWarning, stacklevel=3,
+            + ("is in no face and was" if report["loose_vertices"] == 1 else
+               "are in no face and were")
+            + " left out: a mesh is fitted through its faces (fit the vertices without faces "
+            "to use them as a point cloud)", RuntimeWarning, stacklevel=3,
         )
     if (param.faces is None and best.selection is None
             and SPARSE_POINTS_PER_CONTROL * report["control_points"] > used.sum()):

@@ -634,7 +634,7 @@ def test_loose_vertices_of_a_mesh_are_counted_and_few_faced_vertices_refused():
     i = np.arange(144).reshape(12, 12)
     a, b, c, d = i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()
     F = np.r_[np.c_[a, b, c], np.c_[a, c, d]]
-    with pytest.warns(RuntimeWarning, match="1 of the 145 vertices is in no face"):
+    with pytest.warns(RuntimeWarning, match="1 of the 145 vertices is in no face and was left out"):
         surf = fit_surface(np.r_[V, [[0.5, 0.5, 50.0]]], F, max_control_points=100)
     assert surf.report["loose_vertices"] == 1 and surf.report["points"] == 144
     # the stray vertex changed nothing: the same surface as the mesh without it
