@@ -545,6 +545,11 @@ class TCBSurface:
                 "closest points need finite ones: leave those out, e.g. "
                 "points[np.isfinite(points).all(axis=1)]"
             )
+        huge = np.flatnonzero(np.abs(p).max(axis=1, initial=0.0) > 1e150)
+        if len(huge):  # (squared distances overflow: an IndexError from the KD-tree, user test)
+            raise InvalidInputError(
+                f"{len(huge)} of {len(p)} points have coordinates beyond 1e150 (the first: row "
+                f"{huge[0]}), whose squared distances overflow: leave those out")
         uv_t, tri = self.tessellation_uv(96)
         lo, hi = uv_t.min(axis=0), uv_t.max(axis=0)
         # starts: the nearest of the tessellation's vertices and of the surface points at (up

@@ -123,6 +123,8 @@ def test_cancelling_returns_the_best_surface_and_raises_nothing():
         (lambda s: s.distances([[0, 0, 0], [np.nan, 0, 0], [0, 0, 1], [0, np.inf, 0]]),
          r"2 of 4 points have NaN or infinite coordinates \(rows 1, 3\)"),
         (lambda s: s.closest_parameters([[np.nan, 0, 0]]), r"\(rows 0\)"),
+        (lambda s: s.distances([[0, 0, 0], [1e155, 0, 0]]),  # (an IndexError: user test)
+         r"1 of 2 points have coordinates beyond 1e150 \(the first: row 1\)"),
         (lambda s: s.with_control_points(sp.csr_matrix(s.control_points)), "sparse"),
         (lambda s: s.with_control_points([[1.0, 2.0, 3.0], [1.0, 2.0]]), "different lengths"),
         (lambda s: s.with_control_points(s.control_points + 1j), "complex"),
