@@ -91,7 +91,11 @@ _OUTLIER_ISOLATION = 20.0  # isolated: its nearest non-candidate j is this many 
 
 
 def _as_points(points: np.ndarray, *, what: str = "points") -> np.ndarray:
-    """Return ``points`` as a C-contiguous ``(n, 3) float64`` array or raise InvalidInputError."""
+    """Return ``points`` as a C-contiguous ``(n, 3) float64`` array or raise InvalidInputError
+    (complex numbers too: numpy drops their imaginary parts with only a warning; user test)."""
+    if np.iscomplexobj(points):
+        raise InvalidInputError(f"{what} must be real numbers, got complex ones (take .real "
+                                "if that is meant)")
     try:
         arr = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:

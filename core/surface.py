@@ -1581,10 +1581,7 @@ def fit_surface(
             raise InvalidInputError(f"{name} must be True or False, got {flag!r}")
     coarse = float32_rounding(points, "pass float64 coordinates, or subtract an offset before "
                                       "converting to 32 bits")
-    try:
-        points = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError("points must be an (N, 3) array of numbers") from None
+    points = _as_points(points)  # (says what is wrong; complex numbers refused, user test)
     try:
         param = parameterize(points, faces, drop_outliers=drop_outliers, projection=projection,
                              fill_holes=bool(fill_holes))

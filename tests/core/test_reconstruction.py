@@ -1407,6 +1407,7 @@ def test_a_slot_whose_fan_bulges_away_along_a_bend_is_clipped(monkeypatch):
         ("closed", TopologyError, "closed"),
         ("hole", TopologyError, "boundary loops"),
         ("shape", InvalidInputError, r"\(N, 3\)"),
+        ("complex", InvalidInputError, "real numbers, got complex"),  # (dropped: user test)
     ],
 )
 def test_bad_input_raises_a_specific_error(case, error, words):
@@ -1431,6 +1432,8 @@ def test_bad_input_raises_a_specific_error(case, error, words):
         points, faces = grid_with_hole()
     elif case == "shape":
         points = rng.random((50, 2))
+    elif case == "complex":
+        points = points + 1j
     with pytest.raises(error, match=words) as info:
         fit_surface(points, faces)
     assert isinstance(info.value, (TCBError, ValueError))
