@@ -520,6 +520,21 @@ def _distance_to_hull(uv: np.ndarray, chunk: int = 20_000) -> np.ndarray:
     return out
 
 
+def _degrees_note(points) -> str:
+    """Words for a refused cloud whose x and y look like longitude and latitude in degrees
+    and whose heights like metres (a DEM exported from a GIS: the Jacksboro DEM so, with z
+    given, was "two or more layers about 28 apart ... align the scans"; user test), else ""."""
+    p = np.asarray(points, dtype=np.float64)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    across = float(max(hi[0] - lo[0], hi[1] - lo[1]))
+    if (lo[0] >= -180 and hi[0] <= 180 and lo[1] >= -90 and hi[1] <= 90 and 0 < across < 10
+            and hi[2] - lo[2] > 100 * across):
+        return (" (if x and y are longitude and latitude in degrees and z a height in metres, "
+                "project them to metres first, e.g. to UTM: the surface needs one unit in all "
+                "three)")
+    return ""
+
+
 def _fold_sample(q: np.ndarray) -> np.ndarray:
     """Indices of the (seeded) subset of at most 40 000 points used by the fold checks.
 
@@ -1476,7 +1491,7 @@ def parameterize_points(
             "direction across the surface (e.g. the axis it faces), or leave the projection "
             "automatic"
         )
-    tail = ""
+    tail = _degrees_note(points) if frac > _FOLD_MAX_FRACTION else ""
     if frac > _FOLD_MAX_FRACTION and strays:
         # a few points of another layer over the surface (a power line over terrain): left
         # out, and the rest parameterized as if they were not there

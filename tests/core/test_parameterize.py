@@ -1283,3 +1283,20 @@ def test_a_clipped_hole_runs_against_its_border_and_avoids_the_mesh_s_edges():
     assert np.isclose(np.linalg.norm(P[border] - P[border].mean(axis=0), axis=1), 0).any()
     par = parameterize_mesh(P, cells[~cut], fill_holes=True)
     assert len(par.holes) == 1 and np.all(orient2d(*(par.uv[par.faces[:, k]] for k in range(3))) > 0)
+
+
+def test_a_cloud_in_degrees_and_metres_is_named_when_refused() -> None:
+    """The Jacksboro DEM's nodes as a GIS exports them, longitude and latitude in degrees and
+    heights in metres, with z given: refused as "two or more layers about 28 apart ... align
+    the scans", which does not name the mixed units (user test)."""
+    d = np.load(DATA / "jacksboro_fault_dem.npz")
+    e = d["elevation"].astype(float)
+    x, y = np.meshgrid(np.linspace(float(d["xmin"]), float(d["xmax"]), e.shape[1]),
+                       np.linspace(float(d["ymin"]), float(d["ymax"]), e.shape[0]))
+    cloud = np.c_[x.ravel(), y.ravel(), e.ravel()][::3]
+    with pytest.raises(ParameterizationError, match=r"if x and y are longitude and latitude in "
+                                                    r"degrees .* project them to metres"):
+        parameterize_points(cloud, projection="z")
+    # the same in metres (about 93 km per degree there) is a terrain
+    metres = cloud * [93_000.0, 111_000.0, 1.0]
+    np.testing.assert_allclose(parameterize_points(metres, projection="z").axes[2], [0, 0, 1])
