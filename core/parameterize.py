@@ -209,6 +209,10 @@ def box_normalization(p: np.ndarray) -> Normalization:
     return Normalization(center=_readonly(0.5 * (lo + hi)), scale=0.5 * float(np.linalg.norm(hi - lo)))
 
 
+# the coordinates' 64-bit spacing may be at most this share of the half-diagonal (normalize)
+_MAX_ROUNDING = 1e-7
+
+
 def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
     """Validate a point cloud and map it into the box centred at 0 with half-diagonal 1.
 
@@ -238,6 +242,16 @@ def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
     if not norm.scale > 0.0:
         raise InvalidInputError(
             f"all {n} points are identical; a surface needs points spread in two directions"
+        )
+    far = float(np.abs(p).max())
+    if np.spacing(far) > _MAX_ROUNDING * norm.scale:
+        # (1e15 from the origin, 64-bit coordinates are 0.125 apart: "more auxiliary border
+        # rings are needed" had been the error; user test)
+        raise InvalidInputError(
+            f"the points lie {far:.3g} from the origin, where 64-bit coordinates are "
+            f"{np.spacing(far):.3g} apart, {np.spacing(far) / (2 * norm.scale):.2g} of the "
+            "points' extent: their shape is lost to rounding; subtract an offset (e.g. the "
+            "coordinates of a corner of the data) from them before they are rounded"
         )
     n_dup = count_duplicates(p)
     if n - n_dup < MIN_POINTS:

@@ -41,8 +41,8 @@ from .parameterize import (
     Parameterization, _as_points, _check_finite, box_normalization, local_scatter, normalize,
     parameterize, spike_points,
 )
-from .refine import (STALLED, RefineOptions, adaptive_fit, area_weights, check_callback,
-                     swing_places)
+from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
+                     check_callback, swing_places)
 from .spline_space import SplineSpace, _whole, derivative_order, frozen
 from .simplex import orient2d
 
@@ -566,7 +566,10 @@ class TCBSurface:
         m = len(p)
         x, d, S = np.empty((m, 2)), np.empty(m), np.empty((m, 3))
         for s in range(0, m, CLOSEST_CHUNK):
-            if callback is not None and callback({"points_done": s, "points": m}):
+            # (True cancels, None or False go on, anything else is refused as by the fit:
+            # 1 or "no" had cancelled here; user test)
+            if callback is not None and _cancel_requested(callback, {"points_done": s,
+                                                                     "points": m}):
                 raise CancelledError(f"closest points cancelled after {s} of {m} points")
             c = slice(s, s + CLOSEST_CHUNK)
             near, nearest = tree.query(p[c], workers=-1)

@@ -1408,6 +1408,7 @@ def test_a_slot_whose_fan_bulges_away_along_a_bend_is_clipped(monkeypatch):
         ("hole", TopologyError, "boundary loops"),
         ("shape", InvalidInputError, r"\(N, 3\)"),
         ("complex", InvalidInputError, "real numbers, got complex"),  # (dropped: user test)
+        ("far", InvalidInputError, "where 64-bit coordinates are 0.125 apart"),  # (user test)
     ],
 )
 def test_bad_input_raises_a_specific_error(case, error, words):
@@ -1434,6 +1435,8 @@ def test_bad_input_raises_a_specific_error(case, error, words):
         points = rng.random((50, 2))
     elif case == "complex":
         points = points + 1j
+    elif case == "far":
+        points = points + 1e15  # ("more auxiliary border rings are needed" had been said)
     with pytest.raises(error, match=words) as info:
         fit_surface(points, faces)
     assert isinstance(info.value, (TCBError, ValueError))
@@ -1735,6 +1738,11 @@ def test_closest_points_in_chunks_report_progress_cancel_and_equal_one_pass(nefe
     assert seen == [0, 300, 600]
     with pytest.raises(InvalidInputError, match="callback must be a function"):
         surf.distances(p, callback=5)
+    # as the fit's: True cancels, None or False go on, anything else is refused (1 or "no"
+    # had cancelled: user test)
+    for answer in (1, "no"):
+        with pytest.raises(InvalidInputError, match="must return None or False .* or True"):
+            surf.distances(p, callback=lambda r, a=answer: a)
 
 
 def test_the_surface_is_nan_where_its_basis_is_not_a_partition_of_unity(nefertiti):
