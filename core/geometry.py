@@ -46,20 +46,22 @@ def float32_rounding(points, advice: str, columns=None) -> str | None:
     if not (isinstance(points, np.ndarray) and points.ndim == 2 and points.shape[0] > 1
             and points.shape[1] == 3):
         return None
-    columns = (np.full(3, points.dtype == np.float32) if columns is None
+    # (16-bit floats too: 0.03 apart at 64, and no word had been said; user test)
+    small = points.dtype if points.dtype in (np.float16, np.float32) else np.dtype(np.float32)
+    columns = (np.full(3, points.dtype in (np.float16, np.float32)) if columns is None
                else np.asarray(columns, dtype=bool).reshape(3))
     if not columns.any() or not np.isfinite(points).all():
         return None
     lo, hi = column_bounds(points.astype(np.float64))
     extent = float((hi - lo).max())
     far = np.maximum(np.abs(lo), np.abs(hi))[columns]
-    step = float(np.spacing(far.astype(np.float32)).max())
+    step = float(np.spacing(far.astype(small)).max())
     if not step > 1e-4 * extent:
         return None
     which = ("the points are" if columns.all() else
              f"the points' {' and '.join(np.array(list('xyz'))[columns])} are")
     return (
-        f"{which} 32-bit floats, which far from the origin are {step:.3g} apart, "
+        f"{which} {8 * small.itemsize}-bit floats, which far from the origin are {step:.3g} apart, "
         f"{step / max(extent, 1e-300):.1e} of the data's extent: {advice}"
     )
 

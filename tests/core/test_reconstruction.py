@@ -1172,6 +1172,10 @@ def test_coarse_32_bit_coordinates_are_named_in_the_error_or_a_warning():
         fit_surface((patch + 1e6).astype(np.float32), max_control_points=200)
     with pytest.warns(RuntimeWarning, match=r"32-bit floats.*subtract an offset"):
         fit_surface((patch + 1e4).astype(np.float32), max_control_points=200)
+    # 16-bit floats too (they had had no word: user test): 0.0625 apart at 64 to 70
+    with pytest.warns(RuntimeWarning, match=r"16-bit floats, which far from the origin are "
+                                            r"0\.0625 apart"):
+        fit_surface((10 * patch + 60).astype(np.float16), max_control_points=200)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         fit_surface(patch.astype(np.float32), max_control_points=200)
