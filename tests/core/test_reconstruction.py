@@ -1808,6 +1808,15 @@ def test_two_scans_a_little_apart_are_reported_as_layers_and_noise_is_not():
         with warnings.catch_warnings():
             warnings.simplefilter("error", RuntimeWarning)
             assert fit_surface(cloud).report["layers"] == 0.0
+    # layers over part of the surface: a second strip, 0.1 higher, over the upper 40% of the
+    # first and on beyond it (strips of an airborne scan overlapping: not seen in the whole,
+    # user test)
+    xy2 = rng.random((3000, 2)) * 4 + [0.0, 2.4]
+    strips = np.vstack([scan, np.c_[xy2, 0.3 * np.sin(xy2[:, 0]) + 0.1]])
+    strips += rng.normal(0.0, 0.005, strips.shape)
+    with pytest.warns(RuntimeWarning, match=r"two layers about 0\.\d+ apart"):
+        partial = fit_surface(strips)
+    assert 0.09 < partial.report["layers"] < 0.11
 
 
 def test_drop_outliers_on_a_mesh_warns_and_changes_nothing(nefertiti):
