@@ -683,6 +683,11 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             kwargs["fill_holes"] = False
             self._ignored.append(f"Fill Holes applies to meshes: '{data.name}' is fitted as a "
                                  "point cloud, whose surface keeps to where its points are")
+        if data.faces is not None and kwargs.get("projection") is not None:
+            # (World Z left on from a terrain's fit refused the next mesh: user test)
+            kwargs["projection"] = None
+            self._ignored.append(f"Projection applies to point clouds: '{data.name}' is a "
+                                 "mesh, mapped through its faces")
         self._key = (data.digest(), tuple(sorted(kwargs.items())))
         cached = _cache_get(self._key)
         self._reused = cached is not None

@@ -124,7 +124,8 @@ class FitSettings:
         description=(
             "Direction a point cloud is projected along (a height field over the plane across "
             "it): chosen from the data, or a world axis. Still checked for folds; a cloud too "
-            "noisy for that check is fitted only along a given axis (meshes: Auto)"
+            "noisy for that check is fitted only along a given axis (not used for meshes, "
+            "which are mapped through their faces)"
         ),
         items=(("AUTO", "Auto", "The best-fit plane, or a direction the cloud is less steep over"),
                ("X", "World X", "Project along the world X axis"),

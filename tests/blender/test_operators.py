@@ -1646,7 +1646,7 @@ def test_live_net_moves_the_surface_locally_and_survives_reopen(clean_scene, add
     assert np.allclose(again, surf.with_control_points(moved).tessellate(res)[0], atol=1e-4)
 
 
-def test_a_cloud_too_noisy_to_check_needs_a_world_axis_projection(clean_scene, addon):
+def test_a_cloud_too_noisy_to_check_needs_a_world_axis_projection(clean_scene, addon, capfd):
     """A steep height field with noise (Renka's F7 x3): refused with the Projection setting
     named and nothing built; with Projection World Z it is fitted along the world's Z axis,
     which is the object's local Y (the object is turned 90 degrees about X). A mesh with a
@@ -1666,10 +1666,15 @@ def test_a_cloud_too_noisy_to_check_needs_a_world_axis_projection(clean_scene, a
     surf = spline_of(bpy.context.view_layer.objects.active)
     np.testing.assert_allclose(np.abs(surf.parameterization.axes[2]), [0, 0, 1], atol=1e-12)
     assert snapshot(cloud) == before
+    # a mesh is mapped through its faces: a Projection left on from a terrain's fit is not
+    # used, and said so, as Drop Outliers and Fill Holes are (it had refused the mesh: user
+    # test)
     verts, _ = grid(10)
     mesh = add_mesh(bpy, "Sheet", verts, grid(10)[1])
-    with pytest.raises(RuntimeError, match="projection direction applies to point clouds"):
-        fit(bpy, mesh, projection="X")
+    capfd.readouterr()
+    assert fit(bpy, mesh, projection="X") == {"FINISHED"}
+    assert "Projection applies to point clouds: 'Sheet' is a mesh" in capfd.readouterr().out
+    assert spline_of(bpy.context.view_layer.objects.active).parameterization.kind == "disk"
 
 
 def test_a_curve_without_geometry_is_refused_with_what_to_do(clean_scene):
