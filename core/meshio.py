@@ -219,12 +219,15 @@ def _concave_split(verts: np.ndarray, polys: np.ndarray) -> np.ndarray:
     m, k = polys.shape
     if k < 4 or m == 0 or polys.min() < 0 or polys.max() >= len(verts):
         return tris
-    P = verts[polys]  # (m, k, 3)
-    normal = np.cross(P, np.roll(P, -1, axis=1)).sum(axis=1)  # (Newell: twice the area vector)
-    e = np.roll(P, -1, axis=1) - P
-    turn = np.einsum("mkj,mj->mk", np.cross(np.roll(e, 1, axis=1), e), normal)
-    size = np.einsum("mkj,mkj->mk", e, e).max(axis=1) * np.linalg.norm(normal, axis=1)
-    for i in np.flatnonzero((turn < -1e-9 * size[:, None]).any(axis=1)):
+    P = verts[polys].astype(np.float64)  # (m, k, 3)
+    with np.errstate(invalid="ignore", over="ignore"):  # (NaN or huge vertices: fans)
+        P = P - P.mean(axis=1, keepdims=True)  # (centred: float32 files, offsets; review)
+        normal = np.cross(P, np.roll(P, -1, axis=1)).sum(axis=1)  # (Newell: twice the area)
+        e = np.roll(P, -1, axis=1) - P
+        turn = np.einsum("mkj,mj->mk", np.cross(np.roll(e, 1, axis=1), e), normal)
+        size = np.einsum("mkj,mkj->mk", e, e).max(axis=1) * np.linalg.norm(normal, axis=1)
+        concave = (turn < -1e-9 * size[:, None]).any(axis=1)
+    for i in np.flatnonzero(concave):
         n = normal[i] / np.linalg.norm(normal[i])
         e1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
         e1 /= np.linalg.norm(e1)
@@ -793,8 +796,9 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
     try:
         [float(t) for t in (lines[0].split(delim))[:3]]
     except ValueError:
-        cols = _header_columns(lines[0], delim)  # a header line such as 'x,y,z'
-        lines = lines[1:]
+        header, lines = lines[0], lines[1:]  # a header line such as 'x,y,z'
+        if lines and len(header.split(delim)) == len(lines[0].split(delim)):
+            cols = _header_columns(header, delim)  # (its names, when they line up)
     if not lines:
         raise _MalformedError("the file has no data lines")
     if len(lines[0].split(delim)) < max(cols) + 1:
@@ -818,14 +822,17 @@ def _header_columns(header: str, delim: str | None) -> tuple[int, int, int]:
     first three when it names none of them. A header ``id,x,y,z`` (GIS exports; pandas'
     ``to_csv`` writes ``,x,y,z``) had been read as x = id, y = x, z = y and fitted with no
     word (user test). One that names only some of the three is refused: which column is the
-    third cannot be told."""
+    third cannot be told. Used only when the header has as many fields as the data lines
+    (``X [m] Y [m] Z [m]`` separated by spaces has more: the first three columns), and a
+    header naming only some coordinates where the first three are not (``x,y,depth``, ``E N
+    H``, ``lon,lat,value`` are the first three) keeps them (review)."""
     names = [re.match(r"[\s\"'/#]*(\w*)", f).group(1).lower() for f in header.split(delim)]
     names = [n[-2:].lstrip("_") if re.fullmatch(r"\w+_[xyz]", n) else n for n in names]
     found = []
     for words in _AXIS_NAMES:
         at = next((names.index(w) for w in words if w in names), None)
         found.append(at)
-    if all(a is None for a in found):
+    if all(a is None or a == k for k, a in enumerate(found)):
         return (0, 1, 2)
     if any(a is None for a in found) or len(set(found)) < 3:
         named = ", ".join(f"{'xyz'[k]} in column {a + 1}" for k, a in enumerate(found)

@@ -65,6 +65,7 @@ _FOLD_COHERENCE = 0.5  # fraction of suspect 3D neighbours for a point to be fla
 _FOLD_MAX_FRACTION = 0.02  # fraction of flagged points above which the cloud is rejected
 _FOLD_CLEAR = 0.25  # a projection with flags at fewer than this times that is taken at once
 _FOLD_RIM = 0.05  # "at the rim": within this fraction of the extent from the convex hull
+_FOLD_BACK = 0.02  # a direction given: normals facing away by more than this are folds
 _FOLD_RIM_SHARE = 0.6  # steep points count as a fold when this share of them is at the rim
 _ORIENT_BELOW = 0.15  # first candidate's score below this: a steep cloud, orient the normals
 _SIGNED_MIN = -0.05  # the direction the oriented normals face is tried when they score this
@@ -210,7 +211,7 @@ def box_normalization(p: np.ndarray) -> Normalization:
 
 
 # the coordinates' 64-bit spacing may be at most this share of the half-diagonal (normalize)
-_MAX_ROUNDING = 1e-7
+_MAX_ROUNDING = 1e-4  # (1 mm objects at UTM coordinates, 5e-7, fit as at the origin: review)
 
 
 def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
@@ -250,7 +251,7 @@ def normalize(points: np.ndarray) -> tuple[np.ndarray, Normalization]:
         raise InvalidInputError(
             f"the points lie {far:.3g} from the origin, where 64-bit coordinates are "
             f"{np.spacing(far):.3g} apart, {np.spacing(far) / (2 * norm.scale):.2g} of the "
-            "points' extent: their shape is lost to rounding; subtract an offset (e.g. the "
+            "points' extent: too coarse for their shape; subtract an offset (e.g. the "
             "coordinates of a corner of the data) from them before they are rounded"
         )
     n_dup = count_duplicates(p)
@@ -793,7 +794,9 @@ def _fold_fraction(
     details: dict | None = None, steep_test: bool = True,
 ) -> float:
     """Fraction of points where the cloud is not a height field over its best-fit plane
-    (``steep_test`` False: the overlap test's alone; the steep share is still in ``details``).
+    (``steep_test`` False, for a direction given: the overlap test's, and at the rim the
+    points whose consistently oriented normals face away from ``normal``, where the surface
+    turns past it; the steep share is still in ``details``).
 
     Two tests (method.md section 4, "detect folds"), with the local planes of
     :func:`_local_planes` (``k = 12`` neighbours):
@@ -865,6 +868,17 @@ def _fold_fraction(
                 flagged |= steep_flag
         else:
             steep_flag[:] = False
+    if not steep_test:
+        # a direction given: the surface folds where it turns past it, its consistently
+        # oriented normals facing away (a sphere cap to 95-100 degrees from the pole, over
+        # z, had been accepted with no word, 0.097 of its diagonal off; review); a steep
+        # height field turns steep but never past
+        # at the rim of the projection, where a fold turns (noise flips normals inside a
+        # steep field: Renka's F7 turned with noise, 3.0% flagged)
+        oriented = _oriented_normals(q, normals, reliable, normal)
+        back = coherent(reliable & (oriented @ normal < -_FOLD_BACK))
+        if back.any():
+            flagged |= back & (_distance_to_hull(uv) < _FOLD_RIM * float(np.ptp(uv, axis=0).max()))
     if details is not None:
         gap = 0.0
         own = layered & overlap  # (a coherent flag may have no off-layer neighbour itself)
@@ -1477,9 +1491,10 @@ def parameterize_points(
             fractions.append(np.inf)
             continue
         # a direction given is trusted to see a height field where the surface only turns
-        # steep: its overlaps are folds (a terrain tile with a bank of 80 degrees 4 m from its
-        # edge, and a height field on a grid whose slopes reach 80 degrees, were refused over
-        # z by the steep test at the rim, 3.0% and 4.3%: user test)
+        # steep: its overlaps are folds, and where it turns past the direction (a terrain
+        # tile with a bank of 80 degrees 4 m from its edge, and a height field on a grid
+        # whose slopes reach 80 degrees, were refused over z by the steep test at the rim,
+        # 3.0% and 4.3%: user test)
         fractions.append(_fold_fraction(q, uv_n, n, planes, sample, found[-1],
                                         steep_test=direction is None))
         if fractions[-1] <= _FOLD_CLEAR * _FOLD_MAX_FRACTION:

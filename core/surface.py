@@ -81,9 +81,12 @@ TESSELLATION_STRETCH_CELLS = 512
 # grid steps across the shorter side of the domain at least (a road strip 250 times longer than
 # wide had 143 triangles in one row at resolution 64, up to 0.34 m off an 8 m wide road)
 TESSELLATION_MIN_ACROSS = 8
-# a cloud's tessellation reaches TRIM_GAP_FACTOR times the lower quartile of the distance to
-# the data over a TRIM_LATTICE x TRIM_LATTICE lattice (TCBSurface._trim_distance: the gaps
-# between the lines of a scan made in lines)
+# a cloud scanned in lines (its points' nearest spread across their line by less than TRIM_LINE
+# of their variance along it) gets a tessellation reaching TRIM_GAP_FACTOR times the lower
+# quartile of the distance to the data over a TRIM_LATTICE x TRIM_LATTICE lattice
+# (TCBSurface._trim_distance: the gaps between the lines)
+TRIM_LINE = 0.1  # (random points 0.44, a grid 1; lines 0.03 and 0.10 jittered across by 0.5 and 1
+# times their spacing along: /tmp/s24/ratio.py)
 TRIM_GAP_FACTOR = 6.0
 TRIM_LATTICE = 100
 # tessellation_uv keeps this many of the most recent resolutions (a fine one is megabytes)
@@ -400,17 +403,28 @@ class TCBSurface:
 
     def _trim_distance(self, data, tree) -> float:
         """How far from the data a cloud's tessellation reaches (not in method.md): 4 times
-        the data's spacing (the median distance of a point to its nearest one), or
-        TRIM_GAP_FACTOR times the lower quartile of the distance to the data over a
-        TRIM_LATTICE x TRIM_LATTICE lattice in the domain, when that is larger: the gaps
-        between the lines of a scan made in lines (profiles, sonar, a CMM), which its points'
-        spacing along the lines does not see (user test: 10 profiles 0.11 apart, 1000 points
-        each, tessellated at 256 covered 0.11 of the area between them). Lattice points in a
-        gap between lines are up to half its width from the data, evenly, so the quartile is
-        about an eighth of it; in an evenly spread cloud the quartile is 0.6x the spacing
-        (random points; 0.4x on a grid): the first bound holds. A hole of the data (an L's
-        notch) counts only when it is over 3/4 of the domain."""
-        spacing = float(np.median(tree.query(data[:: max(1, len(data) // 5000)], k=2)[0][:, 1]))
+        the data's spacing (the median distance of a point to its nearest one); for a scan
+        made in lines (the median point's 8 nearest spread across their line by less than
+        TRIM_LINE of their variance along it: profiles, sonar tracks, a CMM), whose spacing
+        along the lines does not see the gaps between them (user test: 10 profiles 0.11 apart,
+        1000 points each, tessellated at 256 covered 0.11 of the area between them), the
+        larger of that and TRIM_GAP_FACTOR times the lower quartile of the distance to the
+        data over a TRIM_LATTICE x TRIM_LATTICE lattice in the domain: points of the lattice
+        in a gap between lines are up to half its width from the data, evenly, so the
+        quartile is about an eighth of it. (Not for clouds spread in two directions: a thin
+        L-shaped cloud or a road round a bend covers so little of its hull that the quartile
+        falls in the empty part; review.)"""
+        sample = data[:: max(1, len(data) // 5000)]
+        dist, nb = tree.query(sample, k=min(9, len(data)))
+        spacing = float(np.median(dist[:, 1])) if dist.shape[1] > 1 else 0.0
+        if nb.shape[1] < 3:
+            return 4 * spacing
+        X = data[nb] - data[nb].mean(axis=1, keepdims=True)
+        C = np.einsum("mki,mkj->mij", X, X)
+        ev = np.linalg.eigvalsh(C)  # ascending
+        ratio = float(np.median(ev[:, 0] / np.maximum(ev[:, 1], 1e-300)))
+        if ratio >= TRIM_LINE:
+            return 4 * spacing
         poly = np.asarray(self._param.domain_polygon, dtype=np.float64)
         lo, hi = poly.min(axis=0), poly.max(axis=0)
         g = [np.linspace(lo[k], hi[k], TRIM_LATTICE + 2)[1:-1] for k in range(2)]
@@ -1583,7 +1597,7 @@ def fit_surface(
         if not isinstance(flag, (bool, np.bool_)):
             raise InvalidInputError(f"{name} must be True or False, got {flag!r}")
     coarse = float32_rounding(points, "pass float64 coordinates, or subtract an offset before "
-                                      "converting to 32 bits")
+                                      "rounding them to fewer bits")
     points = _as_points(points)  # (says what is wrong; complex numbers refused, user test)
     try:
         param = parameterize(points, faces, drop_outliers=drop_outliers, projection=projection,
@@ -1780,6 +1794,10 @@ LAYER_SIDE = 0.15
 LAYER_MIXED = 0.25
 LAYER_LOCAL = 24  # ... or around LAYER_PART of the points at least, among their 24 nearest
 LAYER_PART = 0.1
+# ... in clouds of at least this many (sample) points: pure noise gave an alarm in 8-10 of 100
+# draws of 100-200 points, none of 500-5000; uniform residuals 1 of 50 draws of 1000, none of
+# 2000 or 5000 (/tmp/s24/lnoise.py, lnoise2.py)
+LAYER_LOCAL_MIN = 2000
 
 
 def data_layers(uv, residuals, seed: int = 0) -> float:
@@ -1797,7 +1815,8 @@ def data_layers(uv, residuals, seed: int = 0) -> float:
     when under LAYER_NEAR are that near, both sides hold at least LAYER_SIDE of the points,
     and the median point has LAYER_MIXED of its 8 nearest neighbours (in uv) on the other
     side (interleaved layers, not a smooth misfit). The distance is ``median(r | r > 0) -
-    median(r | r < 0)``. Layers over part of the surface (overlapping strips) are found by
+    median(r | r < 0)``. Layers over part of the surface (overlapping strips; in clouds of
+    LAYER_LOCAL_MIN points or more) are found by
     the same near and side tests on each point's LAYER_LOCAL nearest, where they hold around
     LAYER_PART of the points; their distance is the median of the neighbourhoods'. No false
     alarm on benchmarks/layers.py's 48 fits, nor on the DEM with its heights rounded to 1 or 5
@@ -1818,7 +1837,7 @@ def data_layers(uv, residuals, seed: int = 0) -> float:
         _, nb = tree.query(uv, k=9, workers=-1)
         if np.median(np.mean(up[nb[:, 1:]] != up[:, None], axis=1)) >= LAYER_MIXED:
             return float(np.median(r[up]) - np.median(r[~up]))
-    if len(r) <= LAYER_LOCAL:
+    if len(r) < LAYER_LOCAL_MIN:  # (150 noisy points: 4 of 30 fits were alarms; review)
         return 0.0
     # layers over part of the surface (strips of a scan overlapping by a third, the second
     # 0.15 above the first, noise 0.02: the whole passed as noise, user test): the same test

@@ -401,6 +401,11 @@ def test_a_given_projection_is_still_checked_for_folds() -> None:
     for cloud in (tile, steep):
         par = parameterize_points(cloud, projection="z")
         np.testing.assert_allclose(par.axes[2], [0, 0, 1], atol=1e-15)
+    # and a surface that turns past the direction, its oriented normals facing away at the
+    # rim, folds: a cap to 95 degrees from the pole (accepted without the steep test,
+    # 0.097 of its diagonal off: review)
+    with pytest.raises(ParameterizationError, match=r"projection direction \(0, 0, 1\)"):
+        parameterize_points(sphere_cap(8000, 95.0), projection="z")
 
 
 def test_a_projection_along_a_flat_cloud_is_refused_with_advice() -> None:
