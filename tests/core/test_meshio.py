@@ -745,7 +745,8 @@ def test_a_text_header_that_names_the_columns_chooses_them(tmp_path: Path, heade
     pts, _ = read_geometry(tmp_path / "p.csv")
     np.testing.assert_array_equal(pts, VERTS)
     # a header naming only some of the three is refused: the third cannot be told
-    (tmp_path / "q.csv").write_text(delim.join(["id", "x", "y", "value"]) + "\n" + "".join(rows))
+    named = ["id", "x", "y"] + ["v"] * (cols - 3)  # (as many fields as the data)
+    (tmp_path / "q.csv").write_text(delim.join(named) + "\n" + "".join(rows))
     with pytest.raises(FileFormatError, match=r"names x in column 2, y in column 3 but not all "
                                               r"three coordinates: name the columns x, y and z"):
         read_geometry(tmp_path / "q.csv")
