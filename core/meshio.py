@@ -231,8 +231,7 @@ def _concave_split(verts: np.ndarray, polys: np.ndarray) -> np.ndarray:
         n = normal[i] / np.linalg.norm(normal[i])
         e1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
         e1 /= np.linalg.norm(e1)
-        q = P[i] - P[i].mean(axis=0)
-        clip = ear_clipping(np.column_stack([q @ e1, q @ np.cross(n, e1)]), P[i])
+        clip = ear_clipping(np.column_stack([P[i] @ e1, P[i] @ np.cross(n, e1)]), P[i])
         if clip is not None:
             tris[i * (k - 2) : (i + 1) * (k - 2)] = polys[i][clip]
     return tris
@@ -801,11 +800,8 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
             cols = _header_columns(header, delim)  # (its names, when they line up)
     if not lines:
         raise _MalformedError("the file has no data lines")
-    if len(lines[0].split(delim)) < max(cols) + 1:
-        raise _MalformedError("each line needs at least three numbers (x, y, z)"
-                              if cols == (0, 1, 2) else
-                              f"the header names x, y, z in columns {', '.join(str(c + 1) for c in cols)}, "
-                              f"but the line {lines[0].strip()[:60]!r} has fewer")
+    if len(lines[0].split(delim)) < 3:  # (a header's columns: as many as the data's)
+        raise _MalformedError("each line needs at least three numbers (x, y, z)")
     return _loadtxt(lines, "line", usecols=cols, delimiter=delim), None
 
 
@@ -821,17 +817,14 @@ def _header_columns(header: str, delim: str | None) -> tuple[int, int, int]:
     ``//X`` as CloudCompare writes it, ``point_x``, ``lon``/``lat``/``elevation`` ...), or the
     first three when it names none of them. A header ``id,x,y,z`` (GIS exports; pandas'
     ``to_csv`` writes ``,x,y,z``) had been read as x = id, y = x, z = y and fitted with no
-    word (user test). One that names only some of the three is refused: which column is the
-    third cannot be told. Used only when the header has as many fields as the data lines
-    (``X [m] Y [m] Z [m]`` separated by spaces has more: the first three columns), and a
-    header naming only some coordinates where the first three are not (``x,y,depth``, ``E N
-    H``, ``lon,lat,value`` are the first three) keeps them (review)."""
+    word (user test). Names that agree with the first three columns keep them (``x,y,depth``,
+    ``E N H``, ``lon,lat,value``); one that names some coordinates elsewhere but not all three
+    is refused: which column is the third cannot be told. The caller uses it only when the
+    header has as many fields as the data lines (``X [m] Y [m] Z [m]`` separated by spaces
+    has more: the first three columns; review)."""
     names = [re.match(r"[\s\"'/#]*(\w*)", f).group(1).lower() for f in header.split(delim)]
     names = [n[-2:].lstrip("_") if re.fullmatch(r"\w+_[xyz]", n) else n for n in names]
-    found = []
-    for words in _AXIS_NAMES:
-        at = next((names.index(w) for w in words if w in names), None)
-        found.append(at)
+    found = [next((names.index(w) for w in words if w in names), None) for words in _AXIS_NAMES]
     if all(a is None or a == k for k, a in enumerate(found)):
         return (0, 1, 2)
     if any(a is None for a in found) or len(set(found)) < 3:

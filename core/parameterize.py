@@ -859,6 +859,7 @@ def _fold_fraction(
     edge_on = np.count_nonzero(steep_flag) / max(np.count_nonzero(reliable), 1)
     if details is not None:
         details["edge_on"] = edge_on
+    near_rim = None
     if steep_flag.any():
         # a sheet that turns over does so at the rim of its projection; steep stripes inside
         # the domain are a steep height field (Renka's F7), which projects without folding
@@ -871,17 +872,18 @@ def _fold_fraction(
     if not steep_test:
         # a direction given: the surface folds where it turns past it, its consistently
         # oriented normals facing away (a sphere cap to 95-100 degrees from the pole, over
-        # z, had been accepted with no word, 0.097 of its diagonal off; review); a steep
-        # height field turns steep but never past
-        # at the rim of the projection, where a fold turns (noise flips normals inside a
-        # steep field: Renka's F7 turned with noise, 3.0% flagged), and nearly along the
-        # direction, as where the surface turns past it: the orientation fails across a
-        # ridge narrower than the points' spacing, and whole flat parts then face away (a
-        # 1.5 m ridge in a 200 m tile of 2e4 points: 13% of the points)
+        # z, had been accepted with no word, 0.097 of its diagonal off; review), while a
+        # steep height field turns steep but never past. Counted at the rim, where a fold
+        # turns (noise flips normals inside a steep field: Renka's F7 turned with noise,
+        # 3.0% flagged), and nearly along the direction (the orientation fails across a
+        # ridge narrower than the points' spacing, and whole flat parts then face away: a
+        # 1.5 m ridge in a 200 m tile of 2e4 points, 13% of the points)
         facing = _oriented_normals(q, normals, reliable, normal) @ normal
         back = coherent(reliable & (facing < -_FOLD_BACK) & (facing > -_FOLD_MIN_COS))
         if back.any():
-            flagged |= back & (_distance_to_hull(uv) < _FOLD_RIM * float(np.ptp(uv, axis=0).max()))
+            if near_rim is None:
+                near_rim = _distance_to_hull(uv) < _FOLD_RIM * float(np.ptp(uv, axis=0).max())
+            flagged |= back & near_rim
     if details is not None:
         gap = 0.0
         own = layered & overlap  # (a coherent flag may have no off-layer neighbour itself)
@@ -2148,7 +2150,7 @@ HOLE_BACKWARD = 0.05
 # border spans it with less than this share of the fan's area (3D). A slot two cells wide along
 # the bend of a strip (benchmarks/holes.py) has 0.93, 0.81, 0.50 of its fan's area clipped at
 # 15, 30, 90 degrees of bend, its fan facing backwards nowhere; clipped, the fit's RMS is
-# 0.07-0.2x and its max 0.12-0.2x the fan's at 15-120 degrees. Round holes have 0.99-1.0 and
+# 0.07-0.21x and its max 0.09-0.21x the fan's at 15-120 degrees (/tmp/s24/bendfit.py). Round holes have 0.99-1.0 and
 # 29 holes punched into three_peaks.off 0.90-1.12, where clipping is no better (scratch
 # /tmp/s24/area.py of the twenty-fourth session). The clipped area is at least the border's
 # vector area, so a hole whose fan has more than this share of it in that area is not tried

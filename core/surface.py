@@ -85,8 +85,9 @@ TESSELLATION_MIN_ACROSS = 8
 # of their variance along it) gets a tessellation reaching TRIM_GAP_FACTOR times the lower
 # quartile of the distance to the data over a TRIM_LATTICE x TRIM_LATTICE lattice
 # (TCBSurface._trim_distance: the gaps between the lines)
-TRIM_LINE = 0.1  # (random points 0.44, a grid 1; lines 0.03 and 0.10 jittered across by 0.5 and 1
-# times their spacing along: /tmp/s24/ratio.py)
+# (the median ratio: random points 0.44, a grid 1; lines jittered across by 0.5 and 1 times
+# their spacing along 0.03 and 0.10: /tmp/s24/ratio.py)
+TRIM_LINE = 0.1
 TRIM_GAP_FACTOR = 6.0
 TRIM_LATTICE = 100
 # tessellation_uv keeps this many of the most recent resolutions (a fine one is megabytes)
@@ -1816,12 +1817,12 @@ def data_layers(uv, residuals, seed: int = 0) -> float:
     and the median point has LAYER_MIXED of its 8 nearest neighbours (in uv) on the other
     side (interleaved layers, not a smooth misfit). The distance is ``median(r | r > 0) -
     median(r | r < 0)``. Layers over part of the surface (overlapping strips; in clouds of
-    LAYER_LOCAL_MIN points or more) are found by
-    the same near and side tests on each point's LAYER_LOCAL nearest, where they hold around
-    LAYER_PART of the points; their distance is the median of the neighbourhoods'. No false
-    alarm on benchmarks/layers.py's 48 fits, nor on the DEM with its heights rounded to 1 or 5
-    m or with Laplace noise, or terrain rounded to 0.1-1 (scratch /tmp/s24/quant.py); two
-    strips overlapping by 40%, 0.1 apart: 0.1 (the tests)."""
+    LAYER_LOCAL_MIN points or more) are found by the same near and side tests on each
+    point's LAYER_LOCAL nearest, where they hold around LAYER_PART of the points; their
+    distance is the median of the neighbourhoods'. No false alarm on benchmarks/layers.py's
+    48 fits, nor on the DEM with its heights rounded to 1 or 5 m or with Laplace noise, or
+    terrain rounded to 0.1-1 (scratch /tmp/s24/quant.py); two strips overlapping by 40%, 0.1
+    apart: 0.1 (the tests)."""
     r = np.asarray(residuals, dtype=np.float64)
     uv = np.asarray(uv, dtype=np.float64)
     if len(r) > LAYER_POINTS:
