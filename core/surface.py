@@ -420,9 +420,9 @@ class TCBSurface:
         spacing = float(np.median(dist[:, 1])) if dist.shape[1] > 1 else 0.0
         if nb.shape[1] < 3:
             return 4 * spacing
-        X = data[nb] - data[nb].mean(axis=1, keepdims=True)
-        C = np.einsum("mki,mkj->mij", X, X)
-        ev = np.linalg.eigvalsh(C)  # ascending
+        X = data[nb]
+        X = X - X.mean(axis=1, keepdims=True)
+        ev = np.linalg.eigvalsh(np.einsum("mki,mkj->mij", X, X))  # ascending
         ratio = float(np.median(ev[:, 0] / np.maximum(ev[:, 1], 1e-300)))
         if ratio >= TRIM_LINE:
             return 4 * spacing
