@@ -28,7 +28,7 @@ import warnings
 from concurrent.futures import Future
 from typing import Callable, Iterable, Sequence, TypeVar
 
-__all__ = ["thread_count", "pmap", "row_blocks"]
+__all__ = ["thread_count", "pmap", "row_blocks", "background"]
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -114,6 +114,35 @@ def pmap(fn: Callable[[T], R], items: Iterable[T]) -> list[R]:
         if err is not None:
             raise err
     return [f.result() for f in futures]
+
+
+def background(fn: Callable[[], R]) -> Callable[[], R]:
+    """``fn()`` started on a daemon thread of its own, for work that releases the GIL (qhull,
+    KD-trees) and whose result is needed later: returns ``get()``, which waits for the result
+    (and re-raises what ``fn`` raised). Not in the :func:`pmap` pool, whose chunks would queue
+    behind it. With one thread (``TCB_THREADS=1``) or from inside a chunk, ``fn`` runs on the
+    first ``get()``, on the thread that calls it."""
+    if thread_count() <= 1 or getattr(_inside, "active", False):
+        lock, done = threading.Lock(), []
+
+        def get() -> R:
+            with lock:
+                if not done:
+                    done.append(fn())
+            return done[0]
+
+        return get
+    fut: Future = Future()
+
+    def run() -> None:
+        fut.set_running_or_notify_cancel()
+        try:
+            fut.set_result(fn())
+        except BaseException as exc:  # handed to whoever asks for the result
+            fut.set_exception(exc)
+
+    threading.Thread(target=run, name="tcb-background", daemon=True).start()
+    return fut.result
 
 
 def row_blocks(n: int, min_rows: int = 4096, per_thread: int = 2) -> Sequence[tuple[int, int]]:

@@ -42,7 +42,7 @@ from .parameterize import (
     parameterize, spike_points,
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
-                     check_callback, swing_places)
+                     check_callback, prefetch_swing_triangles, swing_places)
 from .spline_space import SplineSpace, _whole, derivative_order, frozen
 from .simplex import orient2d
 
@@ -1307,6 +1307,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
                                 seed=options.seed)
         fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
     domain = np.asarray(param.domain_polygon, dtype=np.float64)
+    if not subsampled:  # the swing check's triangles, made while the loop runs
+        prefetch_swing_triangles(uv, options.seed)
     best, hist, reason = adaptive_fit(
         fit_uv, fit_q, options, diagonal=diag_norm, start_knots=start, ring_knots=rings,
         callback=callback, history_offset=len(history), unit=norm.scale,
