@@ -41,6 +41,7 @@ import scipy.sparse.linalg as spla
 
 from .errors import BorderError, InvalidInputError, SingularSystemError
 from .geometry import column_bounds
+from .parallel import background
 from .simplex import orient2d
 
 __all__ = ["FitResult", "fit_control_points", "fairing_quadrature", "check_smoothness",
@@ -181,6 +182,9 @@ def fit_control_points(
     smoothness = check_smoothness(smoothness)
 
     unit = bool((weights == 1.0).all())
+    # the fairing's Gram matrices depend on the space only: made on a thread of their own
+    # while the data's basis is evaluated and assembled
+    grams = background(lambda: _grams(space, *fairing_quadrature(space)))
     AtA = sp.csr_matrix((n, n))
     AtP = np.zeros((n, 3))
     chunks, keep, kept_bytes = [], True, 0
@@ -218,8 +222,7 @@ def fit_control_points(
     if not data_trace > 0:
         raise SingularSystemError("no data point lies in the support of any basis function")
     has_data = AtA.diagonal() > 0
-    q, qw = fairing_quadrature(space)
-    G1, G2 = _grams(space, q, qw)
+    G1, G2 = grams()
     G = (FIRST_ORDER_SHARE * data_trace / max(G1.diagonal().sum(), 1e-300)) * G1
     if G2 is not None:
         G = G + (data_trace / max(G2.diagonal().sum(), 1e-300)) * G2

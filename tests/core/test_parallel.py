@@ -12,7 +12,7 @@ import pytest
 
 from core import build_space, fit_surface
 from core.configurations import _close_links, _unique_rows, constrained_delaunay
-from core.parallel import pmap, row_blocks, thread_count
+from core.parallel import background, pmap, row_blocks, thread_count
 from core.refine import make_space
 from core.triangulation import FeatureLinkTriangulator, PlaneFitCost
 from knotsets import knot_set
@@ -77,6 +77,41 @@ def test_changing_the_thread_count_does_not_cut_off_a_running_pmap(monkeypatch):
     assert pmap(lambda i: -i, range(5)) == [0, -1, -2, -3, -4]
     other.join(20)
     assert box["v"] == list(range(8))
+
+
+@pytest.mark.parametrize("threads", ["1", "2"])
+def test_background_work_runs_ahead_on_its_own_thread_or_on_request(monkeypatch, threads):
+    monkeypatch.setenv("TCB_THREADS", threads)
+    ran_on, release = [], threading.Event()
+
+    def work():
+        ran_on.append(threading.current_thread())
+        release.wait(5)
+        return 42
+
+    get = background(work)
+    if threads == "1":  # nothing runs until asked for, then on the asking thread
+        time.sleep(0.05)
+        assert ran_on == []
+        release.set()
+        assert get() == 42 and ran_on == [threading.current_thread()]
+    else:  # started at once on a thread that is neither this one nor a pmap worker
+        deadline = time.perf_counter() + 5
+        while not ran_on and time.perf_counter() < deadline:
+            time.sleep(0.01)
+        assert ran_on and ran_on[0].name == "tcb-background"
+        assert pmap(lambda i: i, range(4)) == [0, 1, 2, 3]  # the pool is not held up by it
+        release.set()
+        assert _within(10, get) == 42
+    assert get() == 42 and len(ran_on) == 1  # computed once
+
+    def fails():
+        raise ValueError("bad sample")
+
+    failing = background(fails)
+    for _ in range(2):
+        with pytest.raises(ValueError, match="bad sample"):
+            failing()
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="fork is POSIX-only")

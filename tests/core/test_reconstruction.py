@@ -1110,6 +1110,44 @@ def test_a_spike_in_the_gap_between_data_points_is_a_swing(monkeypatch):
     assert len(refine.swing_places(flat, np.eye(3), uv, points, np.zeros(len(uv)))[0]) == 0
 
 
+@pytest.mark.parametrize("threads", ["1", "2"])
+def test_the_swing_checks_triangles_made_ahead_are_those_it_uses(monkeypatch, threads):
+    """prefetch_swing_triangles starts the triangulation of the very sample swing_places takes
+    (the final check of a fit, with the domain checks), so the check makes none of its own and
+    finds what it finds without it; a sample of other points is triangulated anew."""
+    monkeypatch.setenv("TCB_THREADS", threads)
+    g = np.arange(12.0)
+    uv = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    uv = uv + np.random.default_rng(1).uniform(-0.2, 0.2, uv.shape)
+    points = np.c_[uv, np.zeros(len(uv))]
+    spike = _SpikedPlane(uv[:4].mean(axis=0) + [0.1, 0.4], 40.0, 0.2, uv[[0, 1, 12, 13]])
+    refine._GAP_CACHE.clear()
+    plain = refine.swing_places(spike, np.eye(3), uv, points, np.zeros(len(uv)), seed=3,
+                                domain=True)
+    assert len(plain[0]) >= 1  # (the check finds something to compare)
+    made = []
+    triangulate = refine._triangulate
+    monkeypatch.setattr(refine, "_triangulate", lambda x: made.append(len(x)) or triangulate(x))
+    refine._GAP_CACHE.clear()
+    refine.prefetch_swing_triangles(uv, seed=3)
+    ahead = refine.swing_places(spike, np.eye(3), uv, points, np.zeros(len(uv)), seed=3,
+                                domain=True)
+    # the prefetched one, and no other of the sample (the points around knots that crowd
+    # are triangulated on their own)
+    assert made[0] == len(uv) and made.count(len(uv)) == 1
+    assert np.array_equal(ahead[0], plain[0]) and ahead[1:] == plain[1:]
+    # another sample is not taken for this one (with one thread, it is never made: nothing
+    # asks for it)
+    refine.prefetch_swing_triangles(uv + 1.0, seed=3)
+    other = refine._GAP_CACHE["last"][1]
+    again = refine.swing_places(spike, np.eye(3), uv, points, np.zeros(len(uv)), seed=3,
+                                domain=True)
+    if threads == "2":
+        other()  # (wait for it)
+    assert made.count(len(uv)) == (3 if threads == "2" else 2)
+    assert np.array_equal(again[0], plain[0])
+
+
 def test_a_cross_validated_smoothness_that_swings_off_the_data_is_raised():
     """30 points of sin(3x): cross-validation chose 1e-5 and the surface swung 1.2 off the
     function between the points (its height range is 2; 1e-4 gives 0.23): held-out data
