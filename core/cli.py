@@ -28,8 +28,17 @@ from .surface import default_swung
 __all__ = ["main"]
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line, as the issue asks of bad input: the
+    error and where to read the options (argparse prints its whole usage first, ten lines
+    for ``fit``). Its subcommands' parsers are of the same class."""
+
+    def error(self, message: str):  # (argparse's signature; it does not return)
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog="python -m core",
         description="Fit smooth TCB-spline surfaces to scanned points and disk-like meshes.",
     )

@@ -98,6 +98,9 @@ def parse_args(args: list[str]) -> argparse.Namespace:
         "(background mode) and save the .blend.",
         epilog="Inside Blender: blender -b -P scripts/fit_in_blender.py -- INPUT -o OUT.blend",
     )
+    # an option error is bad input like any other: one line, status 1 (argparse prints its
+    # whole usage first, and exits with 2)
+    ap.error = lambda message: ap.exit(1, f"fit_in_blender: error: {message} (see --help)\n")
     ap.add_argument("input", type=Path,
                     help="PLY, OBJ, OFF mesh, or XYZ/TXT/CSV/PTS/NPY/NPZ points")
     ap.add_argument("-o", "--output", type=Path, required=True, help="the .blend file to write")
