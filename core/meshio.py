@@ -776,8 +776,8 @@ def _skip_point_counts(lines: list[str]) -> list[str]:
 
 def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
     """Text columns: whitespace, comma or semicolon separated; the first three are x, y, z
-    (with semicolons, a decimal comma is read as a point: a spreadsheet's CSV in many
-    locales). A first line holding a lone integer is a point count (Leica ``.pts``) and is
+    (with semicolons, or between whitespace, a decimal comma is read as a point: a
+    spreadsheet's CSV or a scanner's export in many locales). A first line holding a lone integer is a point count (Leica ``.pts``) and is
     skipped."""
     lines = _skip_point_counts(_text_lines(path))
     if not lines:
@@ -789,6 +789,12 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
             lines = lines[:1] + [ln.replace(",", ".") for ln in lines[1:]]
             if not any(c.isalpha() for c in lines[0]):
                 lines[0] = lines[0].replace(",", ".")
+    elif (all(_decimal_comma_fields(ln) for ln in data)
+          and any("," in ln for ln in lines[:3])):
+        # whitespace columns with decimal commas ('1,5 2,0 3,25': a European locale's export;
+        # read as commas, its first line was taken for a header and the next one refused)
+        delim = None
+        lines = [ln.replace(",", ".") if _decimal_comma_fields(ln) else ln for ln in lines]
     else:
         delim = "," if any("," in ln for ln in lines[:2]) else None
     cols = (0, 1, 2)
@@ -803,6 +809,16 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
     if len(lines[0].split(delim)) < 3:  # (a header's columns: as many as the data's)
         raise _MalformedError("each line needs at least three numbers (x, y, z)")
     return _loadtxt(lines, "line", usecols=cols, delimiter=delim), None
+
+
+_DECIMAL_COMMA = re.compile(r"[+-]?(\d+(,\d+)?|,\d+)([eE][+-]?\d+)?")
+
+
+def _decimal_comma_fields(line: str) -> bool:
+    """The line holds at least three whitespace-separated numbers, which may be written with a
+    decimal comma ('1,5 2 -3,25e2'); comma-separated values ('1, 2, 3', '1,2,3') do not."""
+    fields = line.split()
+    return len(fields) >= 3 and all(_DECIMAL_COMMA.fullmatch(f) for f in fields)
 
 
 # header names of the coordinate columns (lowercase, after units such as '[m]' are cut off):

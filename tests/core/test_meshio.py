@@ -440,6 +440,25 @@ def test_semicolon_separated_columns_with_decimal_points_or_commas(tmp_path: Pat
     np.testing.assert_array_equal(read_geometry(tmp_path / "head.xyz")[0], VERTS)
 
 
+def test_whitespace_columns_with_decimal_commas(tmp_path: Path) -> None:
+    """A European locale's export: '1,5 2,0 -3,25e2' (whitespace columns, decimal commas),
+    with or without a header; its first line had been taken for a header and the next one
+    refused. Comma-separated files with spaces after the commas are read as before."""
+    rows = "".join(f"{x!r}\t{y!r} {z!r}\n".replace(".", ",") for x, y, z in ROWS)
+    big = "".join(f"{x!r} {y!r} {100 * z:.6e}\n".replace(".", ",") for x, y, z in ROWS)
+    (tmp_path / "plain.xyz").write_text(rows)
+    (tmp_path / "head.xyz").write_text("X Y Z\n" + rows)
+    (tmp_path / "exp.xyz").write_text(big)
+    for name in ("plain.xyz", "head.xyz"):
+        np.testing.assert_array_equal(read_geometry(tmp_path / name)[0], VERTS)
+    np.testing.assert_allclose(read_geometry(tmp_path / "exp.xyz")[0], VERTS * [1, 1, 100])
+    (tmp_path / "spaced.csv").write_text("".join(f"{x!r}, {y!r}, {z!r}\n" for x, y, z in ROWS))
+    (tmp_path / "ints.csv").write_text("1, 2, 3\n4, 5, 6\n7, 8, 9\n")
+    np.testing.assert_array_equal(read_geometry(tmp_path / "spaced.csv")[0], VERTS)
+    np.testing.assert_array_equal(read_geometry(tmp_path / "ints.csv")[0],
+                                  [[1, 2, 3], [4, 5, 6], [7, 8, 9]])
+
+
 def test_text_in_a_number_column_raises_file_format_error(tmp_path: Path) -> None:
     (tmp_path / "p.xyz").write_text("0 0 0\n1 0 0\n1 one 0\n")
     with pytest.raises(FileFormatError, match="p.xyz"):
