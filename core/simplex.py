@@ -284,14 +284,22 @@ class SimplexBatch:
         du_ = [xu - VT[2 * i] for i in range(n)]  # x - V_i, once per knot
         dv_ = [xv - VT[2 * i + 1] for i in range(n)]
         bits = np.zeros(P, dtype=self.leaf_want.dtype)
+        # preallocated buffers, and the tie rule only where f is 0 (rare): 0.6-0.8x the time
+        # of the loop over whole-array temporaries, the same bits
+        dx, dy, f, g = (np.empty(P) for _ in range(4))
+        left, shifted = np.empty(P, dtype=bool), np.empty(P, dtype=bits.dtype)
         for e, (p, q) in enumerate(self.edges):  # p < q: V_p <lex V_q
-            dx = VT[2 * q] - VT[2 * p]
-            dy = VT[2 * q + 1] - VT[2 * p + 1]
-            f = dx * dv_[p]
-            f -= dy * du_[p]
-            left = f > 0
-            left |= (f == 0) & (dy <= 0)
-            bits |= left.astype(bits.dtype) << e
+            np.subtract(VT[2 * q], VT[2 * p], out=dx)
+            np.subtract(VT[2 * q + 1], VT[2 * p + 1], out=dy)
+            np.multiply(dx, dv_[p], out=f)
+            f -= np.multiply(dy, du_[p], out=g)
+            np.greater(f, 0, out=left)
+            tie = np.flatnonzero(f == 0)
+            if len(tie):
+                left[tie] = dy[tie] <= 0
+            shifted[...] = left
+            shifted <<= e
+            bits |= shifted
         inside = (bits & np.take(self.leaf_masks, sets, axis=1)) == np.take(
             self.leaf_want, sets, axis=1
         )  # (L, P)
