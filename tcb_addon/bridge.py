@@ -216,6 +216,15 @@ def _world_checked(obj, pts: np.ndarray, matrix) -> np.ndarray:
     return world
 
 
+def _world_faces(tris, matrix):
+    """``tris`` wound as they are seen in world space: reversed under a mirroring transform
+    (a negative determinant; Blender shows such an object's faces turned, and its fitted
+    surface had faced the other way: user test)."""
+    if tris is None or np.linalg.det(np.array(matrix, dtype=np.float64)[:3, :3]) >= 0:
+        return tris
+    return np.ascontiguousarray(tris[:, ::-1])
+
+
 # a note when the stored float32 coordinates are farther apart than this share of the extent
 ROUNDED = 1e-4
 
@@ -319,7 +328,8 @@ def read_selection(context, objects=None) -> InputData:
         else:
             continue
         if len(pts):
-            parts[key].append((_world_checked(owner, pts, inst.matrix_world), tris))
+            parts[key].append((_world_checked(owner, pts, inst.matrix_world),
+                               _world_faces(tris, inst.matrix_world)))
             _rounding_note(owner, pts, notes)
     # hidden objects (H, the viewport toggle, an excluded collection) are not evaluated: read
     # their own data (the modifiers cannot be applied without showing them)
@@ -331,7 +341,8 @@ def read_selection(context, objects=None) -> InputData:
         tris = read_triangles(data) if obj.type == "MESH" and len(data.polygons) else None
         tris = _faces_or_cloud(obj, pts, tris, notes)
         if len(pts):
-            parts[key].append((_world_checked(obj, pts, obj.matrix_world), tris))
+            parts[key].append((_world_checked(obj, pts, obj.matrix_world),
+                               _world_faces(tris, obj.matrix_world)))
             _rounding_note(obj, pts, notes)
             if any(m.show_viewport for m in getattr(obj, "modifiers", ())):
                 notes.append(f"'{obj.name}' is hidden: read without its modifiers (show it to "
@@ -582,12 +593,17 @@ def nearest_distances(query: np.ndarray, data: np.ndarray, faces: np.ndarray | N
     return point_mesh_distance(query, data, faces)
 
 
-def deviation_material(name: str = "TCB Deviation", attribute: str = "tcb_deviation"):
+DEVIATION_MATERIAL = "TCB Deviation"
+DEVIATION_MATERIAL_KEY = "tcb_deviation_material"  # marks the material as the add-on's
+
+
+def deviation_material(name: str = DEVIATION_MATERIAL, attribute: str = "tcb_deviation"):
     """A material that shows a color attribute (for renders and Material Preview)."""
     mat = bpy.data.materials.get(name)
     if mat is not None:
         return mat
     mat = bpy.data.materials.new(name)
+    mat[DEVIATION_MATERIAL_KEY] = True
     if mat.node_tree is None:  # Blender < 5.0 (5.0 materials always have a node tree)
         mat.use_nodes = True
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
@@ -599,3 +615,12 @@ def deviation_material(name: str = "TCB Deviation", attribute: str = "tcb_deviat
     attr.location = (bsdf.location.x - 300, bsdf.location.y)
     links.new(attr.outputs["Color"], bsdf.inputs["Base Color"])
     return mat
+
+
+def drop_deviation_material(mesh) -> None:
+    """Take the Deviation Map's material (:func:`deviation_material`) off ``mesh``: it shows a
+    colour attribute that a newly written mesh does not have."""
+    for i in reversed(range(len(mesh.materials))):
+        mat = mesh.materials[i]
+        if mat is not None and (mat.get(DEVIATION_MATERIAL_KEY) or mat.name == DEVIATION_MATERIAL):
+            mesh.materials.pop(index=i)

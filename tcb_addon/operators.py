@@ -130,6 +130,33 @@ def active_surface(context):
     return result_objects(getattr(context, "active_object", None))[0]
 
 
+def linked_problem(*objs) -> str | None:
+    """Why a result cannot be rewritten: one of ``objs`` (or its mesh) is linked from another
+    .blend file, read-only (Refine, Re-tessellate and Deviation Map had reported success, and
+    the work was gone when the file was saved: user test); None when all are local."""
+    for ob in objs:
+        if ob is None:
+            continue
+        lib = ob.library or getattr(ob.data, "library", None)
+        if lib is not None:
+            return (f"'{ob.name}' is linked from {bpy.path.basename(lib.filepath)}, read-only: "
+                    "its changes could not be saved; make it local first (Object > Relations "
+                    "> Make Local > Selected Objects and Data)")
+    return None
+
+
+def editable_surface(context, what: str = ""):
+    """The active TCB surface, local (not linked: :func:`linked_problem`); a
+    :class:`bridge.SelectionError` saying what is missing otherwise."""
+    surface = active_surface(context)
+    if surface is None:
+        raise bridge.SelectionError(f"Select a TCB surface (or its control net){what}")
+    problem = linked_problem(surface, surface.tcb.net)
+    if problem:
+        raise bridge.SelectionError(problem)
+    return surface
+
+
 def _poll_object_mode(op_cls, context, surface: bool = True) -> bool:
     """The operators' poll: Object Mode and (``surface``) an active TCB surface or net, with
     Blender's poll message saying which is missing (F3 search or a script got only "poll()
@@ -265,7 +292,9 @@ def _as_stored(fn, resolution: int):
 
 def source_data(context, surface_obj) -> bridge.InputData:
     sources = [s.object for s in surface_obj.tcb.sources]
-    if not sources or any(s is None for s in sources):
+    # deleted (X): in no scene, kept alive by the pointer (user test: the deleted scan was
+    # measured, and called hidden)
+    if not sources or any(s is None or not s.users_scene for s in sources):
         raise bridge.SelectionError(
             f"The source object of '{surface_obj.name}' was deleted: refining and the deviation "
             "map need the input data"
@@ -344,6 +373,9 @@ def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = No
     mesh = bridge.new_mesh(name or surface_obj.data.name, local, faces)
     mesh.shade_smooth()
     bridge.replace_mesh(surface_obj, mesh)
+    # the Deviation Map's material shows colours the new mesh does not have (it rendered
+    # near-black after Refine, Re-tessellate or Fit again: user test)
+    bridge.drop_deviation_material(mesh)
     surface_obj.tcb.has_deviation = False
     remember_placement(surface_obj)
 
@@ -617,15 +649,19 @@ class _EngineOperator:
 FITTED_KEY = "tcb_fitted_at"
 
 
-def previous_result(context, sources):
+def previous_result(context, sources, linked: list | None = None):
     """The surface object of the view layer fitted to exactly the objects ``sources`` (the
     latest fitted when there are several), or None. (One in an excluded collection stays as
-    it is: it cannot be made active.)"""
+    it is: it cannot be made active; so does one linked from another file, whose name is
+    added to ``linked``.)"""
     want = sorted(o.as_pointer() for o in sources)
     found = [ob for ob in context.view_layer.objects
              if ob.tcb.role == "SURFACE" and ob.type == "MESH"
              and sorted(s.object.as_pointer() for s in ob.tcb.sources if s.object is not None)
              == want and len(ob.tcb.sources) == len(want)]
+    if linked is not None:
+        linked += [ob.name for ob in found if linked_problem(ob, ob.tcb.net)]
+    found = [ob for ob in found if not linked_problem(ob, ob.tcb.net)]
     if not found:
         return None
     return max(found, key=lambda ob: (float(ob.get(FITTED_KEY, 0.0)), ob.name))
@@ -724,8 +760,10 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         _cache_put(self._key, surf)
         data = self._data
         name = data.name
-        previous = previous_result(context, data.sources) if self.replace else None
-        replaced = []
+        kept = []
+        previous = previous_result(context, data.sources, kept) if self.replace else None
+        replaced = [f"'{name}' is linked from another file and was kept: this result is a new "
+                    "one" for name in kept if previous is None][:1]
         if previous is None:
             coll = bridge.result_collection(context, f"TCB {name}")
             verts, faces = surf.tessellate(self.resolution)
@@ -753,6 +791,9 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 replaced.append("its Deviation Points were removed (run Deviation Map again)")
         try:
             net.hide_set(not self.show_net)
+            # a replaced surface hidden by the user is shown, as a new one is (it had stayed
+            # hidden, and only its net came back: user test)
+            surface.hide_set(False)
         except RuntimeError:  # a replaced result's net outside the current view layer
             pass
         surface[FITTED_KEY] = time.time()  # (the latest of several results is replaced)
@@ -829,9 +870,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         return super().invoke(context, event)
 
     def prepare(self, context):
-        surface = active_surface(context)
-        if surface is None:
-            raise bridge.SelectionError("Select a TCB surface (or its control net) to refine")
+        surface = editable_surface(context, " to refine")
         st = surface.tcb
         self._surface = surface
         stored = stored_surface(surface, use_net=False)
@@ -906,7 +945,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             unit = " of the diagonal" if self._settings["relative"] else ""
             warnings.append(f"nothing was refined: the surface already meets the tolerance "
                             f"{self._settings['tolerance']:.4g}{unit} ({what} "
-                            f"{self._before[0]:.4g}); set a smaller Tolerance")
+                            f"{self._before[0]:.4g}{unit}); set a smaller Tolerance")
         report_result(self, surf, notes, warnings)
         return {"FINISHED"}
 
@@ -935,10 +974,8 @@ class TCB_OT_retessellate(bpy.types.Operator):
         return self.execute(context)
 
     def execute(self, context):
-        surface = active_surface(context)
         try:
-            if surface is None:
-                raise bridge.SelectionError("Select a TCB surface (or its control net)")
+            surface = editable_surface(context)
             surf = stored_surface(surface)
             moved = moved_note(surface)
             write_surface_mesh(surface, surf, self.resolution)
@@ -988,9 +1025,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         return _poll_object_mode(cls, context)
 
     def prepare(self, context):
-        surface = active_surface(context)
-        if surface is None:
-            raise bridge.SelectionError("Select a TCB surface (or its control net)")
+        surface = editable_surface(context)
         data = source_data(context, surface)
         surf = stored_surface(surface)
         self._surface, self._data, self._surf = surface, data, surf
@@ -1073,6 +1108,11 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
                 st.deviation_points = pts_obj
             else:
                 bridge.replace_mesh(pts_obj, mesh)
+        elif drop_deviation_points(surface):
+            # without a new copy the old one would show the distances to the surface as it
+            # was (user test: its max 0.0033 beside the map's 0.094 after a net edit)
+            data.notes.append("the Deviation Points of the last map were removed (Copy of "
+                              "Input Points is off)")
 
         # the deviation's own statistics (the fit's stay: they are what the fit reached, and a
         # closest-point distance is another measure than the fit's error at the data's own
@@ -1182,7 +1222,16 @@ class TCB_OT_toggle_net(bpy.types.Operator):
         if net.name not in context.view_layer.objects:
             self.report({"ERROR"}, f"'{net.name}' is not in the current view layer")
             return {"CANCELLED"}
-        net.hide_set(not net.hide_get())
+        if net.visible_get():
+            net.hide_set(True)
+            return {"FINISHED"}
+        # shown also when it was disabled in viewports (the outliner's monitor icon: each
+        # press had flipped its hide state, and it never appeared: user test)
+        net.hide_set(False)
+        net.hide_viewport = False
+        if not net.visible_get():
+            self.report({"WARNING"}, f"'{net.name}' stays hidden: its collection is hidden or "
+                                     "excluded in the outliner")
         return {"FINISHED"}
 
 
@@ -1203,13 +1252,15 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
             surface = active_surface(context)
             if surface is None:
                 raise bridge.SelectionError("Select a TCB surface (or its control net)")
-            stored_surface(surface).save(self.filepath)
+            # ('//' is relative to the .blend: it had been written to the filesystem's root)
+            path = bpy.path.abspath(self.filepath)
+            stored_surface(surface).save(path)
         except (*_user_errors(), OSError) as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
         problem = net_vertex_problem(surface)
         self.report({"WARNING"} if problem else {"INFO"},
-                    f"TCB: saved {self.filepath}" + (f"; {problem}" if problem else ""))
+                    f"TCB: saved {path}" + (f"; {problem}" if problem else ""))
         return {"FINISHED"}
 
 

@@ -98,7 +98,7 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
         row.operator("tcb.refine", icon="MOD_MULTIRES")
         row.operator("tcb.retessellate", text="", icon="FILE_REFRESH")
         if net is not None:
-            hidden = net.name in context.view_layer.objects and net.hide_get()
+            hidden = net.name in context.view_layer.objects and not net.visible_get()
             layout.operator("tcb.toggle_net", text="Show Net" if hidden else "Hide Net",
                             icon="HIDE_ON" if hidden else "HIDE_OFF")  # fmt: skip
         layout.operator("tcb.deviation_map", icon="MOD_VERTEX_WEIGHT")

@@ -1,0 +1,203 @@
+"""Results in scenes that changed around them (user test of the twenty-fifth session): linked
+from another file, after a Deviation Map, with the source deleted or mirrored, hidden by the
+user, a net disabled in viewports, a map without a point copy, an export path relative to the
+.blend."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from scenes import add_mesh, grid, move_net_vertex, positions, select, spline_of  # noqa: E402
+
+
+def wave():
+    return grid(20, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y), triangles=True)
+
+
+def fit(bpy, *objs, **props):
+    props.setdefault("tolerance", 2e-2)
+    props.setdefault("max_control_points", 300)
+    props.setdefault("resolution", 24)
+    with bpy.context.temp_override(**select(bpy, *objs)):
+        return bpy.ops.tcb.fit_surface(**props)
+
+
+def run(bpy, op, obj, **props):
+    with bpy.context.temp_override(**select(bpy, obj)):
+        return op(**props)
+
+
+def test_results_linked_from_another_file_are_not_rewritten(clean_scene, tmp_path):
+    """Refine, Re-tessellate and Deviation Map had rewritten linked (read-only) results in
+    memory and reported success; the work was gone when the file was saved. They are refused
+    now, naming the library, and Fit with Replace makes a new result beside a linked one."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    names = [o.name for o in bpy.data.objects]
+    lib_path = tmp_path / "lib.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(lib_path), copy=True)  # (this file stays open)
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj)
+    try:
+        with bpy.data.libraries.load(str(lib_path), link=True) as (_, into):
+            into.objects = names
+        for obj in into.objects:
+            bpy.context.scene.collection.objects.link(obj)
+        bpy.context.view_layer.update()
+        surface = bpy.data.objects["Scan TCB Surface"]
+        assert surface.library is not None
+        before = positions(surface)
+        for op in (bpy.ops.tcb.refine, bpy.ops.tcb.retessellate, bpy.ops.tcb.deviation_map):
+            with pytest.raises(RuntimeError, match=r"'Scan TCB Surface' is linked from "
+                                                   r"lib\.blend, read-only: .*Make Local"):
+                run(bpy, op, surface)
+        assert np.array_equal(positions(surface), before)
+        assert "tcb_deviation" not in surface.data.attributes
+        # the (linked) source fitted again: a new, local result; the linked one stays
+        assert fit(bpy, bpy.data.objects["Scan"], replace=True) == {"FINISHED"}
+        new = bpy.context.view_layer.objects.active
+        assert new != surface and new.library is None and new.tcb.role == "SURFACE"
+        assert np.array_equal(positions(surface), before)
+    finally:
+        for obj in list(bpy.data.objects):
+            bpy.data.objects.remove(obj)
+        for lib in list(bpy.data.libraries):
+            bpy.data.libraries.remove(lib)
+
+
+def test_a_rewritten_surface_drops_the_deviation_material(clean_scene):
+    """Deviation Map adds a material showing its colours; Refine, Re-tessellate and Fit again
+    wrote meshes without the colours and kept the material, and the surface rendered
+    near-black. The material goes with the colours; the user's own material stays."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    mine = bpy.data.materials.new("Clay")
+    surface.data.materials.append(mine)
+
+    def materials():
+        return [m.name for m in surface.data.materials]
+
+    steps = [(bpy.ops.tcb.refine, dict(tolerance=5e-3, max_control_points=600)),
+             (bpy.ops.tcb.retessellate, dict(resolution=16))]
+    for op, props in steps:
+        assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+        assert materials() == ["Clay", "TCB Deviation"]
+        assert surface.data.color_attributes.get("tcb_deviation_color") is not None
+        assert run(bpy, op, surface, **props) == {"FINISHED"}
+        assert materials() == ["Clay"], op.idname()
+        assert surface.data.color_attributes.get("tcb_deviation_color") is None
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+    assert fit(bpy, src, replace=True) == {"FINISHED"}
+    assert bpy.context.view_layer.objects.active == surface and materials() == ["Clay"]
+
+
+def test_a_deleted_source_is_named_as_deleted(clean_scene):
+    """X on the source leaves it in bpy.data, held by the surface's pointer: Deviation Map
+    measured the deleted object's mesh, and both it and Refine called it hidden."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    assert run(bpy, bpy.ops.object.delete, src) == {"FINISHED"}
+    assert "Scan" in bpy.data.objects and not bpy.data.objects["Scan"].users_scene
+    for op in (bpy.ops.tcb.deviation_map, bpy.ops.tcb.refine):
+        with pytest.raises(RuntimeError, match="The source object of 'Scan TCB Surface' was "
+                                               "deleted"):
+            run(bpy, op, surface)
+    assert not surface.tcb.has_deviation
+
+
+def _mean_normal(points, faces) -> np.ndarray:
+    a, b, c = (points[faces[:, k]] for k in range(3))
+    n = np.cross(b - a, c - a).sum(axis=0)
+    return n / np.linalg.norm(n)
+
+
+def test_a_mirrored_source_gives_a_surface_facing_its_way(clean_scene):
+    """A source with Scale (-1, 1, 1) shows its faces turned by the mirror (Blender flips
+    them with the transform); the fitted surface had faced the other way."""
+    bpy = clean_scene
+    verts, faces = wave()
+    facing = {}
+    for name, scale in (("Plain", (1.0, 1.0, 1.0)), ("Mirrored", (-1.0, 1.0, 1.0))):
+        src = add_mesh(bpy, name, verts, faces)
+        src.scale = scale
+        bpy.context.view_layer.update()
+        # as shown: the local normals through the transform's inverse transpose
+        m = np.array(src.matrix_world)[:3, :3]
+        shown = np.linalg.inv(m).T @ _mean_normal(verts, faces)
+        assert fit(bpy, src) == {"FINISHED"}
+        surface = bpy.context.view_layer.objects.active
+        tris = np.array([p.vertices[:] for p in surface.data.polygons])
+        world = positions(surface) @ np.array(surface.matrix_world)[:3, :3].T
+        facing[name] = float(_mean_normal(world, tris) @ (shown / np.linalg.norm(shown)))
+    assert facing["Plain"] > 0.9 and facing["Mirrored"] > 0.9, facing
+
+
+def test_fit_again_shows_a_hidden_result_and_toggle_shows_a_disabled_net(clean_scene):
+    """Fit with Replace into a surface hidden by the user (H) had left the new one hidden, its
+    net shown; Show/Hide Net flipped the hide state of a net disabled in viewports (the
+    outliner's monitor icon) and never showed it."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    surface.hide_set(True)
+    net.hide_set(True)
+    assert fit(bpy, src, replace=True, tolerance=1e-2) == {"FINISHED"}
+    assert bpy.context.view_layer.objects.active == surface
+    assert surface.visible_get() and net.visible_get()
+    net.hide_viewport = True
+    assert not net.visible_get()
+    assert run(bpy, bpy.ops.tcb.toggle_net, surface) == {"FINISHED"}
+    assert net.visible_get()
+    assert run(bpy, bpy.ops.tcb.toggle_net, surface) == {"FINISHED"}
+    assert not net.visible_get()
+
+
+def test_a_map_without_a_point_copy_removes_the_old_copy(clean_scene, capfd):
+    """After a net edit, a Deviation Map without "Copy of Input Points" left the last map's
+    copy, which holds the distances to the surface before the edit."""
+    bpy = clean_scene
+    verts, faces = wave()
+    src = add_mesh(bpy, "Scan", verts, faces)
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface, points_copy=True) == {"FINISHED"}
+    old = surface.tcb.deviation_points.name
+    move_net_vertex(bpy, surface.tcb.net, len(verts) // 2 % len(surface.tcb.net.data.vertices),
+                    (0.0, 0.0, 0.2))
+    capfd.readouterr()
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface, points_copy=False) == {"FINISHED"}
+    assert surface.tcb.deviation_points is None and old not in bpy.data.objects
+    assert "Deviation Points of the last map were removed" in capfd.readouterr().out
+    assert surface.tcb.has_deviation
+
+
+def test_export_to_a_path_relative_to_the_blend(clean_scene, tmp_path):
+    """'//' paths are relative to the .blend file: the spline had been written to the
+    filesystem's root."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    surface = bpy.data.objects[surface.name]
+    name = f"tcb_export_{tmp_path.name}.npz"
+    try:
+        assert run(bpy, bpy.ops.tcb.export_spline, surface, filepath=f"//{name}") == {"FINISHED"}
+        assert (tmp_path / name).is_file() and not (Path("/") / name).exists()
+        stored = spline_of(surface).control_points
+        loaded = sys.modules["scenes"].core_module().TCBSurface.load(tmp_path / name)
+        assert np.array_equal(loaded.control_points, stored)
+    finally:
+        (Path("/") / name).unlink(missing_ok=True)
