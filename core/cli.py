@@ -44,7 +44,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     sub = p.add_subparsers(dest="command", required=True)
     f = sub.add_parser("fit", help="fit a surface to a point cloud or a disk-like mesh")
-    f.add_argument("input", help="points or mesh: .ply .obj .off .xyz .pts .txt .csv .npy .npz")
+    f.add_argument("input", help="points or mesh: .ply .obj .off .xyz .pts .txt .csv .npy .npz "
+                   "(a DEM .npz: 'elevation' with xmin/xmax/ymin/ymax, row 0 at ymin; a "
+                   "north-up raster needs dy < 0 or its 'transform' / 'geotransform')")
     f.add_argument("-o", "--output", required=True, help="tessellated surface: .obj or .ply")
     f.add_argument("--tolerance", type=float, default=1e-3,
                    help="stop when the error (RMS, or max with --criterion max) is at most "

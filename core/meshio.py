@@ -17,7 +17,9 @@ cloud. Supported:
                            (Leica ``.pts``: before each scan)
 ``.npy``                   an ``(n, 3)`` array (more columns: the first three are used)
 ``.npz``                   key ``points`` (and optional ``faces``), or a DEM: key ``elevation``
-                           (rows, cols) with ``xmin, xmax, ymin, ymax``
+                           (rows, cols) with ``xmin, xmax, ymin, ymax`` (row 0 at ``ymin``;
+                           ``dy < 0``: at the larger y) or the raster's ``transform``
+                           (rasterio) or ``geotransform`` (GDAL)
 =========================  =====================================================================
 
 Writers: :func:`write_mesh` for ``.obj`` (ASCII) and ``.ply`` (binary little endian).
@@ -978,7 +980,15 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
     With optional cell sizes ``dx``, ``dy`` that say the bounds are the grid's outer edges
     (``cols dx = |xmax - xmin|``: a pixel-registered grid, as the jacksboro file is) the
     nodes are the cells' centres, ``xmin + (j + 1/2) (xmax - xmin) / cols``; a cell size
-    that fits neither (nor ``(cols - 1) dx``) is an error.
+    that fits neither (nor ``(cols - 1) dx``) is an error. A negative cell size says which
+    way the rows (columns) run whatever the order of the bounds: ``dy < 0``, as GDAL writes
+    a north-up raster, puts row 0 at the larger y (a north-up grid saved with ``ymin <
+    ymax`` and a positive ``dy`` was read mirrored north-south: user test).
+
+    Instead of the bounds, the raster's affine transform: ``transform`` as rasterio gives it
+    (``a, b, c, d, e, f``, 6 or 9 numbers: ``x = a col + b row + c``, ``y = d col + e row +
+    f`` at the cells' corners) or ``geotransform`` as GDAL gives it (``c, a, b, f, d, e``);
+    the nodes are the cells' centres (``col = j + 1/2``, ``row = i + 1/2``).
 
     Geographic grids (bounds in degrees: |x| <= 180, |y| <= 90, and an elevation range larger
     than 10x the extent in degrees, i.e. heights in metres) are converted to metres relative to
@@ -989,17 +999,26 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
     elev = np.asarray(z["elevation"])
     if elev.ndim != 2 or min(elev.shape) < 2 or not np.issubdtype(elev.dtype, np.number):
         raise _MalformedError(f"'elevation' must be a 2D grid of numbers; got shape {elev.shape}")
-    try:
-        xmin, xmax, ymin, ymax = (float(z[k]) for k in ("xmin", "xmax", "ymin", "ymax"))
-    except KeyError as exc:
-        raise _MalformedError(
-            f"the DEM needs keys xmin, xmax, ymin, ymax; {exc} is missing"
-        ) from None
-    except (TypeError, ValueError):
-        raise _MalformedError("the DEM bounds xmin, xmax, ymin, ymax must be numbers") from None
     rows, cols = elev.shape
-    x = _dem_nodes(xmin, xmax, cols, z.get("dx"), "x")
-    y = _dem_nodes(ymin, ymax, rows, z.get("dy"), "y")
+    affine = _dem_affine(z)
+    if affine is not None:
+        a, b, c, d, e, f = affine
+        jj, ii = np.meshgrid(np.arange(cols) + 0.5, np.arange(rows) + 0.5)
+        gx, gy = a * jj + b * ii + c, d * jj + e * ii + f
+        corners = np.array([[a * u + b * v + c, d * u + e * v + f]
+                            for u in (0, cols) for v in (0, rows)])
+        (xmin, ymin), (xmax, ymax) = corners.min(axis=0), corners.max(axis=0)
+    else:
+        try:
+            xmin, xmax, ymin, ymax = (float(z[k]) for k in ("xmin", "xmax", "ymin", "ymax"))
+        except KeyError as exc:
+            raise _MalformedError(
+                f"the DEM needs keys xmin, xmax, ymin, ymax (or the raster's transform); {exc} "
+                "is missing") from None
+        except (TypeError, ValueError):
+            raise _MalformedError("the DEM bounds xmin, xmax, ymin, ymax must be numbers") from None
+        gx, gy = np.meshgrid(_dem_nodes(xmin, xmax, cols, z.get("dx"), "x"),
+                             _dem_nodes(ymin, ymax, rows, z.get("dy"), "y"))
     h = elev.astype(np.float64)
     units = str(z["units"]) if "units" in z else "auto"
     if units not in ("auto", "degrees", "metres", "meters"):
@@ -1016,9 +1035,8 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
         units = "degrees" if geographic else "metres"
     if units == "degrees":
         lat_mid = np.radians(0.5 * (ymin + ymax))
-        x = (x - min(xmin, xmax)) * _METRES_PER_DEGREE * np.cos(lat_mid)
-        y = (y - min(ymin, ymax)) * _METRES_PER_DEGREE
-    gx, gy = np.meshgrid(x, y)
+        gx = (gx - min(xmin, xmax)) * _METRES_PER_DEGREE * np.cos(lat_mid)
+        gy = (gy - min(ymin, ymax)) * _METRES_PER_DEGREE
     pts = np.column_stack([gx.ravel(), gy.ravel(), h.ravel()])
     keep = np.isfinite(pts[:, 2])
     if "nodata" in z:
@@ -1028,19 +1046,44 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
     return pts[keep]
 
 
+def _dem_affine(z: dict) -> tuple | None:
+    """The DEM's ``transform`` (rasterio's order) or ``geotransform`` (GDAL's) as rasterio's
+    ``(a, b, c, d, e, f)``, or None when it has neither."""
+    for key in ("transform", "geotransform"):
+        if key not in z:
+            continue
+        try:
+            t = np.asarray(z[key], dtype=np.float64).ravel()
+        except (TypeError, ValueError):
+            t = np.zeros(0)
+        sizes = (6, 9) if key == "transform" else (6,)
+        if len(t) not in sizes or not np.isfinite(t).all():
+            raise _MalformedError(
+                f"the DEM's {key} must be {' or '.join(map(str, sizes))} finite numbers "
+                f"({'a, b, c, d, e, f as rasterio gives it' if key == 'transform' else 'as GDAL gives it'})")
+        a, b, c, d, e, f = t[:6] if key == "transform" else t[[1, 2, 0, 4, 5, 3]]
+        if a * e - b * d == 0:
+            raise _MalformedError(f"the DEM's {key} maps the grid onto a line (zero determinant)")
+        return a, b, c, d, e, f
+    return None
+
+
 def _dem_nodes(lo: float, hi: float, count: int, cell, axis: str) -> np.ndarray:
     """The ``count`` node coordinates of a DEM axis with bounds ``lo``, ``hi`` (in the order
     stored) and an optional cell size ``cell``: the bounds themselves are the first and last
     nodes, unless ``count cell`` spans them (the bounds are the outer cell edges: the nodes
     are the cells' centres). The user test found the jacksboro grid stretched by 1/402 and
     1/343 (75 m over the tile) when its edges were taken for nodes."""
-    span = hi - lo
     if cell is None:
         return np.linspace(lo, hi, count)
     try:
-        cell = abs(float(np.asarray(cell)))
+        cell = float(np.asarray(cell))
     except (TypeError, ValueError):
         raise _MalformedError(f"the DEM cell size d{axis} must be a number") from None
+    if cell < 0:  # the nodes run towards the smaller coordinate (GDAL's north-up rows)
+        lo, hi = max(lo, hi), min(lo, hi)
+    cell = abs(cell)
+    span = hi - lo
     tol = 1e-6 * max(abs(span), 1e-300)
     if abs(count * cell - abs(span)) <= tol:  # the bounds are the outer edges of the cells
         return lo + (np.arange(count) + 0.5) * (span / count)

@@ -652,6 +652,42 @@ def test_dem_cell_sizes_say_where_the_nodes_are(tmp_path: Path) -> None:
         read_geometry(tmp_path / "bad.npz")
 
 
+def test_a_north_up_dem_is_read_the_right_way_round(tmp_path: Path) -> None:
+    """A raster as GDAL and rasterio give it (row 0 the northern edge): with a negative ``dy``,
+    with its affine ``transform`` (rasterio's order, 6 or 9 numbers) or ``geotransform``
+    (GDAL's), or with ``ymin`` the northern edge, the hill is where it is; with ``ymin < ymax``
+    and a positive ``dy`` the rows run north from ``ymin`` (user test: a north-up grid saved
+    so was read mirrored, which stays the documented reading)."""
+    rows, cols, d, x0, y0 = 5, 6, 10.0, 500_000.0, 4_200_000.0
+    elev = np.zeros((rows, cols))
+    elev[1, 4] = 100.0  # row 1 from the north, column 4 from the west
+    top = (x0 + 4.5 * d, y0 + (rows - 1.5) * d)
+    edges = dict(xmin=x0, xmax=x0 + cols * d, ymin=y0, ymax=y0 + rows * d, dx=d)
+    north = y0 + rows * d
+    cases = {
+        "dy": dict(edges, dy=-d),
+        "ymin north": dict(edges, ymin=north, ymax=y0, dy=d),
+        "transform": dict(transform=np.array([d, 0.0, x0, 0.0, -d, north])),
+        "affine 3x3": dict(transform=np.array([d, 0.0, x0, 0.0, -d, north, 0.0, 0.0, 1.0])),
+        "geotransform": dict(geotransform=np.array([x0, d, 0.0, north, 0.0, -d])),
+        "south up": dict(edges, dy=d),
+    }
+    for name, keys in cases.items():
+        np.savez(tmp_path / "dem.npz", elevation=elev, **keys)
+        pts, _ = read_geometry(tmp_path / "dem.npz")
+        assert len(pts) == rows * cols, name
+        np.testing.assert_allclose(np.unique(pts[:, 0]), x0 + d * (np.arange(cols) + 0.5))
+        np.testing.assert_allclose(np.unique(pts[:, 1]), y0 + d * (np.arange(rows) + 0.5))
+        want = top if name != "south up" else (top[0], y0 + 1.5 * d)
+        np.testing.assert_allclose(pts[np.argmax(pts[:, 2]), :2], want, err_msg=name)
+    for keys, words in ((dict(transform=np.arange(5.0)), "transform must be 6 or 9 finite"),
+                        (dict(geotransform=np.array([x0, d, 0, north, 0, 0.0])),
+                         "zero determinant")):
+        np.savez(tmp_path / "bad.npz", elevation=elev, **keys)
+        with pytest.raises(FileFormatError, match=words):
+            read_geometry(tmp_path / "bad.npz")
+
+
 def test_a_dem_fill_value_without_a_nodata_key_is_refused(tmp_path: Path) -> None:
     """-9999 cells of a DEM saved without its 'nodata' key were fitted as terrain 10 km deep
     ("tolerance reached" on a garbage surface); a real low elevation is kept."""
