@@ -66,6 +66,11 @@ _FOLD_MAX_FRACTION = 0.02  # fraction of flagged points above which the cloud is
 _FOLD_CLEAR = 0.25  # a projection with flags at fewer than this times that is taken at once
 _FOLD_RIM = 0.05  # "at the rim": within this fraction of the extent from the convex hull
 _FOLD_BACK = 0.02  # a direction given: normals facing away by more than this are folds
+# ... and a surface parallel to it (|n_i . n| below this, within 0.6 degrees) at _EDGE_ON of
+# the reliable points is seen edge-on: a wall stacked along z was fitted over z as a ribbon
+# at half its height, 20% of its diagonal off (user test); Renka's F7 with 3x its heights, the
+# steepest height field of the suite, stays above 0.011 everywhere
+_FOLD_PARALLEL = 0.01
 _FOLD_RIM_SHARE = 0.6  # steep points count as a fold when this share of them is at the rim
 _ORIENT_BELOW = 0.15  # first candidate's score below this: a steep cloud, orient the normals
 _SIGNED_MIN = -0.05  # the direction the oriented normals face is tried when they score this
@@ -884,6 +889,9 @@ def _fold_fraction(
             if near_rim is None:
                 near_rim = _distance_to_hull(uv) < _FOLD_RIM * float(np.ptp(uv, axis=0).max())
             flagged |= back & near_rim
+        parallel = coherent(reliable & (cos < _FOLD_PARALLEL))
+        if np.count_nonzero(parallel) >= _EDGE_ON * np.count_nonzero(reliable):
+            flagged |= parallel  # (seen edge-on: _FOLD_PARALLEL)
     if details is not None:
         gap = 0.0
         own = layered & overlap  # (a coherent flag may have no off-layer neighbour itself)

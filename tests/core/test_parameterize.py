@@ -421,6 +421,20 @@ def test_a_projection_along_a_flat_cloud_is_refused_with_advice() -> None:
             parameterize_points(wall, projection=along)
     for along in ("y", None):
         assert abs(parameterize_points(wall, projection=along).axes[2] @ [0, 1, 0]) > 1 - 1e-12
+    # a wall that bends (y = 0.05 sin 5x) projects onto a curve, not a line: it was fitted
+    # over z as a ribbon at half its height, 20% of its diagonal off (user test); refused as
+    # parallel to the direction. Renka's F7 with 5x its heights, slopes to 89.6 degrees, is
+    # still a height field over z
+    xz = np.random.default_rng(5).random((2000, 2))
+    bent = np.c_[xz[:, 0], 0.05 * np.sin(5 * xz[:, 0]), xz[:, 1]]
+    with pytest.raises(ParameterizationError, match=r"projection direction \(0, 0, 1\): at "
+                                                    r"100.0% of the points the surface is "
+                                                    r"nearly parallel to that direction"):
+        parameterize_points(bent, projection="z")
+    assert abs(parameterize_points(bent).axes[2] @ [0, 0, 1]) < 0.1
+    x, y = np.random.default_rng(0).random((2, 5000))
+    f7 = np.c_[x, y, 5 * (2 * np.cos(10 * x) * np.sin(10 * y) + np.sin(10 * x * y))]
+    np.testing.assert_allclose(parameterize_points(f7, projection="z").axes[2], [0, 0, 1])
 
 
 @pytest.mark.parametrize("bad", ["w", "", [0, 0, 0], [np.nan, 0, 1], [1, 2], "1,2,3", [[0, 0, 1]]])
