@@ -257,6 +257,12 @@ def _fit(args) -> int:
         )
     given = points
     bad = ~np.isfinite(points).all(axis=1)
+    if faces is not None and len(faces):
+        # (a vertex in no face is left out of a mesh's fit as any loose one, NaN or not: the
+        # engine does so, and the CLI had refused the file: user test)
+        in_faces = np.zeros(len(points), dtype=bool)
+        in_faces[np.asarray(faces).ravel()] = True
+        bad &= in_faces
     if bad.any() and faces is not None:  # the engine's advice is Python; this is the CLI's
         raise TCBError(
             f"{int(bad.sum())} of the {len(points)} vertices of the mesh {args.input} have NaN "

@@ -245,6 +245,18 @@ def test_a_mesh_with_a_nan_vertex_gets_command_line_advice(tmp_path):
         assert r.returncode == 2 and r.stderr.strip().count("\n") == 0
         assert "1 of the" in r.stderr and "repair or delete them in a mesh editor" in r.stderr
         assert "np." not in r.stderr
+    # a NaN vertex in no face is left out as any loose vertex, as fit_surface does (user test:
+    # refused, also with --drop-invalid)
+    loose = tmp_path / "loose.off"
+    verts, _ = read_geometry(ROOT / "data" / "nefertiti.off")
+    verts = np.vstack([verts, [np.nan, np.nan, np.nan]])
+    with open(loose, "w") as fh:
+        fh.write(f"OFF\n{len(verts)} {len(faces)} 0\n")
+        np.savetxt(fh, verts)
+        np.savetxt(fh, np.c_[np.full(len(faces), 3), faces], fmt="%d")
+    r = run("fit", loose, "-o", tmp_path / "l.obj", "--max-iterations", "1")
+    assert r.returncode == 0, r.stderr
+    assert "1 of the" in r.stderr and "is in no face and was left out" in r.stderr
 
 
 def test_a_stalled_fit_says_which_iteration_and_why_the_smoothness_was_chosen(tmp_path):
