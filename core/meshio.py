@@ -369,15 +369,36 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
 # --------------------------------------------------------------------------------------------
 
 
+def _obj_records(lines: list[str]):
+    """``(line number, record)`` of an OBJ file's lines: a line ending in a backslash goes on
+    in the next one (the OBJ format's continuation, with which exporters wrap long faces;
+    such a file was refused: user test), numbered by its first line."""
+    start, held = 0, []
+    for lineno, line in enumerate(lines, 1):
+        body = line.rstrip()
+        if body.endswith("\\") and "#" not in body:
+            start = start or lineno
+            held.append(body[:-1])
+            continue
+        if held:
+            yield start, " ".join(held + [line])
+            start, held = 0, []
+        else:
+            yield lineno, line
+    if held:
+        yield start, " ".join(held)
+
+
 def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     """Wavefront OBJ: ``v x y z [w | r g b]`` and ``f a b c ...`` where ``a`` may be ``i``,
     ``i/t``, ``i//n`` or ``i/t/n``, 1-based, negative = relative to the vertices read so far.
     Other statements (``vt``, ``vn``, ``g``, ``usemtl``, ``l``, ...) are ignored. One loop over
-    the ``v``/``f`` lines; coordinates are converted in bulk by ``np.loadtxt``."""
+    the ``v``/``f`` lines (a backslash at a line's end continues it); coordinates are converted
+    in bulk by ``np.loadtxt``."""
     coords: list[str] = []
     polys: list[list[int]] = []
     text = _read_text(path)
-    for lineno, raw in enumerate(text.splitlines(), 1):
+    for lineno, raw in _obj_records(text.splitlines()):
         parts = raw.split("#", 1)[0].split()
         if not parts or parts[0] not in ("v", "f"):
             continue

@@ -160,6 +160,23 @@ def test_obj_with_slashes_quads_negative_indices_and_other_statements(tmp_path: 
     assert_reads_the_sample_mesh(tmp_path / "a.obj", text)
 
 
+def test_obj_records_continued_on_the_next_line(tmp_path: Path) -> None:
+    """A backslash at the end of a line continues it (the OBJ format; exporters wrap long
+    faces so): such a file was refused with "bad face 'f 1 2 \\'" (user test). A comment
+    ending in one does not swallow the next line; errors name the record's first line."""
+    text = (
+        "# exported \\\n"
+        + "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in ROWS[:4])
+        + "f 1 2 \\\n   3 4\n"
+        + f"v {ROWS[4][0]!r} \\\n{ROWS[4][1]!r} {ROWS[4][2]!r}\n"
+        + "f 2 5 \\  \n 3\n"
+    )
+    assert_reads_the_sample_mesh(tmp_path / "a.obj", text)
+    (tmp_path / "b.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 \\\n 2 9\n")
+    with pytest.raises(FileFormatError, match="line 4: the face refers to a vertex not defined"):
+        read_geometry(tmp_path / "b.obj")
+
+
 def test_obj_without_faces_is_a_point_cloud(tmp_path: Path) -> None:
     (tmp_path / "p.obj").write_text("".join(f"v {x} {y} {z}\n" for x, y, z in ROWS))
     pts, faces = read_geometry(tmp_path / "p.obj")
