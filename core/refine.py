@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import copy
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -1142,6 +1143,11 @@ def adaptive_fit(
         n0 = int(min(options.initial_knots or automatic_start(options.mode,
                                                               options.max_control_points),
                      max(len(uv) // 8, 6)))
+        if options.initial_knots is not None and options.initial_knots > n0:
+            # (it had been cut silently: user test)
+            warnings.warn(f"initial_knots={options.initial_knots} is more than {len(uv)} "
+                          f"points hold: the first fit has {n0} interior knots (one per 8 "
+                          "points at most)", RuntimeWarning, stacklevel=4)
         sizing = (options.initial_knots is None and tol > 0 and options.max_iterations > 1
                   and n0 // PROBE_FRACTION >= MIN_PROBE_KNOTS)
         interior, ring_knots = place(n0 // PROBE_FRACTION if sizing else n0)

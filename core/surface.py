@@ -1626,7 +1626,8 @@ def fit_surface(
         the budget in interior knots, and with a tolerance a probe fit with a quarter of those
         first, whose error sets the knots of the next start, so that the net follows the
         tolerance: ``core.refine.next_start``); None (the default) keeps them automatic. An
-        ``initial_knots`` given is the first fit's knot count, with no probe. The probe and
+        ``initial_knots`` given is the first fit's knot count, with no probe (at most one knot
+        per 8 points: more is cut to that, with a warning). The probe and
         the fresh starts count towards ``max_iterations``. Each iteration's report says
         whether its knots were placed ``"afresh"``, ``"continued"`` (the first fit of
         ``refine()``) or ``"inserted"`` (``knots_placed``).
