@@ -309,6 +309,24 @@ def _remove(obj) -> None:
         bpy.data.meshes.remove(mesh)
 
 
+def drop_orphaned_weights() -> int:
+    """Remove the hidden weights objects whose surface was deleted (X leaves it in the file,
+    held by the pointers of its net and weights, in no scene): the user cannot select them,
+    and they kept the deleted surface and its spline in the .blend (user test). How many."""
+    gone = 0
+    for ob in list(bpy.data.objects):
+        if ob.tcb.role != "WEIGHTS":
+            continue
+        surface = ob.tcb.surface
+        if surface is not None and surface.users_scene:
+            continue
+        if any(o.users_scene for o in _users(ob, "weights", "Weights")):
+            continue  # (a surface in a scene still reads it)
+        _remove(ob)
+        gone += 1
+    return gone
+
+
 def detach(surface_obj) -> None:
     """Remove the live link of ``surface_obj``: its modifier and its weights object (unless
     another surface uses it). The surface keeps its own mesh."""

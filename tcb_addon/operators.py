@@ -816,6 +816,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             obj.select_set(False)
         surface.select_set(True)
         context.view_layer.objects.active = surface
+        if live.drop_orphaned_weights():  # (of surfaces deleted with X; the view layer
+            context.view_layer.update()  # lists a removed object as None until updated)
         reused = ["the same input and settings as the last fit: its result was reused (the "
                   "seconds are that fit's)"] if getattr(self, "_reused", False) else []
         holes = int((surf.report or {}).get("holes_filled", 0))

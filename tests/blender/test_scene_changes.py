@@ -201,3 +201,31 @@ def test_export_to_a_path_relative_to_the_blend(clean_scene, tmp_path):
         assert np.array_equal(loaded.control_points, stored)
     finally:
         (Path("/") / name).unlink(missing_ok=True)
+
+
+def test_fit_after_deleting_a_surface_removes_its_hidden_weights(clean_scene, tmp_path):
+    """X on a live surface left its hidden, unselectable weights object in the file, which
+    kept the deleted surface and its spline there too (user test). The next Fit removes the
+    weights of deleted surfaces; those of a surface in the scene stay."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    other = add_mesh(bpy, "Other", *wave())
+    assert fit(bpy, other) == {"FINISHED"}
+    kept = bpy.context.view_layer.objects.active.tcb.weights
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    weights, name = surface.tcb.weights, surface.name
+    assert weights is not None and weights.tcb.role == "WEIGHTS"
+    weights_name = weights.name
+    assert run(bpy, bpy.ops.object.delete, surface) == {"FINISHED"}
+    assert weights_name in bpy.data.objects  # (held by the deleted surface's pointers)
+    assert fit(bpy, src) == {"FINISHED"}
+    assert weights_name not in bpy.data.objects
+    assert kept.name in bpy.data.objects and kept.users_scene
+    new = bpy.context.view_layer.objects.active
+    assert new.name != name and new.tcb.weights is not None and new.tcb.weights.users_scene
+    path = tmp_path / "after.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    roles = [o.tcb.role for o in bpy.data.objects if o.tcb.role == "WEIGHTS"]
+    assert len(roles) == 2  # the other surface's and the new one's
