@@ -23,7 +23,7 @@ from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 from .parameterize import projection_direction
 from .refine import STALLED, SWINGS_LEFT, mostly_taken_back, replaced_default_reason
-from .surface import default_swung
+from .surface import MAX_RESOLUTION, default_swung
 
 __all__ = ["main"]
 
@@ -69,8 +69,8 @@ def _parser() -> argparse.ArgumentParser:
                    "falling above the tolerance, the default is cross-validated)")
     f.add_argument("--resolution", type=int, default=None,
                    help="tessellation steps across the longer side of the domain (default: 64, or "
-                   "2 sqrt(control points) for a larger net, at most 512; at least 8 across the "
-                   "shorter one)")
+                   "2 sqrt(control points) for a larger net, at most 512, more where the surface "
+                   "leaves out most of the domain; at least 8 across the shorter one)")
     f.add_argument("--net", help="write the control net (.obj or .ply) here")
     f.add_argument("--spline", help="write the spline (.npz, TCBSurface.save) here")
     f.add_argument("--drop-invalid", action="store_true",
@@ -195,13 +195,39 @@ def _check_distinct(args) -> None:
                 )
 
 
-def default_resolution(control_points: int) -> int:
+# default_resolution over a domain mostly left out: at most this many grid cells (a 2048 x 2048
+# grid took a minute and 2 GiB: MAX_RESOLUTION)
+MAX_AUTO_CELLS = 1 << 20
+
+
+def default_resolution(control_points: int, surf=None) -> int:
     """The tessellation resolution for a net of ``control_points``: 64, or ``2
     sqrt(control points)`` for a larger net (at most 512), so that the written mesh keeps up
     with the spline. At 64 a DEM net of 5980 control points was written as 4090 vertices,
     whose error (a piecewise-linear surface against the points) was 1.9x the spline's; at 128
-    1.13x, at 256 1.0x (user test)."""
-    return int(min(512, max(64, np.ceil(2.0 * np.sqrt(max(control_points, 1))))))
+    1.13x, at 256 1.0x (user test).
+
+    With the surface ``surf``: where its tessellation covers less than half of the square on
+    the longer side of its domain (patches far apart, a long strip), the resolution grows
+    until the triangles kept are as many as that square would hold (at most MAX_AUTO_CELLS
+    grid cells): two 1 x 1 patches 20 apart were written with 93 vertices each at
+    64, 4x farther from the data than the spline (user test)."""
+    base = int(min(512, max(64, np.ceil(2.0 * np.sqrt(max(control_points, 1))))))
+    if surf is None:
+        return base
+    uv, tri = surf.tessellation_uv(base)
+    if len(tri) == 0:
+        return base
+    a, b, c = (uv[tri[:, k]] for k in range(3))
+    covered = 0.5 * float(np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
+                                 - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])).sum())
+    extent = np.ptp(np.asarray(surf.parameterization.domain_polygon), axis=0)
+    side, across = float(extent.max()), float(extent.min())
+    if covered >= 0.5 * side * side:
+        return base
+    want = base * side / np.sqrt(max(covered, 1e-300))
+    cap = np.sqrt(MAX_AUTO_CELLS * side / max(across, 1e-300 * side))  # (cells: r^2 across/side)
+    return int(min(MAX_RESOLUTION, cap, np.ceil(want)))
 
 
 def _progress(quiet: bool):
@@ -227,7 +253,7 @@ def _progress(quiet: bool):
 
 def _fit(args) -> int:
     from .parameterize import holes_error, outlier_error
-    from .surface import MAX_RESOLUTION, fit_surface
+    from .surface import fit_surface
 
     _check_output(args.output, "surface")
     _check_output(args.net, "control net")
@@ -298,7 +324,7 @@ def _fit(args) -> int:
         # with this command's option
         raise outlier_error(given, np.flatnonzero(~bad)[exc.indices],
                             advice="pass --drop-outliers") from None
-    resolution = args.resolution or default_resolution(surf.report["control_points"])
+    resolution = args.resolution or default_resolution(surf.report["control_points"], surf)
     verts, tris = surf.tessellate(resolution)
     write_mesh(args.output, verts, tris)
     if args.net:
