@@ -834,7 +834,7 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
     return _loadtxt(lines, "line", usecols=cols, delimiter=delim), None
 
 
-_DECIMAL_COMMA = re.compile(r"[+-]?(\d+(,\d+)?|,\d+)([eE][+-]?\d+)?")
+_DECIMAL_COMMA = re.compile(r"[+-]?\d+(,\d+)?([eE][+-]?\d+)?")
 
 
 def _decimal_comma_fields(line: str) -> bool:
@@ -1047,6 +1047,8 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
     if units == "auto":
         extent = max(abs(xmax - xmin), abs(ymax - ymin))
         finite = h[np.isfinite(h)]
+        if "nodata" in z:  # (its -9999 made a small metric grid's relief look like metres)
+            finite = finite[finite != float(z["nodata"])]
         relief = float(np.ptp(finite)) if finite.size else 0.0
         geographic = (
             max(abs(xmin), abs(xmax)) <= 180.0
@@ -1082,6 +1084,13 @@ def _dem_affine(z: dict) -> tuple | None:
             raise _MalformedError(
                 f"the DEM's {key} must be {' or '.join(map(str, sizes))} finite numbers "
                 f"({'a, b, c, d, e, f as rasterio gives it' if key == 'transform' else 'as GDAL gives it'})")
+        if key == "transform" and (t[1] or t[3]) and not (t[2] or t[4]):
+            # rotated in rasterio's order, axis-aligned in GDAL's: GetGeoTransform()'s six
+            # numbers saved as 'transform' (review: read as a grid of 500 km cells)
+            raise _MalformedError(
+                "the DEM's transform looks like GDAL's geotransform (origin x, cell width, 0, "
+                "origin y, 0, cell height): save it as 'geotransform', or give rasterio's "
+                "transform (a, b, c, d, e, f)")
         a, b, c, d, e, f = t[:6] if key == "transform" else t[[1, 2, 0, 4, 5, 3]]
         if a * e - b * d == 0:
             raise _MalformedError(f"the DEM's {key} maps the grid onto a line (zero determinant)")

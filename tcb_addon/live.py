@@ -309,19 +309,24 @@ def _remove(obj) -> None:
         bpy.data.meshes.remove(mesh)
 
 
+def deleted(obj) -> bool:
+    """Whether ``obj`` was deleted by the user (X unlinks it from every collection; our
+    pointers keep it in the file). Not "in no scene": a collection shown only through a
+    collection instance is in none, and its objects are in use (review)."""
+    return obj is None or not obj.users_collection
+
+
 def drop_orphaned_weights() -> int:
     """Remove the hidden weights objects whose surface was deleted (X leaves it in the file,
-    held by the pointers of its net and weights, in no scene): the user cannot select them,
-    and they kept the deleted surface and its spline in the .blend (user test). How many."""
+    held by the pointers of its net and weights, in no collection): the user cannot select
+    them, and they kept the deleted surface and its spline in the .blend (user test). How
+    many."""
     gone = 0
     for ob in list(bpy.data.objects):
-        if ob.tcb.role != "WEIGHTS":
+        if ob.tcb.role != "WEIGHTS" or not deleted(ob.tcb.surface):
             continue
-        surface = ob.tcb.surface
-        if surface is not None and surface.users_scene:
-            continue
-        if any(o.users_scene for o in _users(ob, "weights", "Weights")):
-            continue  # (a surface in a scene still reads it)
+        if any(not deleted(o) for o in _users(ob, "weights", "Weights")):
+            continue  # (a surface not deleted still reads it)
         _remove(ob)
         gone += 1
     return gone

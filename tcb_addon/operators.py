@@ -292,9 +292,9 @@ def _as_stored(fn, resolution: int):
 
 def source_data(context, surface_obj) -> bridge.InputData:
     sources = [s.object for s in surface_obj.tcb.sources]
-    # deleted (X): in no scene, kept alive by the pointer (user test: the deleted scan was
-    # measured, and called hidden)
-    if not sources or any(s is None or not s.users_scene for s in sources):
+    # deleted (X): in no collection, kept alive by the pointer (user test: the deleted scan
+    # was measured, and called hidden)
+    if not sources or any(live.deleted(s) for s in sources):
         raise bridge.SelectionError(
             f"The source object of '{surface_obj.name}' was deleted: refining and the deviation "
             "map need the input data"
@@ -789,13 +789,13 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                             "it back; turn off Replace Previous Result to keep both)")
             if drop_deviation_points(surface):
                 replaced.append("its Deviation Points were removed (run Deviation Map again)")
-        try:
-            net.hide_set(not self.show_net)
-            # a replaced surface hidden by the user is shown, as a new one is (it had stayed
-            # hidden, and only its net came back: user test)
-            surface.hide_set(False)
-        except RuntimeError:  # a replaced result's net outside the current view layer
-            pass
+        # a replaced surface hidden by the user is shown, as a new one is (it had stayed
+        # hidden, and only its net came back: user test)
+        for obj, hide in ((net, not self.show_net), (surface, False)):
+            try:
+                obj.hide_set(hide)
+            except RuntimeError:  # a replaced result's object outside the current view layer
+                pass
         surface[FITTED_KEY] = time.time()  # (the latest of several results is replaced)
 
         store_spline(surface, surf)
@@ -896,8 +896,14 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         self._notes = data.notes
         surf = with_net_edits(surface, stored)
         key = rep.get("faces_digest")  # (a mesh's faces; None for clouds and older files)
-        faces_changed = key is not None and (
-            data.faces is None or _core().surface.faces_digest(data.faces) != key)
+        digest = _core().surface.faces_digest
+        faces = data.faces
+        if key is not None and faces is not None and digest(faces) != key and (
+                digest(faces[:, ::-1]) == key):
+            # a mirrored source fitted before its faces were read turned (bridge._world_faces):
+            # its faces as they were read then (review: "changed since ... (other faces)")
+            faces = np.ascontiguousarray(faces[:, ::-1])
+        faces_changed = key is not None and (faces is None or digest(faces) != key)
         same_points = surf.fitted_to(data.points)  # (a digest of all points: once)
         if not same_points or faces_changed:
             names = ", ".join(repr(o.name) for o in data.sources)
@@ -922,7 +928,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                           ] if edited else []
         self._engine = []
         return ("run", _as_stored(_recording(surf.refine, self._engine), st.resolution),
-                dict(points=data.points, faces=data.faces, **self._settings))
+                dict(points=data.points, faces=faces, **self._settings))
 
     def finish(self, context, surf):
         surface = self._surface

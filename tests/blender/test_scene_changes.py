@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from scenes import add_mesh, grid, move_net_vertex, positions, select, spline_of  # noqa: E402
+from scenes import (  # noqa: E402
+    ADDON, add_mesh, grid, move_net_vertex, positions, select, spline_of,
+)
 
 
 def wave():
@@ -229,3 +231,54 @@ def test_fit_after_deleting_a_surface_removes_its_hidden_weights(clean_scene, tm
     bpy.ops.wm.open_mainfile(filepath=str(path))
     roles = [o.tcb.role for o in bpy.data.objects if o.tcb.role == "WEIGHTS"]
     assert len(roles) == 2  # the other surface's and the new one's
+
+
+def test_a_mirrored_source_fitted_before_its_faces_were_turned_can_be_refined(clean_scene, addon):
+    """Results of mirrored sources fitted before the faces were read turned keep the digest of
+    the faces as they were read then: Refine called the unchanged source changed ("other
+    faces") (review). It refines them, with their faces as then."""
+    bpy = clean_scene
+    core = sys.modules["scenes"].core_module()
+    src = add_mesh(bpy, "Mirrored", *wave())
+    src.scale = (-1.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    surf = spline_of(surface)
+    then = core.surface.faces_digest(addon.tcb_addon.bridge.read_triangles(src.data))
+    assert surf.report["faces_digest"] != then
+    surf._report["faces_digest"] = then  # the stored spline of such a file
+    addon.tcb_addon.operators.store_spline(surface, surf)
+    before = surface.tcb.control_points
+    assert run(bpy, bpy.ops.tcb.refine, surface, tolerance=1e-4,
+               max_control_points=600) == {"FINISHED"}
+    assert surface.tcb.control_points > before
+    assert spline_of(surface).report["faces_digest"] == then
+
+
+def test_results_in_a_collection_shown_by_an_instance_are_not_deleted(clean_scene):
+    """A live surface, its net, weights and source in a collection shown only through a
+    collection instance are in no scene, but not deleted: the next Fit of another source had
+    removed its weights (its net no longer drove it), and Refine called its source deleted
+    (review)."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    weights = surface.tcb.weights
+    asset = bpy.data.collections.new("Asset")
+    for ob in (surface, surface.tcb.net, weights, src):
+        for coll in list(ob.users_collection):
+            coll.objects.unlink(ob)
+        asset.objects.link(ob)
+    inst = bpy.data.objects.new("Instance", None)
+    inst.instance_type = "COLLECTION"
+    inst.instance_collection = asset
+    bpy.context.scene.collection.objects.link(inst)
+    bpy.context.view_layer.update()
+    assert not surface.users_scene and surface.users_collection
+    other = add_mesh(bpy, "Other", *wave(), location=(5.0, 0.0, 0.0))
+    assert fit(bpy, other) == {"FINISHED"}
+    assert surface.tcb.weights == weights and weights.name in bpy.data.objects
+    ops = sys.modules[f"{ADDON}.tcb_addon.operators"]
+    assert len(ops.source_data(bpy.context, surface).points) == len(wave()[0])

@@ -471,6 +471,9 @@ def test_whitespace_columns_with_decimal_commas(tmp_path: Path) -> None:
     np.testing.assert_allclose(read_geometry(tmp_path / "exp.xyz")[0], VERTS * [1, 1, 100])
     (tmp_path / "spaced.csv").write_text("".join(f"{x!r}, {y!r}, {z!r}\n" for x, y, z in ROWS))
     (tmp_path / "ints.csv").write_text("1, 2, 3\n4, 5, 6\n7, 8, 9\n")
+    (tmp_path / "before.csv").write_text("10 ,20 ,30\n1 ,2 ,3\n4 ,5 ,6\n")  # (review)
+    np.testing.assert_array_equal(read_geometry(tmp_path / "before.csv")[0],
+                                  [[10, 20, 30], [1, 2, 3], [4, 5, 6]])
     np.testing.assert_array_equal(read_geometry(tmp_path / "spaced.csv")[0], VERTS)
     np.testing.assert_array_equal(read_geometry(tmp_path / "ints.csv")[0],
                                   [[1, 2, 3], [4, 5, 6], [7, 8, 9]])
@@ -648,6 +651,11 @@ def test_small_dem_in_metres_with_nodata(tmp_path: Path) -> None:
     np.testing.assert_array_equal(
         pts, [[1000, 500, 1], [1010, 500, 2], [1000, 510, 4], [1020, 510, 6]]
     )
+    # bounds that could be degrees: the nodata value is no relief (review: -9999 made this
+    # 60 m grid a geographic one, converted to metres from degrees)
+    np.savez(tmp_path / "e.npz", elevation=elev, xmin=10.0, xmax=70.0, ymin=20.0, ymax=30.0,
+             nodata=-9999.0)
+    np.testing.assert_array_equal(read_geometry(tmp_path / "e.npz")[0][:, 0], [10, 40, 10, 70])
 
 
 def test_dem_cell_sizes_say_where_the_nodes_are(tmp_path: Path) -> None:
@@ -697,7 +705,9 @@ def test_a_north_up_dem_is_read_the_right_way_round(tmp_path: Path) -> None:
         np.testing.assert_allclose(np.unique(pts[:, 1]), y0 + d * (np.arange(rows) + 0.5))
         want = top if name != "south up" else (top[0], y0 + 1.5 * d)
         np.testing.assert_allclose(pts[np.argmax(pts[:, 2]), :2], want, err_msg=name)
+    gdal = np.array([x0, d, 0.0, north, 0.0, -d])
     for keys, words in ((dict(transform=np.arange(5.0)), "transform must be 6 or 9 finite"),
+                        (dict(transform=gdal), "looks like GDAL's geotransform"),
                         (dict(geotransform=np.array([x0, d, 0, north, 0, 0.0])),
                          "zero determinant")):
         np.savez(tmp_path / "bad.npz", elevation=elev, **keys)
