@@ -703,18 +703,27 @@ class TCBSurface:
             step = -np.einsum("ij,ij->i", St, S[active] - p[active]) / np.maximum(den, 1e-300)
             step = np.clip(scale[active] * step, -1.0, 1.0)
             moved = np.abs(step) > 1e-12
-            active, cand = active[moved], (tau[active] + step)[moved] % n
-            Sc, Suc, Svc = self._surface_and_gradient(self._edge_point(cand))
-            dc = np.linalg.norm(Sc - p[active], axis=1)
-            better = dc < dist[active]
-            idx = active[better]
-            tau[idx], dist[idx] = cand[better], dc[better]
-            S[idx], Su[idx], Sv[idx] = Sc[better], Suc[better], Svc[better]
-            scale[idx] = 1.0
-            worse = active[~better]
-            scale[worse] *= 0.25
-            active = np.concatenate([idx, worse[scale[worse] >= 0.25**3]])
+            active = self._try_steps(p, active[moved], (tau[active] + step)[moved] % n, tau,
+                                     dist, (S, Su, Sv), scale, self._edge_point)
         return self._edge_point(tau), dist, S
+
+    def _try_steps(self, p, active, cand, x, dist, state, scale, to_uv=None):
+        """One round of the closest-point descents: the surface and its gradient at the
+        candidate parameters ``cand`` of the points ``active`` (``to_uv(cand)`` when they are
+        no uv), taken where they bring the point no farther (``x``, ``dist`` and ``state`` =
+        (S, Su, Sv) updated in place, the step scale back to 1), else the step retried at a
+        quarter next round (at most 3 times in a row). Returns the points still active."""
+        Sc, Suc, Svc = self._surface_and_gradient(cand if to_uv is None else to_uv(cand))
+        dc = np.linalg.norm(Sc - p[active], axis=1)
+        better = dc <= dist[active]
+        idx = active[better]
+        x[idx], dist[idx] = cand[better], dc[better]
+        for a, b in zip(state, (Sc, Suc, Svc)):
+            a[idx] = b[better]
+        scale[idx] = 1.0
+        worse = active[~better]
+        scale[worse] *= 0.25
+        return np.concatenate([idx, worse[scale[worse] >= 0.25**3]])
 
     def _surface_and_gradient(self, uv):
         return self._space.combine(uv, self._c, [(0, 0), (1, 0), (0, 1)])
@@ -815,17 +824,8 @@ class TCBSurface:
             if delta > 0:  # and the step changes the distance (docstring)
                 t = su * step[:, :1] + sv * step[:, 1:]  # (the whole step's, not retried)
                 moved &= np.einsum("ij,ij->i", t, t) > 2.0 * delta * dist[active]
-            active, cand = active[moved], cand[moved]
-            Sc, Suc, Svc = self._surface_and_gradient(cand)
-            dc = np.linalg.norm(Sc - p[active], axis=1)
-            better = dc <= dist[active]
-            idx = active[better]
-            x[idx], dist[idx] = cand[better], dc[better]
-            S[idx], Su[idx], Sv[idx] = Sc[better], Suc[better], Svc[better]
-            scale[idx] = 1.0
-            worse = active[~better]
-            scale[worse] *= 0.25
-            active = np.concatenate([idx, worse[scale[worse] >= 0.25**3]])
+            active = self._try_steps(p, active[moved], cand[moved], x, dist, (S, Su, Sv),
+                                     scale)
         return x, dist, S
 
     def distances(self, points, callback=None) -> np.ndarray:

@@ -85,3 +85,13 @@ def move_net_vertex(bpy, net, j, offset):
     net.data.update()
     bpy.context.view_layer.update()
     return p
+
+
+def fit(bpy, *objs, **props):
+    """Fit Surface on exactly ``objs`` (tolerance 2e-3, 400 control points, resolution 24
+    unless given)."""
+    props.setdefault("tolerance", 2e-3)
+    props.setdefault("max_control_points", 400)
+    props.setdefault("resolution", 24)
+    with bpy.context.temp_override(**select(bpy, *objs)):
+        return bpy.ops.tcb.fit_surface(**props)

@@ -16,7 +16,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from scenes import (  # noqa: E402
-    ADDON, add_mesh, core_module, grid, move_net_vertex, positions, select, spline_of,
+    ADDON, add_mesh, core_module, fit, grid, move_net_vertex, positions, select, spline_of,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -52,14 +52,6 @@ def snapshot(obj) -> str:
     h.update(repr([(m.name, m.type) for m in getattr(obj, "modifiers", [])]).encode())
     h.update(f"{obj.name}|{data.name if data else ''}|{sorted(obj.keys())}".encode())
     return h.hexdigest()
-
-
-def fit(bpy, *objs, **props):
-    props.setdefault("tolerance", 2e-3)
-    props.setdefault("max_control_points", 400)
-    props.setdefault("resolution", 24)
-    with bpy.context.temp_override(**select(bpy, *objs)):
-        return bpy.ops.tcb.fit_surface(**props)
 
 
 def check_result(bpy, addon, source_name, points, tol_rel):

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import scenes  # noqa: E402
 from scenes import (  # noqa: E402
     ADDON, add_mesh, grid, move_net_vertex, positions, select, spline_of,
 )
@@ -22,11 +23,7 @@ def wave():
 
 
 def fit(bpy, *objs, **props):
-    props.setdefault("tolerance", 2e-2)
-    props.setdefault("max_control_points", 300)
-    props.setdefault("resolution", 24)
-    with bpy.context.temp_override(**select(bpy, *objs)):
-        return bpy.ops.tcb.fit_surface(**props)
+    return scenes.fit(bpy, *objs, **{"tolerance": 2e-2, "max_control_points": 300, **props})
 
 
 def run(bpy, op, obj, **props):
@@ -199,7 +196,7 @@ def test_export_to_a_path_relative_to_the_blend(clean_scene, tmp_path):
         assert run(bpy, bpy.ops.tcb.export_spline, surface, filepath=f"//{name}") == {"FINISHED"}
         assert (tmp_path / name).is_file() and not (Path("/") / name).exists()
         stored = spline_of(surface).control_points
-        loaded = sys.modules["scenes"].core_module().TCBSurface.load(tmp_path / name)
+        loaded = scenes.core_module().TCBSurface.load(tmp_path / name)
         assert np.array_equal(loaded.control_points, stored)
     finally:
         (Path("/") / name).unlink(missing_ok=True)
@@ -238,7 +235,7 @@ def test_a_mirrored_source_fitted_before_its_faces_were_turned_can_be_refined(cl
     the faces as they were read then: Refine called the unchanged source changed ("other
     faces") (review). It refines them, with their faces as then."""
     bpy = clean_scene
-    core = sys.modules["scenes"].core_module()
+    core = scenes.core_module()
     src = add_mesh(bpy, "Mirrored", *wave())
     src.scale = (-1.0, 1.0, 1.0)
     bpy.context.view_layer.update()
