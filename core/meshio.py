@@ -800,8 +800,8 @@ def _skip_point_counts(lines: list[str]) -> list[str]:
 def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
     """Text columns: whitespace, comma or semicolon separated; the first three are x, y, z
     (with semicolons, or between whitespace, a decimal comma is read as a point: a
-    spreadsheet's CSV or a scanner's export in many locales). A first line holding a lone integer is a point count (Leica ``.pts``) and is
-    skipped."""
+    spreadsheet's CSV or a scanner's export in many locales). A first line holding a lone
+    integer is a point count (Leica ``.pts``) and is skipped."""
     lines = _skip_point_counts(_text_lines(path))
     if not lines:
         raise _MalformedError("the file has no data lines")
@@ -1079,11 +1079,11 @@ def _dem_affine(z: dict) -> tuple | None:
             t = np.asarray(z[key], dtype=np.float64).ravel()
         except (TypeError, ValueError):
             t = np.zeros(0)
-        sizes = (6, 9) if key == "transform" else (6,)
+        sizes, order = ((6, 9), "a, b, c, d, e, f as rasterio gives it") if key == "transform" \
+            else ((6,), "as GDAL gives it")
         if len(t) not in sizes or not np.isfinite(t).all():
-            raise _MalformedError(
-                f"the DEM's {key} must be {' or '.join(map(str, sizes))} finite numbers "
-                f"({'a, b, c, d, e, f as rasterio gives it' if key == 'transform' else 'as GDAL gives it'})")
+            raise _MalformedError(f"the DEM's {key} must be {' or '.join(map(str, sizes))} "
+                                  f"finite numbers ({order})")
         if key == "transform" and (t[1] or t[3]) and not (t[2] or t[4]):
             # rotated in rasterio's order, axis-aligned in GDAL's: GetGeoTransform()'s six
             # numbers saved as 'transform' (review: read as a grid of 500 km cells)

@@ -714,16 +714,15 @@ def _delaunay(x: np.ndarray):
 def _gap_triangles(x: np.ndarray) -> np.ndarray:
     """The Delaunay triangles of the sample ``x`` that have no side on its hull (slivers along
     the hull: a flat triangle between points far apart on a curved surface is no measure of
-    it; F7 scattered was 0.35 off such a one, 0.07 of its diagonal)."""
-    tri = _delaunay(x)
-    if tri is None:
-        return np.zeros((0, 3), dtype=np.intp)
-    return tri.simplices[(tri.neighbors >= 0).all(axis=1)]
+    it; F7 scattered was 0.35 off such a one, 0.07 of its diagonal); its triangulation kept
+    (:func:`_delaunay`)."""
+    return _interior_triangles(x, _delaunay(x))
 
 
-def _interior_triangles(x: np.ndarray) -> np.ndarray:
-    """The Delaunay triangles of ``x`` with no side on its hull ((t, 3) indices), not kept."""
-    tri = _triangulate(x)
+def _interior_triangles(x: np.ndarray, tri=False) -> np.ndarray:
+    """The Delaunay triangles of ``x`` with no side on its hull ((t, 3) indices), of ``tri``
+    when given (None: there are none), else of a triangulation made and not kept."""
+    tri = _triangulate(x) if tri is False else tri
     if tri is None:
         return np.zeros((0, 3), dtype=np.intp)
     return tri.simplices[(tri.neighbors >= 0).all(axis=1)]

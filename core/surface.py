@@ -585,7 +585,7 @@ class TCBSurface:
         edge = float(np.linalg.norm(at[tri] - at[tri[:, [1, 2, 0]]], axis=2).max())
         m = len(p)
         x, d, S = np.empty((m, 2)), np.empty(m), np.empty((m, 3))
-        edge_starts = None  # (made for the first chunk with points beyond the edge)
+        edge_starts = None  # (made for the first chunk with points on the edge)
         for s in range(0, m, CLOSEST_CHUNK):
             # (True cancels, None or False go on, anything else is refused as by the fit:
             # 1 or "no" had cancelled here; user test)

@@ -762,8 +762,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         name = data.name
         kept = []
         previous = previous_result(context, data.sources, kept) if self.replace else None
-        replaced = [f"'{name}' is linked from another file and was kept: this result is a new "
-                    "one" for name in kept if previous is None][:1]
+        replaced = [f"'{kept[0]}' is linked from another file and was kept: this result is a "
+                    "new one"] if kept and previous is None else []
         if previous is None:
             coll = bridge.result_collection(context, f"TCB {name}")
             verts, faces = surf.tessellate(self.resolution)
