@@ -4,6 +4,11 @@ A uniform bucket grid over the points. Each box is registered in the cells it ov
 cell -> boxes); each point then looks at the boxes of its own cell only, and the exact
 inclusive-bbox test removes the rest. Work and memory are proportional to the number of
 candidate pairs, never ``points x boxes``. Results come in chunks so memory stays bounded.
+
+A box may also carry a *diagonal band*: the range of ``u + v`` and of ``u - v`` over the set
+it stands for (the knots of a simplex spline, whose support is their convex hull). The box and
+its band bound an octagon around that hull; a box is then registered only in the cells that
+meet its octagon, and a point must lie in both (not in method.md).
 """
 
 from __future__ import annotations
@@ -12,17 +17,41 @@ from typing import Iterator
 
 import numpy as np
 
-__all__ = ["BoxIndex"]
+__all__ = ["BoxIndex", "support_bands"]
+
+
+def support_bands(sets: np.ndarray) -> np.ndarray:
+    """The diagonal bands ``[smin, smax, dmin, dmax]`` (C, 4) of point sets (C, n, 2), for
+    :class:`BoxIndex`: the ranges of ``u + v`` and ``u - v`` over each set, widened by 1e-9
+    of the set's size plus its distance from the origin. A point of the closed convex hull
+    of a set lies in its band (the rounded sums keep the order of the exact ones); so does
+    one that the simplex side tests (``core.simplex``), with their rounding of about 1e-16
+    of that size, can take for a point of the hull."""
+    V = np.asarray(sets, dtype=np.float64)
+    s, d = V[:, :, 0] + V[:, :, 1], V[:, :, 0] - V[:, :, 1]
+    size = np.maximum(np.ptp(s, axis=1), np.ptp(d, axis=1)) + np.abs(V).max(axis=(1, 2))
+    pad = 1e-9 * size
+    return np.stack([s.min(axis=1) - pad, s.max(axis=1) + pad,
+                     d.min(axis=1) - pad, d.max(axis=1) + pad], axis=1)
 
 
 class BoxIndex:
     """Bucket-grid index of boxes (C, 4) ``[umin, vmin, umax, vmax]`` for point queries."""
 
-    def __init__(self, boxes: np.ndarray, cell: float | None = None):
+    def __init__(self, boxes: np.ndarray, cell: float | None = None,
+                 diagonals: np.ndarray | None = None, cell_fraction: float = 0.5):
+        """``boxes`` (C, 4); ``cell`` the grid step (default ``cell_fraction`` times the median
+        box size, see below); ``diagonals`` (C, 4) ``[smin, smax, dmin, dmax]``, the bands of
+        ``s = u + v`` and ``d = u - v`` (module docstring), or None. A band should hold its
+        set with a margin for the rounding of ``u + v`` and ``u - v`` at points that
+        callers count as inside (:meth:`pairs` compares the rounded sums)."""
         boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
         self.boxes = boxes
         # the four bounds as contiguous columns: 1-D gathers and contiguous compares in pairs()
         self._bounds = [np.ascontiguousarray(boxes[:, j]) for j in range(4)]
+        self._bands = (None if diagonals is None else
+                       [np.ascontiguousarray(np.asarray(diagonals, dtype=np.float64)
+                                             .reshape(-1, 4)[:, j]) for j in range(4)])
         if len(boxes) == 0:
             self.origin, self.cell, self.shape = np.zeros(2), 1.0, (1, 1)
             self.ptr = np.zeros(2, dtype=np.int64)
@@ -33,8 +62,9 @@ class BoxIndex:
         hi = boxes[:, 2:].max(axis=0)
         span = np.maximum(hi - lo, 1e-300)
         if cell is None:
-            # half the median box size; at most ~4 cells per box on average per axis
-            cell = 0.5 * float(np.median(ext)) if np.median(ext) > 0 else float(span.max())
+            # a fraction (default half) of the median box size
+            cell = (cell_fraction * float(np.median(ext)) if np.median(ext) > 0
+                    else float(span.max()))
         # cap the grid size (about 16 cells per box in total)
         cell = max(cell, float(np.sqrt(span[0] * span[1] / (16.0 * len(boxes) + 1))))
         cell = max(cell, float(span.max()) / 4096)
@@ -43,16 +73,34 @@ class BoxIndex:
         self.shape = (nx, ny)
         i0, j0 = self._cell_coords(boxes[:, :2])
         i1, j1 = self._cell_coords(boxes[:, 2:])
-        wi, wj = i1 - i0 + 1, j1 - j0 + 1
-        counts = wi * wj
-        box = np.repeat(np.arange(len(boxes)), counts)
-        local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-        ci = i0[box] + local // wj[box]
-        cj = j0[box] + local % wj[box]
-        cid = ci * ny + cj
-        order = np.argsort(cid, kind="stable")
-        self.ids = box[order]
-        self.ptr = np.searchsorted(cid[order], np.arange(nx * ny + 1))
+        wi = i1 - i0 + 1
+        C = len(boxes)
+        # each box's rows of cells i0..i1, and in each row the columns from lo_j to hi_j
+        box = np.repeat(np.arange(C), wi)
+        ci = i0[box] + (np.arange(len(box)) - np.repeat(np.cumsum(wi) - wi, wi))
+        lo_j, hi_j = j0[box], j1[box]
+        if self._bands is not None:
+            # only the cells that meet the octagon. Cell (i, j) spans u + v in origin_s +
+            # cell [i + j, i + j + 2] and u - v in origin_d + cell [i - j - 1, i - j + 1]:
+            # integer bounds on i + j and i - j per box (1e-6 of a cell wider, for the
+            # rounding of the cells' corners and of the points' cells), so in row i the
+            # columns a_lo - i .. a_hi - i and i - b_hi .. i - b_lo
+            smin, smax, dmin, dmax = (np.take(b, box) for b in self._bands)
+            os_, od, tol = lo[0] + lo[1], lo[0] - lo[1], 1e-6
+            lo_j = np.maximum(lo_j, np.maximum(
+                np.ceil((smin - os_) / cell - 2 - tol).astype(np.int64) - ci,
+                ci - np.floor((dmax - od) / cell + 1 + tol).astype(np.int64)))
+            hi_j = np.minimum(hi_j, np.minimum(
+                np.floor((smax - os_) / cell + tol).astype(np.int64) - ci,
+                ci - np.ceil((dmin - od) / cell - 1 - tol).astype(np.int64)))
+        cnt = np.maximum(hi_j - lo_j + 1, 0)
+        # sorted by cell, and by box within a cell (the order a point meets its boxes in):
+        # one sort of unique keys (cell * C + box), faster than a stable argsort of the cells
+        key = np.repeat((ci * ny + lo_j) * C + box, cnt) + C * (
+            np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+        key.sort()
+        self.ids = key % C
+        self.ptr = np.concatenate([[0], np.cumsum(np.bincount(key // C, minlength=nx * ny))])
 
     def _cell_coords(self, p: np.ndarray):
         """Cell of each point, clamped to the grid (NaN coordinates give cell 0: callers
@@ -64,7 +112,8 @@ class BoxIndex:
     def pairs(self, points: np.ndarray, max_pairs: int = 1 << 17) -> Iterator[tuple]:
         """Yield ``(point_index, box_index)`` arrays, chunked, for all points inside boxes.
 
-        ``points`` (m, 2). A point belongs to a box when ``umin <= u <= umax`` and likewise ``v``.
+        ``points`` (m, 2). A point belongs to a box when ``umin <= u <= umax`` and likewise ``v``
+        (and, with diagonal bands, ``smin <= u + v <= smax`` and ``dmin <= u - v <= dmax``).
         """
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         if len(points) == 0 or len(self.boxes) == 0:
@@ -100,5 +149,12 @@ class BoxIndex:
             inside &= pu <= np.take(umax, bx)
             inside &= np.take(vmin, bx) <= pv
             inside &= pv <= np.take(vmax, bx)
+            if self._bands is not None:
+                smin, smax, dmin, dmax = self._bands
+                ps, pd = pu + pv, pu - pv
+                inside &= np.take(smin, bx) <= ps
+                inside &= ps <= np.take(smax, bx)
+                inside &= np.take(dmin, bx) <= pd
+                inside &= pd <= np.take(dmax, bx)
             sel = np.flatnonzero(inside)
             yield np.take(pt, sel), np.take(bx, sel)

@@ -30,7 +30,7 @@ from .configurations import (
 from .errors import InvalidInputError, InvalidKnotsError
 from .parallel import pmap, row_blocks
 from .simplex import SimplexBatch, orient2d
-from .spatial import BoxIndex
+from .spatial import BoxIndex, support_bands
 
 __all__ = ["SplineSpace", "build_space", "validate_knots"]
 
@@ -242,7 +242,8 @@ class SplineSpace:
         p, q, r = knots[T[:, 0]], knots[T[:, 1]], knots[T[:, 2]]
         weights = np.abs(orient2d(p, q, r))
         self._batch = SimplexBatch(knots, np.concatenate([T, I], axis=1), weights)
-        self._index = BoxIndex(self._batch.bbox)
+        self._index = BoxIndex(self._batch.bbox, diagonals=support_bands(self._batch.V),
+                               cell_fraction=0.25)
         self._net_faces: np.ndarray | None = None
 
     @property

@@ -1,6 +1,7 @@
 """TCB and DCB spline spaces (method.md sections 2, 3, 7): the identities that make them spline
 spaces, checked on random and lattice knot sets with Delaunay and random triangulations."""
 
+import copy
 from itertools import combinations
 
 import numpy as np
@@ -17,7 +18,7 @@ from core import (
     constrained_delaunay,
 )
 from core.configurations import delaunay_triangulation
-from core.spatial import BoxIndex
+from core.spatial import BoxIndex, support_bands
 from knotsets import FUNCTIONS, KINDS, knot_set, polar_form
 
 
@@ -307,3 +308,47 @@ def test_spatial_index_finds_exactly_the_points_in_each_box():
         & (boxes[None, :, 1] <= pts[:, None, 1]) & (pts[:, None, 1] <= boxes[None, :, 3])
     )
     assert got == set(zip(*np.nonzero(inside)))
+
+
+@pytest.mark.parametrize("fraction", [0.1, 0.25, 0.5])
+def test_spatial_index_with_diagonal_bands_finds_exactly_the_points_in_each_octagon(fraction):
+    # the band registers a box only in the cells that meet its octagon: no pair inside box
+    # and band may be lost, none outside returned
+    rng = np.random.default_rng(1)
+    sets = rng.random((300, 1, 2)) + rng.uniform(-0.1, 0.1, (300, 5, 2))
+    boxes = np.concatenate([sets.min(axis=1), sets.max(axis=1)], axis=1)
+    bands = support_bands(sets)
+    pts = np.vstack([rng.uniform(-0.2, 1.2, (3000, 2)), sets.reshape(-1, 2)])  # and the corners
+    got = set()
+    for p, b in BoxIndex(boxes, diagonals=bands, cell_fraction=fraction).pairs(pts, max_pairs=999):
+        got.update(zip(p.tolist(), b.tolist()))
+    s, d = pts[:, 0] + pts[:, 1], pts[:, 0] - pts[:, 1]
+    inside = (
+        (boxes[None, :, 0] <= pts[:, None, 0]) & (pts[:, None, 0] <= boxes[None, :, 2])
+        & (boxes[None, :, 1] <= pts[:, None, 1]) & (pts[:, None, 1] <= boxes[None, :, 3])
+        & (bands[None, :, 0] <= s[:, None]) & (s[:, None] <= bands[None, :, 1])
+        & (bands[None, :, 2] <= d[:, None]) & (d[:, None] <= bands[None, :, 3])
+    )
+    assert got == set(zip(*np.nonzero(inside)))
+    # every set's own points are in its octagon
+    own = np.arange(3000, len(pts)).reshape(300, 5)
+    assert all((q, b) in got for b in range(300) for q in own[b])
+
+
+@pytest.mark.parametrize("degree", [2, 3])
+def test_the_support_index_gives_the_same_basis_bits_as_the_plain_box_index(degree):
+    # the octagons only leave out pairs outside the supports (all zero): the basis and its
+    # derivatives are the same bits, also on knot lines and at the knots
+    space = build_space(knot_set("square", 40, degree, seed=3), degree)
+    plain = copy.copy(space)
+    plain._index = BoxIndex(space._batch.bbox)
+    k = np.asarray(space.knots)
+    rng = np.random.default_rng(4)
+    i, j = rng.integers(0, len(k), (2, 4000))
+    x = np.vstack([rng.uniform(k.min(axis=0), k.max(axis=0), (4000, 2)), k,
+                   k[i] + rng.random((4000, 1)) * (k[j] - k[i])])
+    for der in [(0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)]:
+        a, b = space.evaluate(x, der), plain.evaluate(x, der)
+        assert a.nnz == b.nnz and a.nnz > 0
+        assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
+        assert np.array_equal(a.data, b.data)
