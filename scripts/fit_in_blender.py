@@ -40,6 +40,7 @@ from __future__ import annotations
 import argparse
 import atexit
 import importlib
+import math
 import os
 import platform
 import shutil
@@ -54,6 +55,9 @@ EXT_ID = "tcb_surface"
 BLENDER_IMPORT = {".ply": "ply_import", ".obj": "obj_import"}
 OTHER_FORMATS = (".off", ".xyz", ".txt", ".csv", ".pts", ".npy", ".npz")
 EXPORT_FORMATS = {".obj": "obj_export", ".ply": "ply_export"}
+# the limits of the Fit settings (tcb_addon/properties.py; this script checks them before
+# Blender starts)
+MIN_BUDGET, MAX_RESOLUTION = 10, 2048
 # keep the coordinates of the file (Blender's OBJ importer would turn Y-up into Z-up)
 SAME_AXES = dict(forward_axis="Y", up_axis="Z")
 T0 = time.perf_counter()
@@ -127,7 +131,7 @@ def parse_args(args: list[str]) -> argparse.Namespace:
                     "default 1e-4, which on sparse clouds, under 2 points per control point, "
                     "is cross-validated as in Blender's panel)")
     ap.add_argument("--drop-outliers", action="store_true",
-                    help="leave out points far from all others (point clouds; refused otherwise)")
+                    help="leave out points far from all others (point clouds; a mesh is fitted without it, with a note)")
     ap.add_argument("--fill-holes", action="store_true",
                     help="meshes with holes: let the surface span them (Blender's Fill Holes)")
     ap.add_argument("--projection", choices=("auto", "x", "y", "z"), default="auto",
@@ -156,6 +160,18 @@ def parse_args(args: list[str]) -> argparse.Namespace:
         ap.error(f"--render-size must look like 640x480, not {ns.render_size!r}")
     if ns.samples < 1:
         ap.error("--samples must be at least 1")
+    # the limits of the Fit settings in Blender, which would clamp a value beyond them
+    # silently (a tolerance of -1 ran as 1e-9, --resolution 0 as 2: user test)
+    if not (ns.tolerance >= 0 and math.isfinite(ns.tolerance)):
+        ap.error(f"--tolerance must be a nonnegative number (0: refine to the budget), "
+                 f"got {ns.tolerance:g}")
+    for option, value, least in (("--max-control-points", ns.max_control_points, MIN_BUDGET),
+                                 ("--max-iterations", ns.max_iterations, 1),
+                                 ("--resolution", ns.resolution, 2)):
+        if value < least:
+            ap.error(f"{option} must be at least {least}, got {value}")
+    if ns.resolution > MAX_RESOLUTION:
+        ap.error(f"--resolution must be at most {MAX_RESOLUTION}, got {ns.resolution}")
     return ns
 
 
@@ -176,6 +192,19 @@ def check_paths(ns: argparse.Namespace) -> None:
         raise ScriptError(f"--export writes .obj or .ply, not '{ns.export}'")
     if ns.render is not None and ns.render.suffix.lower() != ".png":
         raise ScriptError(f"--render writes a .png, not '{ns.render}'")
+    for option, path in (("-o", ns.output), ("--export", ns.export), ("--render", ns.render)):
+        if path is None:
+            continue
+        # never over the input (--export scan.obj replaced the scan with the surface: user
+        # test), and a folder that can take the file, found before the fit, not after it
+        if path.exists() and path.resolve() == src.resolve():
+            raise ScriptError(f"{option} {path} is the input file: the input is never "
+                              "overwritten; write the output to another file")
+        folder = path.resolve().parent
+        if not folder.is_dir():
+            raise ScriptError(f"{option} {path}: the folder {folder} does not exist")
+        if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+            raise ScriptError(f"{option} {path}: cannot write there (permission denied)")
 
 
 # --- making the extension available -------------------------------------------------------------

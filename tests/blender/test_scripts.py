@@ -131,3 +131,48 @@ def test_a_mesh_with_a_hole_is_fitted_with_fill_holes(tmp_path):
                       "--fill-holes")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert (tmp_path / "h.blend").is_file()
+
+
+@pytest.mark.parametrize("option, value, words", [
+    ("--tolerance", "-1", "--tolerance must be a nonnegative number"),
+    ("--tolerance", "nan", "--tolerance must be a nonnegative number"),
+    ("--max-control-points", "5", "--max-control-points must be at least 10, got 5"),
+    ("--max-iterations", "0", "--max-iterations must be at least 1, got 0"),
+    ("--resolution", "0", "--resolution must be at least 2, got 0"),
+    ("--resolution", "100000", "--resolution must be at most 2048, got 100000"),
+])
+def test_option_values_beyond_the_fit_settings_limits_are_refused(tmp_path, option, value, words):
+    # Blender's settings would clamp them silently (a tolerance of -1 ran as 1e-9: user test)
+    proc = run_script(ROOT / "data" / "nefertiti.off", "-o", tmp_path / "x.blend", option, value,
+                      timeout=60)
+    assert words in _error_line(proc)
+    assert not (tmp_path / "x.blend").exists()
+
+
+def test_the_script_limits_are_the_fit_settings_limits(addon):
+    spec = importlib.util.spec_from_file_location("fit_in_blender_limits", SCRIPT)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    props = addon.tcb_addon.properties
+    settings = props.FitSettings.__annotations__
+    assert script.MIN_BUDGET == settings["max_control_points"].keywords["min"]
+    assert script.MAX_RESOLUTION == props.MAX_RESOLUTION == settings["resolution"].keywords["max"]
+
+
+def test_outputs_over_the_input_or_in_a_missing_folder_are_refused_before_the_fit(tmp_path):
+    src = tmp_path / "scan.obj"
+    n = 12
+    src.write_text("".join(f"v {i} {j} {0.1 * (i - j) ** 2}\n" for i in range(n) for j in range(n))
+                   + "".join(f"f {i * n + j + 1} {(i + 1) * n + j + 1} {i * n + j + 2}\n"
+                             for i in range(n - 1) for j in range(n - 1)))
+    before = src.read_bytes()
+    for args, words in (
+        (["--export", src], "--export"),
+        (["--export", tmp_path / "." / "scan.obj"], "is the input file"),
+        (["--render", tmp_path / "no" / "r.png"], "does not exist"),
+        (["--export", tmp_path / "no" / "s.obj"], "does not exist"),
+    ):
+        proc = run_script(src, "-o", tmp_path / "x.blend", *args, timeout=60)
+        assert words in _error_line(proc)
+        assert proc.stdout == ""  # refused before Blender started
+    assert src.read_bytes() == before and not (tmp_path / "x.blend").exists()
