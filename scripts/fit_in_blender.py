@@ -131,7 +131,8 @@ def parse_args(args: list[str]) -> argparse.Namespace:
                     "default 1e-4, which on sparse clouds, under 2 points per control point, "
                     "is cross-validated as in Blender's panel)")
     ap.add_argument("--drop-outliers", action="store_true",
-                    help="leave out points far from all others (point clouds; a mesh is fitted without it, with a note)")
+                    help="leave out points far from all others (point clouds; a mesh is fitted "
+                    "without it, with a note)")
     ap.add_argument("--fill-holes", action="store_true",
                     help="meshes with holes: let the surface span them (Blender's Fill Holes)")
     ap.add_argument("--projection", choices=("auto", "x", "y", "z"), default="auto",
