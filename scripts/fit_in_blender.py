@@ -201,9 +201,11 @@ def check_paths(ns: argparse.Namespace) -> None:
         if path.exists() and path.resolve() == src.resolve():
             raise ScriptError(f"{option} {path} is the input file: the input is never "
                               "overwritten; write the output to another file")
-        folder = path.resolve().parent
+        folder = path.resolve().parent  # made if missing: its nearest existing folder
+        while not folder.exists() and folder != folder.parent:
+            folder = folder.parent
         if not folder.is_dir():
-            raise ScriptError(f"{option} {path}: the folder {folder} does not exist")
+            raise ScriptError(f"{option} {path}: {folder} is a file, not a folder")
         if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
             raise ScriptError(f"{option} {path}: cannot write there (permission denied)")
 

@@ -14,8 +14,10 @@ Object Mode and while dragging net vertices in Edit Mode, with undo, animation a
 survives saving and reopening the file without the add-on.
 
 When the net or the weights cannot drive the surface (deleted, so their geometry is empty, or
-with other vertex counts) the modifier passes the surface's own mesh through: the stored
-spline's tessellation, never a collapsed surface. Every surface has weights of its own; Shift+D
+with other vertex counts; a modifier on the net that adds or removes vertices, such as
+Wireframe, Skin or Subdivision) the modifier passes the surface's own mesh through: the stored
+spline's tessellation, never a collapsed surface. The weights end with one more point, whose
+``tcb_vertex`` is the number of control points, for that check. Every surface has weights of its own; Shift+D
 copies a surface but not its hidden weights object, so :func:`attach` makes a private one for a
 surface whose weights are shared before writing them, and :func:`own_net` does the same for a
 shared net before Refine rewrites it.
@@ -33,7 +35,9 @@ INPUTS = ("Net", "Weights", "Terms")
 # interface, so the modifiers' inputs are kept) when a file is loaded or the add-on enabled
 # (upgrade_groups) and the next time a surface is linked.
 # 2: falls back to the surface's own mesh when the net or the weights cannot drive it.
-GROUP_VERSION = 2
+# 3: ... also when the net has other than as many vertices as control points (weights made
+#    since end with a point that holds that number; older weights are checked as before)
+GROUP_VERSION = 3
 
 
 def _is_ours(ng) -> bool:
@@ -98,7 +102,10 @@ def _build_nodes(ng) -> None:
 
     The spline evaluation replaces the positions only when the net and the weights fit the
     surface: the weights hold ``Terms`` points per surface vertex and the net has every control
-    point they index. Otherwise (the net or the weights object was deleted, so its geometry is
+    point they index; weights with one point more (:func:`padded_weights`) also need the net
+    to have exactly the number of control points that point holds (a Wireframe modifier on
+    the net, to see the cage, gave it 8x as many points, and the surface became garbage half
+    a diagonal off: user test). Otherwise (the net or the weights object was deleted, so its geometry is
     empty; vertices were added to or deleted from the surface mesh or the net) the surface's own
     mesh passes through unchanged, the tessellation written by the last fit, refine or
     re-tessellate, as Blender's deform modifiers leave a mesh when their object is gone.
@@ -182,9 +189,40 @@ def _build_nodes(ng) -> None:
     covered.data_type, covered.operation = "INT", "GREATER_THAN"
     links.new(count(net_info.outputs["Geometry"]), _socket(covered.inputs, "A_INT"))
     links.new(largest.outputs["Value"], _socket(covered.inputs, "B_INT"))
+    # weights with the net's point count in the tcb_vertex of one more point
+    w_count, net_count = count(w_info.outputs["Geometry"]), count(net_info.outputs["Geometry"])
+    plus_one = nodes.new("FunctionNodeIntegerMath")
+    plus_one.operation = "ADD"
+    links.new(expected.outputs["Value"], plus_one.inputs[0])
+    plus_one.inputs[1].default_value = 1
+    with_count = nodes.new("FunctionNodeCompare")
+    with_count.data_type, with_count.operation = "INT", "EQUAL"
+    links.new(w_count, _socket(with_count.inputs, "A_INT"))
+    links.new(plus_one.outputs["Value"], _socket(with_count.inputs, "B_INT"))
+    last = nodes.new("FunctionNodeIntegerMath")
+    last.operation = "SUBTRACT"
+    links.new(w_count, last.inputs[0])
+    last.inputs[1].default_value = 1
+    stored = nodes.new("GeometryNodeSampleIndex")
+    stored.data_type, stored.domain = "INT", "POINT"
+    links.new(w_info.outputs["Geometry"], stored.inputs["Geometry"])
+    links.new(vertex.outputs["Attribute"], stored.inputs["Value"])
+    links.new(last.outputs["Value"], stored.inputs["Index"])
+    net_exact = nodes.new("FunctionNodeCompare")
+    net_exact.data_type, net_exact.operation = "INT", "EQUAL"
+    links.new(net_count, _socket(net_exact.inputs, "A_INT"))
+    links.new(stored.outputs["Value"], _socket(net_exact.inputs, "B_INT"))
+    counted = nodes.new("FunctionNodeBooleanMath")
+    counted.operation = "AND"
+    links.new(with_count.outputs["Result"], counted.inputs[0])
+    links.new(net_exact.outputs["Result"], counted.inputs[1])
+    either = nodes.new("FunctionNodeBooleanMath")
+    either.operation = "OR"
+    links.new(same.outputs["Result"], either.inputs[0])
+    links.new(counted.outputs["Boolean"], either.inputs[1])
     valid = nodes.new("FunctionNodeBooleanMath")
     valid.operation = "AND"
-    links.new(same.outputs["Result"], valid.inputs[0])
+    links.new(either.outputs["Boolean"], valid.inputs[0])
     links.new(covered.outputs["Result"], valid.inputs[1])
     switch = nodes.new("GeometryNodeSwitch")
     switch.input_type = "GEOMETRY"
@@ -199,7 +237,9 @@ def _build_nodes(ng) -> None:
 
 
 def padded_weights(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """(index, weight, vertex) arrays of length m*K from a CSR matrix (m, n); and K."""
+    """(index, weight, vertex) arrays of length m*K + 1 from a CSR matrix (m, n); and K. The
+    last point has weight 0 and ``vertex`` n: the number of control points, which the node
+    group checks against the net's point count (:func:`_build_nodes`)."""
     csr = matrix.tocsr()
     csr.sort_indices()
     m = csr.shape[0]
@@ -208,11 +248,11 @@ def padded_weights(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     slot = np.repeat(np.arange(m) * k, counts) + (
         np.arange(csr.nnz) - np.repeat(csr.indptr[:-1], counts)
     )
-    index = np.zeros(m * k, np.int32)
-    weight = np.zeros(m * k, np.float32)
+    index = np.zeros(m * k + 1, np.int32)
+    weight = np.zeros(m * k + 1, np.float32)
     index[slot] = csr.indices
     weight[slot] = csr.data
-    vertex = np.repeat(np.arange(m, dtype=np.int32), k)
+    vertex = np.append(np.repeat(np.arange(m, dtype=np.int32), k), np.int32(csr.shape[1]))
     return index, weight, vertex, k
 
 
@@ -434,6 +474,11 @@ def attach(surface_obj, net_obj, surf, resolution: int) -> bpy.types.Object:
     mod = surface_obj.modifiers.get(MODIFIER_NAME)
     if mod is None:
         mod = surface_obj.modifiers.new(MODIFIER_NAME, "NODES")
+    # first in the stack: it needs the surface's own vertices (after a Subdivision of the
+    # user's the surface stopped following the net, with no word: user test)
+    at = list(surface_obj.modifiers).index(mod)
+    if at > 0:
+        surface_obj.modifiers.move(at, 0)
     mod.node_group = node_group()
     ids = _input_ids(mod.node_group)
     mod[ids["Net"]] = net_obj

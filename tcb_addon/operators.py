@@ -21,7 +21,7 @@ from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
 from . import bridge, live
-from .properties import (DEFAULT_SMOOTHNESS, FIT_KEYS, MAX_RESOLUTION, FitSettings,
+from .properties import (DEFAULT_SMOOTHNESS, FIT_KEYS, MAX_RESOLUTION, MIN_BUDGET, FitSettings,
                          ResultSettings, draw_fit_settings)
 
 # Custom property of the surface object: TCBSurface.to_bytes(compact=True) as base64 text (the
@@ -53,12 +53,13 @@ _FIT_CACHE_SIZE = 2
 
 
 def _cache_get(key):
+    """(surface, the engine's warnings, the operator's seconds) of a fit, or None."""
     return _FIT_CACHE.get(key)
 
 
-def _cache_put(key, surf):
+def _cache_put(key, surf, notes=(), seconds=None):
     _FIT_CACHE.pop(key, None)
-    _FIT_CACHE[key] = surf
+    _FIT_CACHE[key] = (surf, list(notes), seconds)
     while len(_FIT_CACHE) > _FIT_CACHE_SIZE:
         _FIT_CACHE.pop(next(iter(_FIT_CACHE)))
 
@@ -151,10 +152,22 @@ def editable_surface(context, what: str = ""):
     surface = active_surface(context)
     if surface is None:
         raise bridge.SelectionError(f"Select a TCB surface (or its control net){what}")
-    problem = linked_problem(surface, surface.tcb.net)
+    problem = linked_problem(surface, surface.tcb.net) or converted_problem(surface)
     if problem:
-        raise bridge.SelectionError(problem)
+        raise bridge.SelectionError(problem[0].upper() + problem[1:])
     return surface
+
+
+def converted_problem(surface_obj) -> str | None:
+    """Why the surface cannot be rewritten, or None: it was converted to another type of
+    object (Object > Convert), so it has no mesh to write (Refine, Re-tessellate and
+    Deviation Map ended in a traceback, Refine after the whole refit: user test)."""
+    if surface_obj.type == "MESH":
+        return None
+    return (f"'{surface_obj.name}' is no longer a mesh (it was converted to "
+            f"{surface_obj.type.replace('_', ' ').title()}): Refine, Re-tessellate and Deviation "
+            "Map rewrite the surface's mesh; Fit Surface makes a new surface from the source "
+            "(Export Spline still saves its spline)")
 
 
 def _poll_object_mode(op_cls, context, surface: bool = True) -> bool:
@@ -226,10 +239,14 @@ def uneven_density(rms: float, rms_area: float) -> bool:
 
 def net_copy_note(obj) -> str | None:
     """For a copy of a control net (Shift+D of the net alone): that its surface follows the
-    original, so its edits change nothing; None for any other object."""
+    original, so its edits change nothing (a linked duplicate, Alt+D, shares the net's mesh:
+    that its edits move the surface); None for any other object."""
     surface, net = result_objects(obj)
     if surface is None or obj.tcb.role != "NET" or net is None or net == obj:
         return None
+    if obj.data is not None and obj.data == net.data:  # Alt+D: the same mesh (user test)
+        return (f"'{obj.name}' shares its mesh with the control net '{net.name}' (a linked "
+                f"duplicate): its edits move '{surface.name}' too")
     return (f"'{obj.name}' is a copy of the control net: '{surface.name}' follows "
             f"'{net.name}', so edits here change nothing")
 
@@ -242,6 +259,42 @@ def live_link_problem(surface_obj) -> str | None:
         return None
     return ("the live link is broken (its hidden weights object was deleted): drags of the net "
             "do not move the surface; Re-tessellate restores it")
+
+
+def _names(mods) -> str:
+    return ", ".join(f"'{m.name}'" for m in mods)
+
+
+def net_modifier_problem(surface_obj) -> str | None:
+    """Why the live surface does not show the net's own vertices, or None: modifiers on the
+    net change the points the live link reads (a Wireframe or Skin, to see the cage, made the
+    surface garbage half a diagonal off; a Smooth moved it 3%; user test), while Refine and
+    Export Spline use the net's own vertices. With modifiers that add or remove vertices the
+    live surface stays on the stored spline (the node group of :mod:`live`)."""
+    net = surface_obj.tcb.net
+    if net is None or net.type != "MESH" or surface_obj.modifiers.get(live.MODIFIER_NAME) is None:
+        return None
+    mods = [m for m in net.modifiers if m.show_viewport or m.show_render]
+    if not mods:
+        return None
+    return (f"modifiers on the control net '{net.name}' ({_names(mods)}) change the points the "
+            "live surface follows, while Refine and Export Spline use the net's own vertices: "
+            "turn them off or remove them")
+
+
+def stack_problem(surface_obj) -> str | None:
+    """Why the live net may not drive the surface, or None: modifiers above the live-net
+    modifier in the surface's stack (one that adds vertices makes the live link pass the mesh
+    through; any other is overwritten). Fit, Refine and Re-tessellate put it first."""
+    mods = list(surface_obj.modifiers)
+    ours = surface_obj.modifiers.get(live.MODIFIER_NAME)
+    if ours is None:
+        return None
+    above = [m for m in mods[: mods.index(ours)] if m.show_viewport or m.show_render]
+    if not above:
+        return None
+    return (f"{_names(above)} above '{live.MODIFIER_NAME}' in the surface's modifier stack: "
+            "the net's edits may not show; move it to the top (Re-tessellate does)")
 
 
 def net_vertex_problem(surface_obj) -> str | None:
@@ -728,7 +781,9 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         cached = _cache_get(self._key)
         self._reused = cached is not None
         if cached is not None:
-            return ("done", cached)
+            # with that fit's warnings and seconds (they had been dropped: user test)
+            self._engine, self._reused_seconds = list(cached[1]), cached[2]
+            return ("done", cached[0])
         core = _core()
 
         def fit(**kw):  # outliers are named by object and index, not by row of the merged input
@@ -748,8 +803,14 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 # and how the selection was read (a mesh with loose vertices fitted as a point
                 # cloud, objects merged: user test, the error spoke of a cloud only)
                 extra += list(data.notes)
-                if extra:
-                    ex.args = (f"{ex} ({'; '.join(extra)})",)
+                text = str(ex)
+                if len(data.sources) == 1 and f"'{data.name}'" not in text:
+                    # which object (a metaball's "the mesh is closed" named none: user test)
+                    src = data.sources[0]
+                    kind = {"MESH": "", "META": " (a metaball)", "FONT": " (a text)",
+                            "POINTCLOUD": ""}.get(src.type, f" (a {src.type.lower()})")
+                    text = f"'{data.name}'{kind}: {text}"
+                ex.args = (f"{text} ({'; '.join(extra)})" if extra else text,)
                 raise ex from None
 
         self._engine = []
@@ -757,7 +818,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 dict(points=data.points, faces=data.faces, **kwargs))
 
     def finish(self, context, surf):
-        _cache_put(self._key, surf)
+        if not getattr(self, "_reused", False):
+            _cache_put(self._key, surf, self._engine)
         data = self._data
         name = data.name
         kept = []
@@ -823,9 +885,19 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         holes = int((surf.report or {}).get("holes_filled", 0))
         spanned = [f"the surface spans the mesh's {holes} hole{'s' if holes > 1 else ''} "
                    "(Fill Holes)"] if holes else []
-        report_result(self, surf, list(data.notes) + self._ignored + reused + replaced + spanned,
-                      _engine_notes(self), seconds=None if reused else
-                      time.perf_counter() - getattr(self, "_started", time.perf_counter()))
+        if reused:
+            seconds = getattr(self, "_reused_seconds", None)
+        else:
+            seconds = time.perf_counter() - getattr(self, "_started", time.perf_counter())
+            _cache_put(self._key, surf, self._engine, seconds)
+        # which shape was fitted: the one the modifiers make (the report had not said so,
+        # nor how many points that is: user test)
+        mods = data.modifier_note()
+        read = [f"fitted after the modifiers ({mods}): {len(data.points)} "
+                f"{'vertices' if data.faces is not None else 'points'}"] if mods else []
+        report_result(self, surf,
+                      read + list(data.notes) + self._ignored + reused + replaced + spanned,
+                      _engine_notes(self), seconds=seconds)
         return {"FINISHED"}
 
     def draw(self, context):
@@ -888,6 +960,10 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             current = max(current, float(rep[key.replace("rms", "rms_area")]))
         previous = st.tolerance if rel == st.relative else np.inf
         tol = self.tolerance or 0.5 * (min(previous, current) if current > 0 else st.tolerance)
+        if 0 < self.max_control_points < MIN_BUDGET:  # (the engine's words had been shown)
+            raise bridge.SelectionError(
+                f"Max Control Points must be 0 (automatic) or at least {MIN_BUDGET}, got "
+                f"{self.max_control_points}")
         budget = self.max_control_points or max(st.max_control_points, 2 * st.control_points)
         self._settings = dict(tolerance=tol, relative=rel, max_control_points=budget,
                               max_iterations=self.max_iterations)  # fmt: skip
@@ -1051,11 +1127,18 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
                                     "distances are those to the spline (Re-tessellate puts it back)")
         # the source moved or edited since the fit: the distances measure that, not the fit
         # (user test: RMS 0.2 for a fit of 1.4e-4, and nothing said why; Refine refuses)
-        changed = None if surf.fitted_to(data.points) else (
-            f"{', '.join(repr(o.name) for o in data.sources)} changed since "
-            f"'{surface.name}' was fitted (moved, transformed or edited): the distances are "
-            "those of the data as it is now; select the source and use Fit Surface to fit it "
-            "again")
+        changed = None
+        if not surf.fitted_to(data.points):
+            # a source hidden since the fit is read without its modifiers: nothing was
+            # edited, and fitting it again would fit the other shape (user test)
+            unmodified = [n for n in data.notes if "read without its modifiers" in n]
+            changed = ("; ".join(unmodified) + f": the distances are those of that shape, not "
+                       f"of the one '{surface.name}' was fitted to; show it (Alt+H) and make "
+                       "the map again") if unmodified else (
+                f"{', '.join(repr(o.name) for o in data.sources)} changed since "
+                f"'{surface.name}' was fitted (moved, transformed or edited): the distances "
+                "are those of the data as it is now; select the source and use Fit Surface to "
+                "fit it again")
         # a live net whose weights were deleted is linked again, so the colors show the net
         live.relink(surface, surf, surface.tcb.resolution, rewrite=False)
 
@@ -1083,6 +1166,12 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         mat = bridge.deviation_material(attribute=DEVIATION_ATTR + "_color")
         if mat.name not in surface.data.materials:
             surface.data.materials.append(mat)
+        # every face in the map's slot: with a material of the user's first, the map's
+        # colours never showed in Material Preview or renders (user test). A rewrite of the
+        # mesh (Refine, Re-tessellate) drops the map and gives the faces the first slot again
+        slot = surface.data.materials.find(mat.name)
+        surface.data.polygons.foreach_set(
+            "material_index", np.full(len(surface.data.polygons), slot, np.int32))
 
         st = surface.tcb
         if self.points_copy:
@@ -1263,10 +1352,13 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
             # ('//' is relative to the .blend: it had been written to the filesystem's root)
             path = bpy.path.abspath(self.filepath)
             stored_surface(surface).save(path)
-        except (*_user_errors(), OSError) as ex:
+        except _user_errors() as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
-        problem = net_vertex_problem(surface)
+        except OSError as ex:  # (not the engine's temporary file's name: user test)
+            self.report({"ERROR"}, f"Could not write {path}: {ex.strerror or ex}")
+            return {"CANCELLED"}
+        problem = net_vertex_problem(surface) or net_modifier_problem(surface)
         self.report({"WARNING"} if problem else {"INFO"},
                     f"TCB: saved {path}" + (f"; {problem}" if problem else ""))
         return {"FINISHED"}

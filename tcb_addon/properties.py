@@ -30,6 +30,8 @@ DEFAULT_SMOOTHNESS = struct.unpack("f", struct.pack("f", 1e-4))[0]
 
 # the finest tessellation offered (Fit's and Re-tessellate's Resolution)
 MAX_RESOLUTION = 2048
+# the smallest budget of control points (the engine's RefineOptions)
+MIN_BUDGET = 10
 
 
 class FitSettings:
@@ -59,7 +61,7 @@ class FitSettings:
     max_control_points: IntProperty(
         name="Max Control Points",
         description="Stop refining when the spline would have more control points than this",
-        default=2000, min=10, soft_max=20000,
+        default=2000, min=MIN_BUDGET, soft_max=20000,
     )  # fmt: skip
     max_iterations: IntProperty(
         name="Max Iterations",

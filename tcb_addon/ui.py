@@ -7,8 +7,9 @@ selected (nothing, a camera, a result object, ...).
 import bpy
 
 from . import bridge
-from .operators import (NO_DATA_KEY, SPLINE_KEY, is_max, live_link_problem, live_moved_problem,
-                        net_copy_note, net_vertex_problem, result_objects, uneven_density)
+from .operators import (NO_DATA_KEY, SPLINE_KEY, converted_problem, is_max, live_link_problem,
+                        live_moved_problem, net_copy_note, net_modifier_problem,
+                        net_vertex_problem, result_objects, stack_problem, uneven_density)
 from .properties import FIT_KEYS, RESULT_KEYS, draw_fit_settings
 
 
@@ -83,7 +84,9 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
             col.label(text=f"Stopped: {st.stop_reason}")
         if SPLINE_KEY not in surface:
             col.label(text="No spline stored: refit from the source", icon="ERROR")
-        for problem in (net_vertex_problem(surface), live_link_problem(surface)):
+        for problem in (converted_problem(surface), net_vertex_problem(surface),
+                        live_link_problem(surface), net_modifier_problem(surface),
+                        stack_problem(surface)):
             if problem:
                 col.label(text=problem[0].upper() + problem[1:], icon="ERROR")
         copy = net_copy_note(context.active_object)

@@ -290,3 +290,89 @@ def test_refine_after_deleting_a_shared_net_brings_no_net_back(clean_scene, addo
     assert linked == [], [o.name for o in linked]
     refined = spline_of(surface)
     assert np.allclose(evaluated(bpy, surface), refined.tessellate(20)[0], atol=1e-5)
+
+
+def test_modifiers_on_the_net_never_make_the_live_surface_garbage(clean_scene, addon):
+    """A Wireframe on the net (to see the cage) gave the live link 8x the points, read by
+    index: the surface went half a diagonal off (user test). A modifier that adds or removes
+    vertices now leaves the surface on its spline; any modifier on the net is named in the
+    Result panel, and Export Spline warns."""
+    bpy = clean_scene
+    _, _, _, surface = fitted(bpy)
+    net = surface.tcb.net
+    surf = spline_of(surface)
+    weights = surface.tcb.weights
+    terms = surface.modifiers[MODIFIER][_ids(surface)["Terms"]]
+    assert len(weights.data.vertices) == len(surface.data.vertices) * terms + 1
+    moved = move_net_vertex(bpy, net, central(surf, 20), (0.0, 0.0, 0.2))
+    live = surf.with_control_points(moved).tessellate(20)[0]
+    assert np.allclose(evaluated(bpy, surface), live, atol=1e-4)
+    problem = "Modifiers on the control net 'Wave TCB Net' ('Wire') change the points"
+    assert not any(problem in label for label in panel_labels(bpy, surface))
+    for kind in ("WIREFRAME", "SKIN", "SUBSURF"):
+        mod = net.modifiers.new("Wire", kind)
+        bpy.context.view_layer.update()
+        assert np.allclose(evaluated(bpy, surface), surf.tessellate(20)[0], atol=1e-5), kind
+        assert any(problem in label for label in panel_labels(bpy, surface)), kind
+        net.modifiers.remove(mod)
+        bpy.context.view_layer.update()
+        assert np.allclose(evaluated(bpy, surface), live, atol=1e-4), kind
+    # one that keeps the vertex count moves what the surface follows: said, and on export
+    net.modifiers.new("Wire", "SMOOTH")
+    assert any(problem in label for label in panel_labels(bpy, surface))
+    assert run(bpy, bpy.ops.tcb.export_spline, surface,
+               filepath=str(Path(bpy.app.tempdir or "/tmp") / "tcb_net_mod.npz")) == {"FINISHED"}
+
+
+def _ids(surface) -> dict:
+    return {i.name: i.identifier for i in surface.modifiers[MODIFIER].node_group.interface.items_tree
+            if getattr(i, "in_out", None) == "INPUT"}
+
+
+def test_the_live_net_modifier_goes_first_in_the_stack(clean_scene, addon):
+    """Fit with Live Net into a surface that has the user's Subdivision: the live-net
+    modifier came after it, saw 4x the vertices and passed the mesh through, and drags of the
+    net did nothing, with no word (user test). It now goes first; one moved above it is
+    named in the Result panel, and Re-tessellate puts it back."""
+    bpy = clean_scene
+    verts, faces = grid(20, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y), triangles=True)
+    src = add_mesh(bpy, "Wave", verts, faces)
+    with bpy.context.temp_override(**select(bpy, src)):
+        assert bpy.ops.tcb.fit_surface(tolerance=5e-3, max_control_points=200, resolution=20,
+                                       live_net=False) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    surface.modifiers.new("Subdivision", "SUBSURF").levels = 1
+    with bpy.context.temp_override(**select(bpy, src)):
+        assert bpy.ops.tcb.fit_surface(tolerance=5e-3, max_control_points=200, resolution=20,
+                                       live_net=True) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    assert [m.name for m in surface.modifiers] == [MODIFIER, "Subdivision"]
+    before = evaluated(bpy, surface)
+    move_net_vertex(bpy, surface.tcb.net, central(spline_of(surface), 20), (0.0, 0.0, 0.2))
+    assert np.abs(evaluated(bpy, surface) - before).max() > 1e-2
+    words = f"'Subdivision' above '{MODIFIER}' in the surface's modifier stack"
+    assert not any(words in label for label in panel_labels(bpy, surface))
+    surface.modifiers.move(1, 0)
+    assert any(words in label for label in panel_labels(bpy, surface))
+    assert run(bpy, bpy.ops.tcb.retessellate, surface, resolution=20) == {"FINISHED"}
+    assert [m.name for m in surface.modifiers] == [MODIFIER, "Subdivision"]
+    assert not any(words in label for label in panel_labels(bpy, surface))
+
+
+def test_weights_made_before_the_net_count_point_still_drive_the_surface(clean_scene, addon):
+    """Files saved before the weights ended with the net's point count: their weights (m K
+    points) are read as before by the new node group."""
+    bpy = clean_scene
+    _, _, _, surface = fitted(bpy)
+    live = sys.modules[ADDON + ".tcb_addon.live"]
+    bridge = sys.modules[ADDON + ".tcb_addon.bridge"]
+    surf = spline_of(surface)
+    index, weight, vertex, _ = live.padded_weights(surf.evaluation_matrix(surf.tessellation_uv(20)[0]))
+    old = bridge.new_mesh("old weights", np.zeros((len(index) - 1, 3), np.float32))
+    for name, values, kind in (("tcb_index", index, "INT"), ("tcb_weight", weight, "FLOAT"),
+                               ("tcb_vertex", vertex, "INT")):
+        old.attributes.new(name, kind, "POINT").data.foreach_set("value", values[:-1])
+    bridge.replace_mesh(surface.tcb.weights, old)
+    moved = move_net_vertex(bpy, surface.tcb.net, central(surf, 20), (0.0, 0.0, 0.2))
+    assert np.allclose(evaluated(bpy, surface), surf.with_control_points(moved).tessellate(20)[0],
+                       atol=1e-4)

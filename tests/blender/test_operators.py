@@ -798,6 +798,7 @@ def test_redo_with_new_resolution_reuses_the_fit(clean_scene, addon, monkeypatch
 
     def counting(*a, **k):
         calls.append(1)
+        warnings.warn("a word from the engine", RuntimeWarning)
         return real(*a, **k)
 
     monkeypatch.setattr(core, "fit_surface", counting)
@@ -806,11 +807,16 @@ def test_redo_with_new_resolution_reuses_the_fit(clean_scene, addon, monkeypatch
     assert fit(bpy, obj, resolution=10, tolerance=3e-3) == {"FINISHED"}
     first = bpy.context.view_layer.objects.active
     coarse = len(first.data.vertices)
-    assert "result was reused" not in capfd.readouterr().out
+    out = capfd.readouterr().out
+    assert "result was reused" not in out and "a word from the engine" in out
+    seconds = re.search(r"smoothness [^,]*, ([0-9.]+ s)", out).group(1)
     assert fit(bpy, obj, resolution=20, tolerance=3e-3) == {"FINISHED"}
     second = bpy.context.view_layer.objects.active
     assert len(calls) == 1  # same input and fit settings: the cached surface is re-tessellated
-    assert "its result was reused (the seconds are that fit's)" in capfd.readouterr().out
+    out = capfd.readouterr().out
+    assert "its result was reused (the seconds are that fit's)" in out
+    # with that fit's warnings and seconds (they had been dropped: user test)
+    assert "a word from the engine" in out and f", {seconds}" in out
     assert second == first and len(second.data.vertices) > coarse  # (replaced in place)
     assert fit(bpy, obj, resolution=20, tolerance=1e-3) == {"FINISHED"}
     assert len(calls) == 2  # a fit setting changed: fitted again

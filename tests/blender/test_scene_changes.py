@@ -5,6 +5,7 @@ user, a net disabled in viewports, a map without a point copy, an export path re
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -86,12 +87,21 @@ def test_a_rewritten_surface_drops_the_deviation_material(clean_scene):
 
     steps = [(bpy.ops.tcb.refine, dict(tolerance=5e-3, max_control_points=600)),
              (bpy.ops.tcb.retessellate, dict(resolution=16))]
+    def slots():
+        idx = np.empty(len(surface.data.polygons), np.int32)
+        surface.data.polygons.foreach_get("material_index", idx)
+        return set(idx.tolist())
+
     for op, props in steps:
         assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
         assert materials() == ["Clay", "TCB Deviation"]
+        # the faces show the map (with Clay first they had kept it, and renders never
+        # showed the colours: user test)
+        assert slots() == {1}
         assert surface.data.color_attributes.get("tcb_deviation_color") is not None
         assert run(bpy, op, surface, **props) == {"FINISHED"}
         assert materials() == ["Clay"], op.idname()
+        assert slots() == {0}
         assert surface.data.color_attributes.get("tcb_deviation_color") is None
     assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
     assert fit(bpy, src, replace=True) == {"FINISHED"}
@@ -279,3 +289,95 @@ def test_results_in_a_collection_shown_by_an_instance_are_not_deleted(clean_scen
     assert surface.tcb.weights == weights and weights.name in bpy.data.objects
     ops = sys.modules[f"{ADDON}.tcb_addon.operators"]
     assert len(ops.source_data(bpy.context, surface).points) == len(wave()[0])
+
+
+def panel_labels(bpy, obj) -> list[str]:
+    from test_operators import draw_panels
+
+    return [e[1] for e in draw_panels(bpy, [obj]) if e[0] == "label"]
+
+
+@pytest.mark.parametrize("target", ["CURVE", "POINTCLOUD"])
+def test_a_surface_converted_to_another_type_is_refused_with_words(clean_scene, target):
+    """Object > Convert of the surface: Refine, Re-tessellate and Deviation Map ended in a
+    traceback (Refine after its whole refit) and left meshes behind (user test)."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.object.convert(target=target) == {"FINISHED"}
+    surface = bpy.data.objects["Scan TCB Surface"]
+    assert surface.type == target
+    meshes = len(bpy.data.meshes)
+    for op in (bpy.ops.tcb.refine, bpy.ops.tcb.retessellate, bpy.ops.tcb.deviation_map):
+        with pytest.raises(RuntimeError, match=r"Error: 'Scan TCB Surface' is no longer a mesh "
+                                               r"\(it was converted to .*Fit Surface makes"):
+            run(bpy, op, surface)
+    assert len(bpy.data.meshes) == meshes
+    assert any("is no longer a mesh" in label for label in panel_labels(bpy, surface))
+
+
+def test_a_linked_duplicate_of_the_net_is_said_to_move_the_surface(clean_scene):
+    """Alt+D of the net shares its mesh: the panel said its edits change nothing (user test);
+    a Shift+D copy's do not."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    net = bpy.context.view_layer.objects.active.tcb.net
+    for linked, words in ((True, "shares its mesh with the control net 'Scan TCB Net'"),
+                          (False, "is a copy of the control net")):
+        with bpy.context.temp_override(**select(bpy, net)):
+            assert bpy.ops.object.duplicate(linked=linked) == {"FINISHED"}
+        dup = bpy.context.view_layer.objects.active
+        assert dup != net and (dup.data == net.data) == linked
+        assert any(words in label for label in panel_labels(bpy, dup)), linked
+
+
+def test_a_hidden_source_read_without_its_modifiers_is_named_by_the_deviation_map(
+        clean_scene, capfd):
+    """Hiding the scan (to look at the coloured surface) reads it without its modifiers: the
+    map warned that it was moved or edited, and advised fitting it again (user test)."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *grid(12, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y),
+                                      triangles=True))
+    src.modifiers.new("Sub", "SUBSURF").levels = 1
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    src.hide_set(True)
+    capfd.readouterr()
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "'Scan' is hidden: read without its modifiers" in out
+    assert "show it (Alt+H) and make the map again" in out
+    assert "moved, transformed or edited" not in out
+
+
+def test_refine_refuses_a_budget_under_the_least_in_the_panels_words(clean_scene):
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    with pytest.raises(RuntimeError, match=r"Max Control Points must be 0 \(automatic\) or at "
+                                           r"least 10, got 5"):
+        run(bpy, bpy.ops.tcb.refine, surface, max_control_points=5)
+
+
+def test_the_fit_report_says_it_fitted_the_modified_mesh(clean_scene, capfd):
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *grid(12, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y)))
+    src.modifiers.new("Sub", "SUBSURF").levels = 2
+    capfd.readouterr()
+    assert fit(bpy, src) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert re.search(r"fitted after the modifiers \('Scan' has the modifier .*'Sub'.*\): "
+                     r"\d+ vertices", out), out
+    n = int(re.search(r"\): (\d+) vertices", out).group(1))
+    assert n > 4 * 12 * 12  # the subdivided mesh's, not its own 144
+
+
+def test_a_refused_object_is_named(clean_scene):
+    bpy = clean_scene
+    bpy.ops.object.metaball_add()
+    with pytest.raises(RuntimeError, match=r"Error: 'Mball' \(a metaball\): the mesh is closed"):
+        bpy.ops.tcb.fit_surface()

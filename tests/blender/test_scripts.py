@@ -155,11 +155,11 @@ def test_the_script_limits_are_the_fit_settings_limits(addon):
     spec.loader.exec_module(script)
     props = addon.tcb_addon.properties
     settings = props.FitSettings.__annotations__
-    assert script.MIN_BUDGET == settings["max_control_points"].keywords["min"]
+    assert script.MIN_BUDGET == props.MIN_BUDGET == settings["max_control_points"].keywords["min"]
     assert script.MAX_RESOLUTION == props.MAX_RESOLUTION == settings["resolution"].keywords["max"]
 
 
-def test_outputs_over_the_input_or_in_a_missing_folder_are_refused_before_the_fit(tmp_path):
+def test_outputs_over_the_input_or_where_they_cannot_be_written_are_refused_first(tmp_path):
     src = tmp_path / "scan.obj"
     n = 12
     src.write_text("".join(f"v {i} {j} {0.1 * (i - j) ** 2}\n" for i in range(n) for j in range(n))
@@ -169,8 +169,8 @@ def test_outputs_over_the_input_or_in_a_missing_folder_are_refused_before_the_fi
     for args, words in (
         (["--export", src], "--export"),
         (["--export", tmp_path / "." / "scan.obj"], "is the input file"),
-        (["--render", tmp_path / "no" / "r.png"], "does not exist"),
-        (["--export", tmp_path / "no" / "s.obj"], "does not exist"),
+        (["--render", src / "r.png"], "is a file, not a folder"),
+        (["--export", src / "sub" / "s.obj"], "is a file, not a folder"),
     ):
         proc = run_script(src, "-o", tmp_path / "x.blend", *args, timeout=60)
         assert words in _error_line(proc)
