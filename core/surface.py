@@ -37,6 +37,7 @@ from .errors import CancelledError, FileFormatError, InvalidInputError, TCBError
 from .fit import (AUTO_SMOOTHNESS, DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL,
                   SPARSE_SMOOTHNESS, DefaultSmoothness, fit_control_points)
 from .geometry import column_bounds, float32_rounding
+from .parallel import background
 from .parameterize import (
     Parameterization, _as_points, _check_finite, box_normalization, local_scatter, normalize,
     parameterize, spike_points,
@@ -1391,16 +1392,35 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         n_measured=None if subsampled else len(uv), domain=domain,
         balance=param.faces is None, start_degree=start_degree,
     )
+    def data_checks(fit_state, errs):
+        """The layers and spikes checks of a fit (below), for a cloud: the layers' gap and
+        the spikes' (found, largest, more) or None (``spikes`` off), given the fit's errors
+        at the points (``errs``); (None, None) for a mesh. Made on another thread while the
+        swing check runs: they read the fit's control points and errors only."""
+        if param.faces is not None or param.axes is None:  # (a mesh's faces hold one layer)
+            return None, None
+        C = norm.undo(fit_state.fit.control_points)
+        sub = np.random.default_rng(options.seed).permutation(len(uv))[:LAYER_POINTS]
+        across = ((points[used][sub] - fit_state.space.combine(uv[sub], C)[0])
+                  @ np.asarray(param.axes)[2])
+        gap = data_layers(uv[sub], across, options.seed)
+        return gap, (data_spikes(points[used], errs, np.asarray(param.axes)[2])
+                     if spikes else None)
+
     if not subsampled:
+        early = background(lambda state=best: data_checks(
+            state, state.fit.errors[: len(uv)] * norm.scale))
         # what the smoother fit must still meet when the loop reached the tolerance
         tol_norm = max(options.tolerance, 0.0) * (diag_norm if options.relative
                                                    else 1.0 / norm.scale)
         limit = tol_norm if reason == "tolerance reached" and options.tolerance > 0 else None
+        looped = best
         best, swings = _smoother_if_swinging(
             best, fit_uv, fit_q, len(uv), options.seed, limit, options.criterion,
             margin=tol_norm, default=isinstance(options.smoothness, DefaultSmoothness))
+        checks = early() if best is looped else None
     else:
-        swings = None
+        swings = checks = None
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)
     errors = np.full(len(points), np.nan)
@@ -1412,6 +1432,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         errors[used] = e * norm.scale
     else:
         errors[used] = best.fit.errors[: len(uv)] * norm.scale
+    if checks is None:
+        checks = data_checks(best, errors[used])
     diagonal = 2.0 * norm.scale
     report = {
         "mode": options.mode,
@@ -1491,20 +1513,17 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     if places:
         warnings.warn(swing_warning(report), RuntimeWarning, stacklevel=3)
     report["layers"] = 0.0
-    if param.faces is None and param.axes is not None:  # (a mesh's faces hold one layer)
-        sub = np.random.default_rng(options.seed).permutation(len(uv))[:LAYER_POINTS]
-        across = (points[used][sub] - best.space.combine(uv[sub], C)[0]) @ np.asarray(param.axes)[2]
-        gap = data_layers(uv[sub], across, options.seed)
-        # (layers closer than twice the tolerance are within it: no matter, as for swings)
-        if gap > 2.0 * max(options.tolerance, 0.0) * (diagonal if options.relative else 1.0):
-            report["layers"] = gap
-            warnings.warn(layers_warning(report), RuntimeWarning, stacklevel=3)
-    if spikes and param.faces is None and param.axes is not None:
+    gap, spiky = checks
+    # (layers closer than twice the tolerance are within it: no matter, as for swings)
+    if gap is not None and gap > 2.0 * max(options.tolerance, 0.0) * (
+            diagonal if options.relative else 1.0):
+        report["layers"] = gap
+        warnings.warn(layers_warning(report), RuntimeWarning, stacklevel=3)
+    if spiky is not None:
         # a few points far off the surface that drop_outliers would have left out (10 stray
         # returns 50-200 m up among 4e4 lidar points: 127 m spikes in the surface, no word;
         # user test)
-        found, largest, more = data_spikes(points[used], errors[used],
-                                           np.asarray(param.axes)[2])
+        found, largest, more = spiky
         report["spikes"] = found
         if found:
             warnings.warn(spikes_warning(found, largest, more), RuntimeWarning, stacklevel=3)

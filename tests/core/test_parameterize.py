@@ -1319,3 +1319,23 @@ def test_a_cloud_in_degrees_and_metres_is_named_when_refused() -> None:
     # the same in metres (about 93 km per degree there) is a terrain
     metres = cloud * [93_000.0, 111_000.0, 1.0]
     np.testing.assert_allclose(parameterize_points(metres, projection="z").axes[2], [0, 0, 1])
+
+
+def test_points_without_a_cellmate_are_those_of_cells_no_reference_point_is_in():
+    # isolated_points queries only these: every other point has a reference point within the
+    # cell's diagonal, so it is within the gap
+    from core.parameterize import _without_cellmate
+
+    rng = np.random.default_rng(5)
+    ref = rng.random((300, 3))
+    x = rng.uniform(-0.2, 1.2, (2000, 3))
+    cell = 0.1
+    lonely = _without_cellmate(x, ref, cell)
+    lo = np.minimum(x.min(axis=0), ref.min(axis=0))
+    cx, cr = np.floor((x - lo) / cell), np.floor((ref - lo) / cell)
+    shared = (cx[:, None, :] == cr[None, :, :]).all(axis=2).any(axis=1)
+    assert np.array_equal(lonely, np.flatnonzero(~shared)) and 0 < len(lonely) < len(x)
+    nearest = np.sqrt(((x[:, None, :] - ref[None, :, :]) ** 2).sum(axis=2)).min(axis=1)
+    assert (nearest[shared] <= cell * np.sqrt(3)).all()
+    # a grid too fine to index: all of them
+    assert len(_without_cellmate(x, ref, 1e-30)) == len(x)
