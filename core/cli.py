@@ -21,7 +21,7 @@ import numpy as np
 from .errors import HolesError, InvalidInputError, OutlierError, TCBError
 from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
-from .parameterize import projection_direction
+from .parameterize import fill_value_rows, fill_value_words, projection_direction
 from .refine import STALLED, SWINGS_LEFT, mostly_taken_back, replaced_default_reason
 from .surface import MAX_RESOLUTION, default_swung
 
@@ -74,7 +74,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--net", help="write the control net (.obj or .ply) here")
     f.add_argument("--spline", help="write the spline (.npz, TCBSurface.save) here")
     f.add_argument("--drop-invalid", action="store_true",
-                   help="leave out points with NaN or infinite coordinates (point clouds)")
+                   help="leave out points with NaN or infinite coordinates, or a raster's "
+                   "no-data fill value (such as -9999) far below all others (point clouds)")
     f.add_argument("--drop-outliers", action="store_true",
                    help="leave out points far from all others instead of refusing the cloud, "
                    "and spikes and pits inside it (point clouds only: refused for a mesh)")
@@ -295,16 +296,29 @@ def _fit(args) -> int:
             "or infinite coordinates; repair or delete them in a mesh editor (--drop-invalid "
             "applies to point clouds: a mesh's faces hold its vertices)"
         )
+    fill = fill_value_rows(points)
+    if fill is not None and faces is not None:
+        raise TCBError(f"{fill_value_words(fill, len(points), 'vertices')}: repair those "
+                       "vertices or cut them out in a mesh editor")
+    if fill is not None and not args.drop_invalid:  # (a no-data fill: user test)
+        raise TCBError(f"{fill_value_words(fill, len(points))}; pass --drop-invalid to leave "
+                       "them out")
     if bad.any() and faces is None:
         if not args.drop_invalid:
             raise TCBError(
                 f"{int(bad.sum())} of {len(points)} points have NaN or infinite coordinates; "
                 "pass --drop-invalid to leave them out"
             )
-        points = points[~bad]
         if not args.quiet:
             print(f"left out {int(bad.sum())} points with NaN or infinite coordinates",
                   file=sys.stderr)
+    if fill is not None:
+        if not args.quiet:
+            print(f"left out {int(fill[0].sum())} points with {'xyz'[fill[1]]} = {fill[2]:g} "
+                  "(a no-data fill value)", file=sys.stderr)
+        bad |= fill[0]
+    if faces is None:
+        points = points[~bad]
     if not args.quiet:
         kind = f"mesh with {len(faces)} faces" if faces is not None else "point cloud"
         print(f"read {args.input}: {len(points)} points, {kind}", file=sys.stderr)

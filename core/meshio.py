@@ -47,6 +47,7 @@ import numpy as np
 
 from .errors import FileFormatError, InvalidInputError
 from .geometry import ear_clipping, float32_rounding
+from .parameterize import FILL_VALUES
 
 __all__ = ["READ_EXTENSIONS", "WRITE_EXTENSIONS", "read_geometry", "write_mesh"]
 
@@ -1128,7 +1129,7 @@ def _dem_nodes(lo: float, hi: float, count: int, cell, axis: str) -> np.ndarray:
 
 
 # fill values of DEM formats (GDAL/ESRI -9999, SRTM -32768, float32 lowest) for cells without data
-_FILL_VALUES = (-9999.0, -99999.0, -32767.0, -32768.0, float(np.finfo(np.float32).min))
+_FILL_VALUES = FILL_VALUES  # (core.parameterize: also checked in fit_surface's input)
 
 
 def _refuse_fill_values(h: np.ndarray) -> None:

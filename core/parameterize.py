@@ -102,6 +102,13 @@ def _as_points(points: np.ndarray, *, what: str = "points") -> np.ndarray:
     if np.iscomplexobj(points):
         raise InvalidInputError(f"{what} must be real numbers, got complex ones (take .real "
                                 "if that is meant)")
+    if np.ma.isMaskedArray(points) and np.ma.getmaskarray(points).any():
+        # (the values under the mask had been fitted as data: user test)
+        mask = np.ma.getmaskarray(points)
+        rows = int(mask.reshape(len(mask), -1).any(axis=1).sum()) if mask.ndim else len(mask)
+        raise InvalidInputError(
+            f"{rows} {what} are masked, and the values under a mask would be fitted as data: "
+            f"leave them out ({what}[~{what}.mask.any(axis=1)]) or fill them with NaN")
     try:
         arr = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -113,6 +120,43 @@ def _as_points(points: np.ndarray, *, what: str = "points") -> np.ndarray:
             f"{what} must be an (N, 3) array of x, y, z coordinates; got shape {arr.shape}"
         )
     return np.ascontiguousarray(arr)
+
+
+# common no-data fill values of rasters (GDAL's and others' defaults): a raster exported to
+# points (gdal_translate -of XYZ) keeps its empty cells with them
+FILL_VALUES = (-9999.0, -99999.0, -32767.0, -32768.0, float(np.finfo(np.float32).min))
+# ... counted as such when all other values of their coordinate are this far above them
+FILL_GAP = 1000.0
+
+
+def fill_value_rows(points: np.ndarray):
+    """The rows of ``points`` (n, 3) whose coordinate is a common no-data fill value
+    (:data:`FILL_VALUES`) far (over FILL_GAP units) below all other values of that coordinate:
+    ``(rows (bool), column, value, lowest other value)``, or None. Not in method.md."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or not len(p):
+        return None
+    finite = np.isfinite(p).all(axis=1)
+    for j in range(p.shape[1]):
+        col = p[finite, j]
+        if not col.size:
+            return None
+        low = float(col.min())
+        if low not in FILL_VALUES:
+            continue
+        rest = col[col != low]
+        if rest.size and float(rest.min()) > low + FILL_GAP:
+            return (p[:, j] == low) & finite, j, low, float(rest.min())
+    return None
+
+
+def fill_value_words(found, total: int, what: str = "points") -> str:
+    """How :func:`fill_value_rows`' find is told: the rows, the value, and what it is."""
+    rows, j, value, lowest = found
+    axis = "xyz"[j] if j < 3 else f"column {j}"
+    return (f"{int(rows.sum())} of the {total} {what} have {axis} = {value:g}, far below all "
+            f"others (lowest {lowest:g}): a no-data fill value (a raster exported to points "
+            "keeps its empty cells with it), which would be fitted as data")
 
 
 def _check_finite(points: np.ndarray, *, what: str = "points") -> None:

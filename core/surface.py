@@ -39,8 +39,8 @@ from .fit import (AUTO_SMOOTHNESS, DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL
 from .geometry import column_bounds, float32_rounding
 from .parallel import background
 from .parameterize import (
-    Parameterization, _as_points, _check_finite, box_normalization, local_scatter, normalize,
-    parameterize, spike_points,
+    Parameterization, _as_points, _check_finite, box_normalization, fill_value_rows,
+    fill_value_words, local_scatter, normalize, parameterize, spike_points,
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
                      check_callback, prefetch_swing_triangles, swing_places)
@@ -1701,6 +1701,12 @@ def fit_surface(
     coarse = float32_rounding(points, "pass float64 coordinates, or subtract an offset before "
                                       "rounding them to fewer bits")
     points = _as_points(points)  # (says what is wrong; complex numbers refused, user test)
+    fill = fill_value_rows(points)
+    if fill is not None:  # (fitted as terrain 10 km deep, with no word: user test)
+        raise InvalidInputError(
+            fill_value_words(fill, len(points), "points" if faces is None else "vertices")
+            + f"; leave those rows out (points[points[:, {fill[1]}] != {fill[2]:g}]) or set "
+            "them to NaN")
     try:
         param = parameterize(points, faces, drop_outliers=drop_outliers, projection=projection,
                              fill_holes=bool(fill_holes))

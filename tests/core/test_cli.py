@@ -251,6 +251,29 @@ def test_nan_rows_name_the_option_that_drops_them(tmp_path):
     assert "597 points" in r.stdout
 
 
+def test_a_rasters_no_data_fill_is_refused_or_left_out_with_drop_invalid(tmp_path):
+    """gdal_translate -of XYZ keeps a raster's empty cells with their fill value: a 100 m
+    lake of -9999 in 260-340 m terrain was fitted as terrain 10 km deep, with no word (user
+    test)."""
+    rng = np.random.default_rng(4)
+    xy = rng.random((3000, 2)) * 1000 + [5e5, 4.1e6]
+    z = 300 + 40 * np.sin((xy[:, 0] - 5e5) / 150)
+    lake = np.hypot(*(xy - [5e5 + 500, 4.1e6 + 500]).T) < 100
+    z[lake] = -9999.0
+    src = tmp_path / "tile.xyz"
+    np.savetxt(src, np.c_[xy, z], fmt="%.3f")
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--quiet")
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0
+    assert f"{lake.sum()} of the 3000 points have z = -9999" in r.stderr
+    assert "pass --drop-invalid to leave them out" in r.stderr
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--drop-invalid", "--max-control-points",
+            "100", "--max-iterations", "2")
+    assert r.returncode == 0, r.stderr
+    assert f"left out {lake.sum()} points with z = -9999" in r.stderr
+    verts, _ = read_geometry(tmp_path / "s.obj")
+    assert verts[:, 2].min() > 250 and verts[:, 2].max() < 350
+
+
 def test_a_mesh_with_a_nan_vertex_gets_command_line_advice(tmp_path):
     """A mesh's NaN vertex was refused with the engine's advice, Python code
     ("points[np.isfinite(points).all(axis=1)]"); --drop-invalid does not apply to a mesh."""

@@ -1478,6 +1478,12 @@ def test_a_slot_whose_fan_bulges_away_along_a_bend_is_clipped(monkeypatch):
         ("shape", InvalidInputError, r"\(N, 3\)"),
         ("complex", InvalidInputError, "real numbers, got complex"),  # (dropped: user test)
         ("far", InvalidInputError, "where 64-bit coordinates are 0.125 apart"),  # (user test)
+        # a raster's no-data cells, and masked values (fitted as terrain: user test)
+        ("fill", InvalidInputError, r"20 of the 200 points have z = -9999, far below all "
+                                    r"others \(lowest 0.0.*\): a no-data fill value.*"
+                                    r"points\[points\[:, 2\] != -9999\]"),
+        ("mesh fill", InvalidInputError, "3 of the 36 vertices have z = -32768, far below"),
+        ("masked", InvalidInputError, r"3 points are masked.*points\[~points.mask.any"),
     ],
 )
 def test_bad_input_raises_a_specific_error(case, error, words):
@@ -1506,6 +1512,16 @@ def test_bad_input_raises_a_specific_error(case, error, words):
         points = points + 1j
     elif case == "far":
         points = points + 1e15  # ("more auxiliary border rings are needed" had been said)
+    elif case == "fill":
+        points[rng.choice(200, 20, replace=False), 2] = -9999.0
+    elif case == "mesh fill":
+        points, faces = grid_with_hole()
+        points = np.array(points, dtype=np.float64)
+        points[:3, 2] = -32768.0
+    elif case == "masked":
+        mask = np.zeros(points.shape, dtype=bool)
+        mask[[3, 8, 9], 2] = True
+        points = np.ma.masked_array(points, mask=mask)
     with pytest.raises(error, match=words) as info:
         fit_surface(points, faces)
     assert isinstance(info.value, (TCBError, ValueError))
