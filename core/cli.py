@@ -374,6 +374,9 @@ def _fit(args) -> int:
         ("RMS error", f"{r['rms']:.4g} ({r['rms_rel']:.2e} of the diagonal)"),
         ("max error", f"{r['max']:.4g} ({r['max_rel']:.2e} of the diagonal)"),
     ]
+    if "faces_max" in r:  # a mesh: between its vertices too
+        rows.append(("on the faces", f"RMS {r['faces_rms']:.4g}, max {r['faces_max']:.4g} "
+                                     f"({r['faces_max_rel']:.2e} of the diagonal)"))
     if "rms_area" in r:  # a cloud: the RMS over its area (uneven density)
         rows.append(("RMS over area", f"{r['rms_area']:.4g} ({r['rms_area_rel']:.2e} of the diagonal)"))
     swings = r.get("swings") or {}
