@@ -62,6 +62,9 @@ _COMPACT_FLOAT = ("param_uv", "param_stretch", "errors")
 MAX_FIT_POINTS = 2_000_000
 # A parameter domain thinner than this (width / length) is a curve, not a surface.
 MIN_ASPECT = 1e-3
+# ... unless they hold at least this many point spacings across (for n points over a domain
+# of w by l, about sqrt(n w / l))
+MIN_ACROSS = 5.0
 # closest points (TCBSurface._newton_closest, _descend): a point stops when its next step
 # would change its distance by less than this share of the surface's size; a cloud's points
 # are also taken from their nearest start when it is more than this many steps of the
@@ -1353,7 +1356,10 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     used = np.asarray(param.used, dtype=bool)
     lo, hi = column_bounds(np.asarray(param.uv)[used])
     extent = hi - lo
-    if extent.min() < MIN_ASPECT * extent.max():
+    # (a strip holding several spacings of its points across is a surface: a road corridor
+    # 5 km long and 4 m wide, 14 spacings across, had been refused: user test)
+    across = np.sqrt(used.sum() * extent.min() / max(extent.max(), 1e-300))
+    if extent.min() < MIN_ASPECT * extent.max() and across < MIN_ACROSS:
         raise InvalidInputError(
             f"the points lie almost on a curve: their parameter domain is {extent.min() / extent.max():.1e} "
             "times as wide as it is long; a surface needs points spread in two directions"

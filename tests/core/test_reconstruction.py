@@ -2177,3 +2177,17 @@ def test_a_coarse_mesh_fitted_far_from_its_faces_is_reported_and_warned_of():
         warnings.simplefilter("error", RuntimeWarning)
         s = fit_surface(verts, faces, max_iterations=2)
     assert s.report["faces_max"] <= 4 * s.report["max"]
+
+
+def test_a_long_corridor_with_points_across_it_is_a_surface_and_a_thread_is_a_curve():
+    """A road scan 5 km long and 4 m wide had been refused as "almost on a curve" (its domain
+    0.8e-3 as wide as long), with 14-30 point spacings across it (user test)."""
+    rng = np.random.default_rng(0)
+    n, L, W = 40_000, 5000.0, 4.0  # sqrt(n W / L) = 5.7 spacings across
+    x, y = rng.uniform(0, L, n), rng.uniform(-W / 2, W / 2, n)
+    P = np.column_stack([x, y, 10 * np.sin(x / 300) - 0.02 * np.abs(y)])
+    s = fit_surface(P, tolerance=0.01, relative=False, projection="z", max_control_points=400)
+    assert s.report["rms"] < 0.05 and np.isfinite(s(np.asarray(s.parameterization.uv))).all()
+    thread = P[:2000] * [1.0, 0.1, 1.0]  # 0.4 m wide: 0.4 spacings across
+    with pytest.raises(InvalidInputError, match="the points lie almost on a curve"):
+        fit_surface(thread, projection="z")
