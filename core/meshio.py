@@ -1061,6 +1061,14 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
         lat_mid = np.radians(0.5 * (ymin + ymax))
         gx = (gx - min(xmin, xmax)) * _METRES_PER_DEGREE * np.cos(lat_mid)
         gy = (gy - min(ymin, ymax)) * _METRES_PER_DEGREE
+        # said, with the origin: the result is in metres from it, not on the map (user test)
+        warnings.warn(
+            f"the DEM's bounds are in degrees: its nodes were converted to metres east and "
+            f"north of its south-west corner (longitude {min(xmin, xmax):.6f}, latitude "
+            f"{min(ymin, ymax):.6f}; {_METRES_PER_DEGREE:g} m per degree of latitude, times "
+            f"cos({np.degrees(lat_mid):.4f} deg) of longitude), so the surface is in those "
+            "units; save the DEM with units='metres' and projected bounds to keep map "
+            "coordinates", RuntimeWarning, stacklevel=2)
     pts = np.column_stack([gx.ravel(), gy.ravel(), h.ravel()])
     keep = np.isfinite(pts[:, 2])
     if "nodata" in z:

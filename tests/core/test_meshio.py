@@ -614,7 +614,11 @@ def test_corrupt_npy_and_npz_raise_file_format_error(
 
 
 def test_dem_npz_becomes_grid_points_in_metres() -> None:
-    pts, faces = read_geometry(DATA / "jacksboro_fault_dem.npz")
+    # said, with the origin (the conversion had been silent: user test)
+    with pytest.warns(RuntimeWarning, match=r"the DEM's bounds are in degrees: its nodes were "
+                      r"converted to metres east and north of its south-west corner \(longitude "
+                      r"-84.41375\d, latitude 36.44625\d"):
+        pts, faces = read_geometry(DATA / "jacksboro_fault_dem.npz")
     assert faces is None and pts.shape == (344 * 403, 3)
     with np.load(DATA / "jacksboro_fault_dem.npz") as z:
         elev = z["elevation"]
