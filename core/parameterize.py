@@ -611,6 +611,11 @@ def _fold_sample(q: np.ndarray) -> np.ndarray:
     return np.arange(len(q))
 
 
+# a given projection along a coordinate axis keeps the other axes as the parameters' unless
+# that makes their bounding box this many times as large as the principal directions' do
+AXIS_BOX_SLACK = 1.25
+
+
 def _projection_normals(q: np.ndarray, pca_normal: np.ndarray, planes):
     """Projection directions to try (a generator), best first: the one that makes the cloud
     most like a height field, then the other candidates by score, and the direction of
@@ -766,9 +771,17 @@ def _on_a_line(uv: np.ndarray) -> bool:
     return bool(np.sqrt(max(ev[0], 0.0)) <= _COLLINEAR_RTOL * max(float(np.ptp(uv, axis=0).max()), 1e-300))
 
 
-def _project(q: np.ndarray, m: np.ndarray, vt: np.ndarray, n: np.ndarray):
+def _project(q: np.ndarray, m: np.ndarray, vt: np.ndarray, n: np.ndarray,
+             aligned: bool = False):
     """Axes ``(a_u, a_v, n)`` (3, 3), centre ``c`` and scale ``s`` of the projection of the
-    centred cloud along ``n``, and the parameters ``uv = ((q - m) . [a_u, a_v] - c) / s``."""
+    centred cloud along ``n``, and the parameters ``uv = ((q - m) . [a_u, a_v] - c) / s``.
+
+    ``a_u`` is the largest principal direction projected into the plane; with ``aligned``
+    and ``n`` along a coordinate axis, the next coordinate axis (x for z, y for x, z for y)
+    unless that makes the parameters' bounding box over AXIS_BOX_SLACK times as large (a
+    strip along a diagonal). The principal directions of a square tile are arbitrary: tiles
+    fitted over z had their tessellation grids turned 0-90 degrees against the tile and each
+    other, and the same resolution gave 1.8x as many vertices on some (user test)."""
     # u along the largest principal direction projected into the plane
     a_u = vt[0] - (vt[0] @ n) * n
     if np.linalg.norm(a_u) < 1e-8:
@@ -778,9 +791,19 @@ def _project(q: np.ndarray, m: np.ndarray, vt: np.ndarray, n: np.ndarray):
     a_u *= np.sign(a_u[np.argmax(np.abs(a_u))])
     if n[np.argmax(np.abs(n))] < 0.0:
         n = -n
-    axes = np.stack([a_u, np.cross(n, a_u), n])
-    proj = (q - m) @ axes[:2].T
-    lo, hi = column_bounds(proj)
+    frames = [a_u]
+    axis = int(np.argmax(np.abs(n)))
+    if aligned and abs(n[axis]) == 1.0:
+        frames.insert(0, np.eye(3)[(axis + 1) % 3])
+    best = None
+    for u in frames:
+        axes = np.stack([u, np.cross(n, u), n])
+        proj = (q - m) @ axes[:2].T
+        lo, hi = column_bounds(proj)
+        area = float(np.prod(hi - lo))
+        if best is None or area * AXIS_BOX_SLACK < best[0]:
+            best = (area, axes, proj, lo, hi)
+    _, axes, proj, lo, hi = best
     c = 0.5 * (lo + hi)
     s = 0.5 * float((hi - lo).max())
     return axes, c, s, (proj - c) / s
@@ -1609,7 +1632,7 @@ def parameterize_points(
     best = min(range(len(fractions)), key=lambda i: (fractions[i] > _FOLD_MAX_FRACTION,
                                                       edge_on[i], fractions[i]))
     frac = fractions[best] if fractions[best] <= _FOLD_MAX_FRACTION else fractions[0]
-    axes, c, s, uv = _project(q, m, vt, tried[best])
+    axes, c, s, uv = _project(q, m, vt, tried[best], aligned=direction is not None)
     if not np.isfinite(frac) and direction is not None:
         raise ParameterizationError(
             f"projected along the direction given ({', '.join(f'{x:.3g}' for x in direction)}) "

@@ -1339,3 +1339,22 @@ def test_points_without_a_cellmate_are_those_of_cells_no_reference_point_is_in()
     assert (nearest[shared] <= cell * np.sqrt(3)).all()
     # a grid too fine to index: all of them
     assert len(_without_cellmate(x, ref, 1e-30)) == len(x)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_tile_projected_along_z_keeps_x_and_y_as_its_parameter_axes(seed):
+    # a square's principal directions are arbitrary: the tessellation grids of tiles fitted
+    # over z were turned 0-90 degrees against the tile (user test)
+    rng = np.random.default_rng(seed)
+    x, y = rng.uniform(0, 1000, (2, 5000))
+    pts = np.column_stack([x, y, 40 * np.sin(x / 150) * np.cos(y / 110)])
+    par = parameterize_points(pts, projection="z")
+    assert np.array_equal(par.axes, np.eye(3))
+    # uv is x and y, centred and scaled alike
+    ratio = (par.uv - par.uv.mean(axis=0)) / (pts[:, :2] - pts[:, :2].mean(axis=0))
+    assert np.allclose(ratio, ratio[0, 0], rtol=1e-9)
+    # a strip along a diagonal keeps its principal direction (a box a third the size)
+    t = rng.uniform(0, 1000, 5000)
+    strip = np.column_stack([t, t + rng.uniform(-20, 20, 5000), np.sin(t / 100)])
+    axes = parameterize_points(strip, projection="z").axes
+    assert abs(abs(axes[0] @ [1, 1, 0]) / np.sqrt(2) - 1) < 1e-2
