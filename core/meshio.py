@@ -820,7 +820,9 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
         delim = None
         lines = [ln.replace(",", ".") if _decimal_comma_fields(ln) else ln for ln in lines]
     else:
-        delim = "," if any("," in ln for ln in lines[:2]) else None
+        # from the data lines (a header 'x, y, z' over whitespace columns had made the
+        # commas the separator, and every line was refused: user test)
+        delim = "," if any("," in ln for ln in data) else None
     cols = (0, 1, 2)
     try:
         [float(t) for t in (lines[0].split(delim))[:3]]

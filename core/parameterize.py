@@ -1735,6 +1735,13 @@ def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
             "the mesh has no faces; give faces of a disk-like patch, or parameterize the "
             "vertices as a point cloud (faces=None)"
         )
+    if len(f) in (3, 4) and f.shape[1] > 8:
+        # (3, F) is a transposed (F, 3), not three F-gons (refused as non-manifold edges,
+        # which sent the user to repair a mesh that is fine: user test)
+        raise InvalidInputError(
+            f"faces must be an (F, 3) array of vertex indices (or (F, 4) quads); got shape "
+            f"{f.shape}, {len(f)} polygons of {f.shape[1]} vertices: transposed? pass faces.T"
+        )
     integral = np.issubdtype(f.dtype, np.integer) or (
         np.issubdtype(f.dtype, np.floating) and np.all(np.isfinite(f)) and np.all(f == np.round(f))
     )

@@ -872,3 +872,14 @@ def test_a_concave_polygon_is_split_by_its_own_vertices(tmp_path: Path, ext: str
     area = 0.5 * ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
     assert (area > 0).all() and area[:6].sum() == pytest.approx(3.0)  # none flipped
     np.testing.assert_array_equal(tris[6:], [quad[:3], [quad[0], quad[2], quad[3]]])
+
+
+def test_a_comma_header_over_whitespace_columns_is_read(tmp_path) -> None:
+    # the separator came from the header too: every data line was refused (user test)
+    for header, want in (("x, y, z", [1.0, 2.0, 3.0]), ("id, x, y, z", [2.0, 3.0, 4.0])):
+        src = tmp_path / "h.xyz"
+        cols = 4 if header.startswith("id") else 3
+        rows = "\n".join(" ".join(str(v + i) for v in range(1, cols + 1)) for i in range(5))
+        src.write_text(f"{header}\n{rows}\n")
+        pts, _ = read_geometry(src)
+        assert pts.shape == (5, 3) and pts[0].tolist() == want

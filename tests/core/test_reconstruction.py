@@ -1484,6 +1484,9 @@ def test_a_slot_whose_fan_bulges_away_along_a_bend_is_clipped(monkeypatch):
                                     r"points\[points\[:, 2\] != -9999\]"),
         ("mesh fill", InvalidInputError, "3 of the 36 vertices have z = -32768, far below"),
         ("masked", InvalidInputError, r"3 points are masked.*points\[~points.mask.any"),
+        # (refused as non-manifold edges: user test)
+        ("transposed faces", InvalidInputError, r"got shape \(3, 48\), 3 polygons of 48 "
+                                                r"vertices: transposed\? pass faces.T"),
     ],
 )
 def test_bad_input_raises_a_specific_error(case, error, words):
@@ -1518,6 +1521,9 @@ def test_bad_input_raises_a_specific_error(case, error, words):
         points, faces = grid_with_hole()
         points = np.array(points, dtype=np.float64)
         points[:3, 2] = -32768.0
+    elif case == "transposed faces":
+        points, faces = grid_with_hole(6)
+        faces = faces.T
     elif case == "masked":
         mask = np.zeros(points.shape, dtype=bool)
         mask[[3, 8, 9], 2] = True
