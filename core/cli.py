@@ -368,7 +368,10 @@ def _fit(args) -> int:
     ]
     if "refit" in r:
         refit = r["refit"]
-        rows.append(("final fit", f"all {refit['points']} points ({refit['seconds']:.1f} s; "
+        extra = refit["points"] - r["points"]  # a mesh's: the points sampled on its faces
+        what = (f"{r['points']} vertices and the {extra} points sampled on the faces" if extra > 0
+                else f"{refit['points']} points")
+        rows.append(("final fit", f"all {what} ({refit['seconds']:.1f} s; "
                                   "the iterations fitted a random subset)"))
     rows += [
         ("RMS error", f"{r['rms']:.4g} ({r['rms_rel']:.2e} of the diagonal)"),

@@ -38,6 +38,7 @@ MAX_THREADS = 4
 _pools: dict = {}  # thread count -> task queue served by that many daemon threads
 _pools_lock = threading.Lock()
 _inside = threading.local()
+_warned: set = set()  # the values of TCB_THREADS warned of
 
 
 def thread_count() -> int:
@@ -47,8 +48,10 @@ def thread_count() -> int:
         try:
             return max(1, int(env))
         except ValueError:
-            warnings.warn(f"TCB_THREADS must be a whole number, got {env!r}; ignoring it",
-                          RuntimeWarning, stacklevel=2)
+            if env not in _warned:  # once per value (a fit asked three times: user test)
+                _warned.add(env)
+                warnings.warn(f"TCB_THREADS must be a whole number, got {env!r}; ignoring it",
+                              RuntimeWarning, stacklevel=2)
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux

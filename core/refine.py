@@ -16,6 +16,7 @@ rms_rel, max_rel, seconds) and may return True to cancel: the best surface so fa
 from __future__ import annotations
 
 import copy
+import inspect
 import time
 import warnings
 from dataclasses import dataclass
@@ -135,11 +136,22 @@ class RefineOptions:
 
 
 def check_callback(callback) -> None:
-    """Refuse a ``callback`` that is neither None nor callable (before any work is done)."""
+    """Refuse a ``callback`` that is neither None nor callable, or that cannot take one
+    argument (before any work is done: one without arguments failed after the first fit with
+    a TypeError; user test)."""
     if callback is not None and not callable(callback):
         raise InvalidInputError(
             f"callback must be a function callback(report) -> bool (or None), got {callback!r}"
         )
+    if callback is not None:
+        try:
+            inspect.signature(callback).bind({})
+        except ValueError:  # (no signature to read, as for some builtins: called as it is)
+            pass
+        except TypeError:
+            raise InvalidInputError(
+                f"callback must take one argument, the iteration's report (callback(report) "
+                f"-> bool); {getattr(callback, '__name__', callback)!r} cannot") from None
 
 
 def _cancel_requested(callback, report: dict) -> bool:

@@ -27,8 +27,10 @@ def test_thread_count_follows_the_environment(monkeypatch):
     default = thread_count()
     assert 1 <= default <= 4
     monkeypatch.setenv("TCB_THREADS", "many")
-    with pytest.warns(RuntimeWarning, match="TCB_THREADS"):
+    with pytest.warns(RuntimeWarning, match="TCB_THREADS") as caught:
         assert thread_count() == default
+        assert thread_count() == default  # (warned once: a fit asks often; user test)
+    assert len([w for w in caught if "TCB_THREADS" in str(w.message)]) == 1
 
 
 def _within(seconds, fn):

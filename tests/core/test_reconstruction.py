@@ -1556,6 +1556,7 @@ def test_bad_input_raises_a_specific_error(case, error, words):
         ({"mode": "tcbx"}, "mode must be 'tcb' or 'dcb' \\(any case\\), got 'tcbx'"),
         ({"criterion": "mean"}, "criterion must be 'rms' or 'max'"),
         ({"callback": 5}, "callback must be a function"),
+        ({"callback": lambda: None}, "callback must take one argument"),  # (after a fit: user test)
     ],
 )
 def test_bad_options_raise_a_specific_error_before_the_fit(options, words):
