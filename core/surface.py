@@ -473,7 +473,11 @@ class TCBSurface:
         keep &= np.abs(det) > 1e-6 * d * d
         tri = np.vstack([cells, np.where((det < 0)[:, None], tri[:, [0, 2, 1]], tri)[keep]])
         if trim is not None:
-            tri = tri[tree.query(uv[tri].mean(axis=1))[0] <= trim]
+            # the search bounded (a hair beyond trim: the same test): unbounded, the triangles
+            # in the empty middle of a ring's hull, nearly as far from all data, took 39 of 40 s
+            # of a tessellation at 1024 (user test)
+            far = tree.query(uv[tri].mean(axis=1), distance_upper_bound=trim * (1 + 1e-9))[0]
+            tri = tri[far <= trim]
         return tri
 
     def tessellate(self, resolution: int = 64) -> tuple[np.ndarray, np.ndarray]:
