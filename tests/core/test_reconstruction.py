@@ -1285,6 +1285,12 @@ def test_refine_refuses_other_points_of_the_same_count(tmp_path):
     surf = fit_surface(far.astype(np.float64), max_iterations=1, max_control_points=150)
     again = ((far * np.float32(3.0)) / np.float32(3.0)).astype(np.float64)
     assert not np.array_equal(again, far.astype(np.float64)) and surf.fitted_to(again)
+    # ... for float32 values only: float64 data at UTM northings (cm precision) shifted by
+    # 0.8 m had passed, 4 float32 steps of 5e6 being 1.2 m (user test)
+    utm = np.round(points * 50 + [512345.67, 5123456.78, 250.0], 2)
+    surf = fit_surface(utm, max_iterations=1, max_control_points=150)
+    assert surf.fitted_to(utm.copy()) and not surf.fitted_to(utm + [0.8, 0.0, 0.0])
+    assert not surf.fitted_to(utm + [0.0, 0.0, 0.3])
 
 
 def closed_octahedron():
