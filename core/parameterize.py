@@ -1595,7 +1595,7 @@ def parameterize_points(
             f"thickness across its best-fit plane is {100 * sv[2] / sv[1]:.0f}% of its width). If the surface is a height field over a known "
             "direction, give it (fit_surface(..., projection=\"z\"), on the command line "
             "--projection z, in Blender the Projection option); otherwise smooth the scan "
-            "or supply a mesh of disk topology (with faces)"
+            "or supply a mesh of disk topology (with faces)" + _degrees_note(points)
         )
     # the most height-field-like direction first; if the cloud folds over that plane, the
     # other candidates (a steep height field far taller than wide, Renka's F7, has a vertical
