@@ -852,8 +852,9 @@ class TCBSurface:
         :meth:`with_control_points` edit) at its own parameters is its fitted error within
         :data:`ROUNDING_RTOL` of the diagonal or, when ``points`` are float32 values, 4 float32
         steps of the largest coordinate (float32 coordinates rounded again: Blender's Apply
-        Rotation & Scale on the source was refused, user test). A point that moved by more changes that distance unless it moved
-        on a sphere around its surface point; another order of the points does not pass.
+        Rotation & Scale on the source was refused, user test). A point that moved by more
+        changes that distance unless it moved on a sphere around its surface point; another
+        order of the points does not pass.
         Points left out of the fit (outliers, loose vertices) are not compared."""
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or len(points) != len(self._param.uv):
@@ -1405,6 +1406,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         n_measured=None if subsampled else len(uv), domain=domain,
         balance=param.faces is None, start_degree=start_degree,
     )
+
     def data_checks(fit_state, errs):
         """The layers and spikes checks of a fit (below), for a cloud: the layers' gap and
         the spikes' (found, largest, more) or None (``spikes`` off), given the fit's errors
@@ -1492,7 +1494,9 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         report["faces_max"] = float(on_faces.max())
         report["faces_rms_rel"] = report["faces_rms"] / diagonal
         report["faces_max_rel"] = report["faces_max"] / diagonal
-        if report["faces_max"] > FACES_MAX_RATIO * report["max"]:
+        # (above rounding: a planar mesh is fitted to 1e-16 at its vertices and its faces)
+        if (report["faces_max"] > FACES_MAX_RATIO * report["max"]
+                and report["faces_max_rel"] > FACES_MIN_REL):
             warnings.warn(faces_warning(report), RuntimeWarning, stacklevel=3)
     if param.faces is None:
         # the RMS over the parameter area (core.refine.area_weights): a cloud of uneven density
@@ -1574,6 +1578,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
 # a mesh's fit is warned of when on its faces the largest error is over this many times the
 # largest at its vertices (the bundled meshes: 1.2-2.7x; a coarse CAD plate with a crease: 44x)
 FACES_MAX_RATIO = 4.0
+FACES_MIN_REL = 1e-6  # ... and that error is above this share of the diagonal
 
 
 def faces_warning(report: dict) -> str:
