@@ -168,14 +168,42 @@ def _build_nodes(ng) -> None:
         links.new(geometry_socket, node.inputs["Geometry"])
         return node.outputs["Point Count"]
 
-    expected = nodes.new("FunctionNodeIntegerMath")
-    expected.operation = "MULTIPLY"
-    links.new(count(gin.outputs["Geometry"]), expected.inputs[0])
-    links.new(gin.outputs["Terms"], expected.inputs[1])
-    same = nodes.new("FunctionNodeCompare")
-    same.data_type, same.operation = "INT", "EQUAL"
-    links.new(count(w_info.outputs["Geometry"]), _socket(same.inputs, "A_INT"))
-    links.new(expected.outputs["Value"], _socket(same.inputs, "B_INT"))
+    def int_math(operation, a, b):
+        """An Integer Math node on sockets (or a number for ``b``); its output."""
+        node = nodes.new("FunctionNodeIntegerMath")
+        node.operation = operation
+        links.new(a, node.inputs[0])
+        if isinstance(b, int):
+            node.inputs[1].default_value = b
+        else:
+            links.new(b, node.inputs[1])
+        return node.outputs["Value"]
+
+    def compare(operation, a, b):
+        node = nodes.new("FunctionNodeCompare")
+        node.data_type, node.operation = "INT", operation
+        links.new(a, _socket(node.inputs, "A_INT"))
+        links.new(b, _socket(node.inputs, "B_INT"))
+        return node.outputs["Result"]
+
+    def boolean(operation, a, b):
+        node = nodes.new("FunctionNodeBooleanMath")
+        node.operation = operation
+        links.new(a, node.inputs[0])
+        links.new(b, node.inputs[1])
+        return node.outputs["Boolean"]
+
+    def sample_int(geometry_socket, value, index):
+        node = nodes.new("GeometryNodeSampleIndex")
+        node.data_type, node.domain = "INT", "POINT"
+        links.new(geometry_socket, node.inputs["Geometry"])
+        links.new(value, node.inputs["Value"])
+        links.new(index, node.inputs["Index"])
+        return node.outputs["Value"]
+
+    w_count, net_count = count(w_info.outputs["Geometry"]), count(net_info.outputs["Geometry"])
+    expected = int_math("MULTIPLY", count(gin.outputs["Geometry"]), gin.outputs["Terms"])
+    same = compare("EQUAL", w_count, expected)
     # the largest index: a Field Min & Max read on the weights (Attribute Statistic would
     # also sort them for the median, 2x the time of the whole evaluation)
     min_max = nodes.new("GeometryNodeFieldMinAndMax")
@@ -185,49 +213,17 @@ def _build_nodes(ng) -> None:
     largest.data_type, largest.domain = "INT", "POINT"
     links.new(w_info.outputs["Geometry"], largest.inputs["Geometry"])
     links.new(min_max.outputs["Max"], largest.inputs["Value"])
-    covered = nodes.new("FunctionNodeCompare")
-    covered.data_type, covered.operation = "INT", "GREATER_THAN"
-    links.new(count(net_info.outputs["Geometry"]), _socket(covered.inputs, "A_INT"))
-    links.new(largest.outputs["Value"], _socket(covered.inputs, "B_INT"))
-    # weights with the net's point count in the tcb_vertex of one more point
-    w_count, net_count = count(w_info.outputs["Geometry"]), count(net_info.outputs["Geometry"])
-    plus_one = nodes.new("FunctionNodeIntegerMath")
-    plus_one.operation = "ADD"
-    links.new(expected.outputs["Value"], plus_one.inputs[0])
-    plus_one.inputs[1].default_value = 1
-    with_count = nodes.new("FunctionNodeCompare")
-    with_count.data_type, with_count.operation = "INT", "EQUAL"
-    links.new(w_count, _socket(with_count.inputs, "A_INT"))
-    links.new(plus_one.outputs["Value"], _socket(with_count.inputs, "B_INT"))
-    last = nodes.new("FunctionNodeIntegerMath")
-    last.operation = "SUBTRACT"
-    links.new(w_count, last.inputs[0])
-    last.inputs[1].default_value = 1
-    stored = nodes.new("GeometryNodeSampleIndex")
-    stored.data_type, stored.domain = "INT", "POINT"
-    links.new(w_info.outputs["Geometry"], stored.inputs["Geometry"])
-    links.new(vertex.outputs["Attribute"], stored.inputs["Value"])
-    links.new(last.outputs["Value"], stored.inputs["Index"])
-    net_exact = nodes.new("FunctionNodeCompare")
-    net_exact.data_type, net_exact.operation = "INT", "EQUAL"
-    links.new(net_count, _socket(net_exact.inputs, "A_INT"))
-    links.new(stored.outputs["Value"], _socket(net_exact.inputs, "B_INT"))
-    counted = nodes.new("FunctionNodeBooleanMath")
-    counted.operation = "AND"
-    links.new(with_count.outputs["Result"], counted.inputs[0])
-    links.new(net_exact.outputs["Result"], counted.inputs[1])
-    either = nodes.new("FunctionNodeBooleanMath")
-    either.operation = "OR"
-    links.new(same.outputs["Result"], either.inputs[0])
-    links.new(counted.outputs["Boolean"], either.inputs[1])
-    valid = nodes.new("FunctionNodeBooleanMath")
-    valid.operation = "AND"
-    links.new(either.outputs["Boolean"], valid.inputs[0])
-    links.new(covered.outputs["Result"], valid.inputs[1])
+    covered = compare("GREATER_THAN", net_count, largest.outputs["Value"])
+    # weights with one more point, whose tcb_vertex is the net's point count
+    stored = sample_int(w_info.outputs["Geometry"], vertex.outputs["Attribute"],
+                        int_math("SUBTRACT", w_count, 1))
+    counted = boolean("AND", compare("EQUAL", w_count, int_math("ADD", expected, 1)),
+                      compare("EQUAL", net_count, stored))
+    valid = boolean("AND", boolean("OR", same, counted), covered)
     switch = nodes.new("GeometryNodeSwitch")
     switch.input_type = "GEOMETRY"
     switch.name = switch.label = "Net and Weights Fit"
-    links.new(valid.outputs["Boolean"], switch.inputs["Switch"])
+    links.new(valid, switch.inputs["Switch"])
     links.new(gin.outputs["Geometry"], switch.inputs["False"])
     links.new(set_pos.outputs["Geometry"], switch.inputs["True"])
     links.new(switch.outputs["Output"], gout.inputs["Geometry"])
