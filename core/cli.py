@@ -296,10 +296,12 @@ def _fit(args) -> int:
             "or infinite coordinates; repair or delete them in a mesh editor (--drop-invalid "
             "applies to point clouds: a mesh's faces hold its vertices)"
         )
-    fill = fill_value_rows(points)
-    if fill is not None and faces is not None:
-        raise TCBError(f"{fill_value_words(fill, len(points), 'vertices')}: repair those "
-                       "vertices or cut them out in a mesh editor")
+    if faces is not None and len(faces):  # (a loose vertex is left out of a mesh's fit)
+        fill = fill_value_rows(points[in_faces])
+        if fill is not None:
+            raise TCBError(f"{fill_value_words(fill, len(fill[0]), 'vertices in faces')}: "
+                           "repair those vertices or cut them out in a mesh editor")
+    fill = fill_value_rows(points) if faces is None else None
     if fill is not None and not args.drop_invalid:  # (a no-data fill: user test)
         raise TCBError(f"{fill_value_words(fill, len(points))}; pass --drop-invalid to leave "
                        "them out")

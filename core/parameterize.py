@@ -105,10 +105,11 @@ def _as_points(points: np.ndarray, *, what: str = "points") -> np.ndarray:
     if np.ma.isMaskedArray(points) and np.ma.getmaskarray(points).any():
         # (the values under the mask had been fitted as data: user test)
         mask = np.ma.getmaskarray(points)
-        rows = int(mask.reshape(len(mask), -1).any(axis=1).sum()) if mask.ndim else len(mask)
+        rows = int(mask.reshape(len(mask), -1).any(axis=1).sum()) if mask.ndim else 1
         raise InvalidInputError(
-            f"{rows} {what} are masked, and the values under a mask would be fitted as data: "
-            f"leave them out ({what}[~{what}.mask.any(axis=1)]) or fill them with NaN")
+            f"{rows} of the {what} {'is' if rows == 1 else 'are'} masked, and the values under "
+            f"a mask would be fitted as data: leave them out ({what}[~{what}.mask.any(axis=1)]) "
+            "or fill them with NaN")
     try:
         arr = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -154,7 +155,9 @@ def fill_value_words(found, total: int, what: str = "points") -> str:
     """How :func:`fill_value_rows`' find is told: the rows, the value, and what it is."""
     rows, j, value, lowest = found
     axis = "xyz"[j] if j < 3 else f"column {j}"
-    return (f"{int(rows.sum())} of the {total} {what} have {axis} = {value:g}, far below all "
+    k = int(rows.sum())
+    return (f"{k} of the {total} {what} {'has' if k == 1 else 'have'} {axis} = {value:g}, far "
+            "below all "
             f"others (lowest {lowest:g}): a no-data fill value (a raster exported to points "
             "keeps its empty cells with it), which would be fitted as data")
 
@@ -1735,9 +1738,11 @@ def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
             "the mesh has no faces; give faces of a disk-like patch, or parameterize the "
             "vertices as a point cloud (faces=None)"
         )
-    if len(f) in (3, 4) and f.shape[1] > 8:
+    if len(f) in (3, 4) and f.shape[1] > 8 and any(
+            len(np.unique(row)) < len(row) for row in np.asarray(f)):
         # (3, F) is a transposed (F, 3), not three F-gons (refused as non-manifold edges,
-        # which sent the user to repair a mesh that is fine: user test)
+        # which sent the user to repair a mesh that is fine: user test); a polygon repeats
+        # no vertex, a column of a mesh's faces does (three 11-gons are a mesh: review)
         raise InvalidInputError(
             f"faces must be an (F, 3) array of vertex indices (or (F, 4) quads); got shape "
             f"{f.shape}, {len(f)} polygons of {f.shape[1]} vertices: transposed? pass faces.T"

@@ -145,7 +145,8 @@ def check_callback(callback) -> None:
         )
     if callback is not None:
         try:
-            inspect.signature(callback).bind({})
+            # (not through functools.wraps: a decorator may call it with other arguments)
+            inspect.signature(callback, follow_wrapped=False).bind({})
         except ValueError:  # (no signature to read, as for some builtins: called as it is)
             pass
         except TypeError:

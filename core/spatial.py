@@ -52,6 +52,8 @@ class BoxIndex:
         self._bands = (None if diagonals is None else
                        [np.ascontiguousarray(np.asarray(diagonals, dtype=np.float64)
                                              .reshape(-1, 4)[:, j]) for j in range(4)])
+        if self._bands is not None and len(self._bands[0]) != len(boxes):
+            raise ValueError(f"{len(self._bands[0])} diagonal bands for {len(boxes)} boxes")
         if len(boxes) == 0:
             self.origin, self.cell, self.shape = np.zeros(2), 1.0, (1, 1)
             self.ptr = np.zeros(2, dtype=np.int64)
@@ -87,12 +89,18 @@ class BoxIndex:
             # columns a_lo - i .. a_hi - i and i - b_hi .. i - b_lo
             smin, smax, dmin, dmax = (np.take(b, box) for b in self._bands)
             os_, od, tol = lo[0] + lo[1], lo[0] - lo[1], 1e-6
+            big = float(nx + ny + 4)  # (clipped before the cast: a grid of point boxes has a
+            # step of 1e-300, and the bounds overflowed; review)
+
+            def whole(x):
+                return np.clip(x, -big, big).astype(np.int64)
+
             lo_j = np.maximum(lo_j, np.maximum(
-                np.ceil((smin - os_) / cell - 2 - tol).astype(np.int64) - ci,
-                ci - np.floor((dmax - od) / cell + 1 + tol).astype(np.int64)))
+                whole(np.ceil((smin - os_) / cell - 2 - tol)) - ci,
+                ci - whole(np.floor((dmax - od) / cell + 1 + tol))))
             hi_j = np.minimum(hi_j, np.minimum(
-                np.floor((smax - os_) / cell + tol).astype(np.int64) - ci,
-                ci - np.ceil((dmin - od) / cell - 1 - tol).astype(np.int64)))
+                whole(np.floor((smax - os_) / cell + tol)) - ci,
+                ci - whole(np.ceil((dmin - od) / cell - 1 - tol))))
         cnt = np.maximum(hi_j - lo_j + 1, 0)
         # sorted by cell, and by box within a cell (the order a point meets its boxes in):
         # one sort of unique keys (cell * C + box), faster than a stable argsort of the cells

@@ -12,6 +12,7 @@ import pytest
 
 from core import build_space, fit_surface
 from core.configurations import _close_links, _unique_rows, constrained_delaunay
+import core.parallel
 from core.parallel import background, pmap, row_blocks, thread_count
 from core.refine import make_space
 from core.triangulation import FeatureLinkTriangulator, PlaneFitCost
@@ -26,6 +27,7 @@ def test_thread_count_follows_the_environment(monkeypatch):
     monkeypatch.delenv("TCB_THREADS")
     default = thread_count()
     assert 1 <= default <= 4
+    monkeypatch.setattr(core.parallel, "_warned", set())  # (whatever warned before)
     monkeypatch.setenv("TCB_THREADS", "many")
     with pytest.warns(RuntimeWarning, match="TCB_THREADS") as caught:
         assert thread_count() == default

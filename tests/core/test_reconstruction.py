@@ -1499,8 +1499,10 @@ def test_a_slot_whose_fan_bulges_away_along_a_bend_is_clipped(monkeypatch):
         ("fill", InvalidInputError, r"20 of the 200 points have z = -9999, far below all "
                                     r"others \(lowest 0.0.*\): a no-data fill value.*"
                                     r"points\[points\[:, 2\] != -9999\]"),
-        ("mesh fill", InvalidInputError, "3 of the 36 vertices have z = -32768, far below"),
-        ("masked", InvalidInputError, r"3 points are masked.*points\[~points.mask.any"),
+        ("mesh fill", InvalidInputError, r"3 of the 36 vertices in faces have z = -32768, "
+                                         r"far below .*; repair those vertices or cut them out"),
+        ("loose fill", TopologyError, "boundary loops"),  # (a loose vertex is left out)
+        ("masked", InvalidInputError, r"3 of the points are masked.*points\[~points.mask.any"),
         # (refused as non-manifold edges: user test)
         ("transposed faces", InvalidInputError, r"got shape \(3, 48\), 3 polygons of 48 "
                                                 r"vertices: transposed\? pass faces.T"),
@@ -1538,6 +1540,9 @@ def test_bad_input_raises_a_specific_error(case, error, words):
         points, faces = grid_with_hole()
         points = np.array(points, dtype=np.float64)
         points[:3, 2] = -32768.0
+    elif case == "loose fill":
+        points, faces = grid_with_hole()
+        points = np.vstack([points, [0.0, 0.0, -9999.0]])
     elif case == "transposed faces":
         points, faces = grid_with_hole(6)
         faces = faces.T
@@ -2215,3 +2220,35 @@ def test_a_long_corridor_with_points_across_it_is_a_surface_and_a_thread_is_a_cu
     thread = P[:2000] * [1.0, 0.1, 1.0]  # 0.4 m wide: 0.4 spacings across
     with pytest.raises(InvalidInputError, match="the points lie almost on a curve"):
         fit_surface(thread, projection="z")
+    # one track wiggling 4 m wide: as many points, but on a curve (it had passed: review)
+    x = np.sort(rng.uniform(0, L, n))
+    with pytest.raises(InvalidInputError, match="the points lie almost on a curve"):
+        fit_surface(np.c_[x, 2 * np.sin(x / 37), 10 * np.sin(x / 300)], projection="z")
+
+
+def test_a_mesh_of_a_few_large_polygons_is_not_taken_for_transposed_faces():
+    # three 11-gons fan out into a disk (review: refused as "transposed" at first)
+    t = np.linspace(0, 2 * np.pi, 31)[:-1]
+    ring = np.c_[np.cos(t), np.sin(t), 0.1 * np.cos(2 * t)]
+    points = np.vstack([[0.0, 0.0, 0.0], ring, 0.5 * ring])
+    faces = np.array([[0] + [1 + (10 * k + j) % 30 for j in range(11)] for k in range(3)])
+    assert faces.shape == (3, 12)
+    surf = fit_surface(points, faces, max_iterations=1)  # (the inner ring: loose vertices)
+    assert surf.report["points"] == 31
+
+
+def test_a_callback_wrapped_by_a_decorator_is_taken_as_it_is_called():
+    import functools
+
+    def with_extra(fn):
+        @functools.wraps(fn)
+        def run(report):
+            return fn(report, "extra")
+        return run
+
+    @with_extra
+    def cb(report, extra):
+        return False
+
+    fit_surface(np.random.default_rng(0).random((300, 3)) * [1, 1, 0.1], max_iterations=1,
+                max_control_points=100, callback=cb)

@@ -340,6 +340,7 @@ def test_the_support_index_gives_the_same_basis_bits_as_the_plain_box_index(degr
     # the octagons only leave out pairs outside the supports (all zero): the basis and its
     # derivatives are the same bits, also on knot lines and at the knots
     space = build_space(knot_set("square", 40, degree, seed=3), degree)
+    assert space._index._bands is not None  # (the octagons are in use)
     plain = copy.copy(space)
     plain._index = BoxIndex(space._batch.bbox)
     k = np.asarray(space.knots)
@@ -352,3 +353,15 @@ def test_the_support_index_gives_the_same_basis_bits_as_the_plain_box_index(degr
         assert a.nnz == b.nnz and a.nnz > 0
         assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
         assert np.array_equal(a.data, b.data)
+
+
+def test_point_boxes_with_bands_keep_their_cell():
+    # every box a point: the grid step falls to 1e-300 (the bands' bounds had overflowed the
+    # integer cast and the box got no cell; review)
+    sets = np.array([[[1.0, 1.0]] * 5, [[2.0, 3.0]] * 5])
+    boxes = np.concatenate([sets.min(axis=1), sets.max(axis=1)], axis=1)
+    got = [(p.tolist(), b.tolist()) for p, b in
+           BoxIndex(boxes, diagonals=support_bands(sets)).pairs(np.array([[1.0, 1.0], [2.0, 3.0]]))]
+    assert sorted(zip(got[0][0], got[0][1])) == [(0, 0), (1, 1)]
+    with pytest.raises(ValueError, match="2 diagonal bands for 1 boxes"):
+        BoxIndex(boxes[:1], diagonals=support_bands(sets))
