@@ -842,7 +842,7 @@ class TCBSurface:
         return self._closest(points, callback=callback)[1]
 
     # ---- refinement --------------------------------------------------------------------
-    def fitted_to(self, points) -> bool:
+    def fitted_to(self, points, rounding: float = 0.0) -> bool:
         """Whether ``points`` are the data this surface was fitted to: the same count and (for
         surfaces that keep ``report["data_digest"]``; older files do not) the same values in
         the same order, or values that differ from them only by rounding. :meth:`refine` needs
@@ -850,11 +850,14 @@ class TCBSurface:
 
         Rounding: each point's distance to the fitted surface (before any
         :meth:`with_control_points` edit) at its own parameters is its fitted error within
-        :data:`ROUNDING_RTOL` of the diagonal or, when ``points`` are float32 values, 4 float32
-        steps of the largest coordinate (float32 coordinates rounded again: Blender's Apply
-        Rotation & Scale on the source was refused, user test). A point that moved by more
-        changes that distance unless it moved on a sphere around its surface point; another
-        order of the points does not pass.
+        :data:`ROUNDING_RTOL` of the diagonal or ``rounding`` (in the data's units: what the
+        caller knows its values were rounded by since the fit; Blender passes 4 float32 steps
+        of the largest coordinate, for its float32 coordinates rounded again by Apply Rotation
+        & Scale, which had been refused: user test). The allowance is not guessed from the
+        values: float64 data at UTM northings got 1.2 m of it, and data shifted by 0.8 m
+        passed (user test, review). A point that moved by more changes that distance unless it
+        moved on a sphere around its surface point; another order of the points does not
+        pass.
         Points left out of the fit (outliers, loose vertices) are not compared."""
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or len(points) != len(self._param.uv):
@@ -865,20 +868,18 @@ class TCBSurface:
         if points.shape[1] != 3 or not np.isfinite(points).all():
             return False
         used = np.asarray(self._param.used, dtype=bool)
-        # 4 float32 steps only for float32 values (Blender's): float64 data at UTM northings
-        # had an allowance of 1.2 m, and data shifted by 0.8 m passed (user test)
-        f32 = np.array_equal(points[used], points[used].astype(np.float32))
-        tol = max(ROUNDING_RTOL * float(self._report.get("diagonal", 0.0)),
-                  4 * 2.0**-24 * float(np.abs(points[used]).max(initial=0.0)) if f32 else 0.0)
+        tol = max(ROUNDING_RTOL * float(self._report.get("diagonal", 0.0)), float(rounding))
         A = self._space.evaluate(np.asarray(self._param.uv)[used])
         far = np.linalg.norm(A @ self._fitted_c - points[used], axis=1)
         return bool(tol > 0 and np.all(np.abs(far - self._errors[used]) <= tol))
 
-    def refine(self, points, faces=None, callback=None, **changes) -> "TCBSurface":
+    def refine(self, points, faces=None, callback=None, rounding: float = 0.0,
+               **changes) -> "TCBSurface":
         """Continue the adaptive loop from this surface on the same data.
 
         ``points`` (and ``faces``) must be the data this surface was fitted to (the same
-        values in the same order: a digest of them is kept in ``report["data_digest"]``);
+        values in the same order: a digest of them is kept in ``report["data_digest"]``; or
+        values within rounding of them, see :meth:`fitted_to` and its ``rounding``);
         ``changes`` override settings (the fields of :class:`RefineOptions`), e.g.
         ``tolerance=``, ``max_control_points=``, ``max_iterations=`` (default: 5 more
         iterations); an unknown name is an :class:`InvalidInputError`.
@@ -889,7 +890,7 @@ class TCBSurface:
                 "refine() needs the points this surface was fitted to "
                 f"({len(self._param.uv)} points, got {len(points)})"
             )
-        if not self.fitted_to(points):
+        if not self.fitted_to(points, rounding):
             _check_finite(points)  # the more specific message first
             raise InvalidInputError(
                 f"refine() needs the {len(points)} points this surface was fitted to, in the "
@@ -1169,7 +1170,8 @@ def _user_path(path) -> Path:
 # data that differ from the data a surface was fitted to by at most this share of its diagonal
 # (per point, in its distance to the surface) count as the same for refine(): float32 coordinates
 # rounded again (Blender's Apply Rotation & Scale; about 17 float32 steps of the data's extent;
-# fitted_to also allows 4 steps of the largest coordinate, for data far from the origin)
+# Blender also passes 4 steps of the largest coordinate to fitted_to, for data far from the
+# origin)
 ROUNDING_RTOL = 1e-6
 
 

@@ -48,6 +48,13 @@ class InputData:
     # source name -> its modifiers as "Kind 'name'" ("(not applied)" after those not applied)
     modifiers: dict = field(default_factory=dict)
 
+    @property
+    def rounding(self) -> float:
+        """What the points may have been rounded by since a fit (TCBSurface.fitted_to): 4
+        float32 steps of their largest coordinate (Blender keeps float32 coordinates: Apply
+        Rotation & Scale rounds them again)."""
+        return 4 * 2.0**-24 * float(np.abs(self.points).max(initial=0.0))
+
     def modifier_note(self, applied_only: bool = True) -> str | None:
         """The sources' modifiers in words, or None when they have none: ``applied_only``
         names only those the input was read through (on in the viewport, source shown)."""

@@ -980,7 +980,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             # its faces as they were read then (review: "changed since ... (other faces)")
             faces = np.ascontiguousarray(faces[:, ::-1])
         faces_changed = key is not None and (faces is None or digest(faces) != key)
-        same_points = surf.fitted_to(data.points)  # (a digest of all points: once)
+        same_points = surf.fitted_to(data.points, data.rounding)  # (a digest: once)
         if not same_points or faces_changed:
             names = ", ".join(repr(o.name) for o in data.sources)
             then, now = len(surf.parameterization.uv), len(data.points)
@@ -1004,7 +1004,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                           ] if edited else []
         self._engine = []
         return ("run", _as_stored(_recording(surf.refine, self._engine), st.resolution),
-                dict(points=data.points, faces=faces, **self._settings))
+                dict(points=data.points, faces=faces, rounding=data.rounding,
+                     **self._settings))
 
     def finish(self, context, surf):
         surface = self._surface
@@ -1128,7 +1129,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         # the source moved or edited since the fit: the distances measure that, not the fit
         # (user test: RMS 0.2 for a fit of 1.4e-4, and nothing said why; Refine refuses)
         changed = None
-        if not surf.fitted_to(data.points):
+        if not surf.fitted_to(data.points, data.rounding):
             # a source hidden since the fit is read without its modifiers: nothing was
             # edited, and fitting it again would fit the other shape (user test)
             unmodified = [n for n in data.notes if "read without its modifiers" in n]

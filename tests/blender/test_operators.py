@@ -557,14 +557,18 @@ def test_a_net_with_a_deleted_vertex_is_named_when_its_edits_are_ignored(clean_s
     assert any(e[0] == "label" and "edits are ignored" in e[1] for e in log)
 
 
-def test_refine_after_applying_the_sources_rotation_and_scale(clean_scene):
+@pytest.mark.parametrize("size, offset", [(1.0, 0.0), (200.0, 2e4)])
+def test_refine_after_applying_the_sources_rotation_and_scale(clean_scene, size, offset):
     """Apply Rotation & Scale (Ctrl+A) on the source rounds its float32 vertices again: the
     world coordinates change by rounding only. Refine refused it as a changed source (user
-    test); it now refines, and a source moved for real is still refused. (Not the quadratic
-    grid: on the rectangle a grid mesh maps to, it is fitted to 4e-5 at once.)"""
+    test); it now refines, and a source moved for real is still refused. Also with the mesh's
+    vertices far from its origin, as an import with map coordinates gives them (review: the
+    engine no longer guesses the allowance; Blender gives it). (Not the quadratic grid: on
+    the rectangle a grid mesh maps to, it is fitted to 4e-5 at once.)"""
     bpy = clean_scene
-    verts, faces = grid(16, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y))
-    src = add_mesh(bpy, "Patch", verts, faces)
+    verts, faces = grid(16, size=size, f=lambda x, y: 0.3 * size * np.sin(2 * x / size)
+                        * np.cos(2 * y / size))
+    src = add_mesh(bpy, "Patch", verts + [offset, 2 * offset, 0.0], faces)
     src.rotation_euler, src.scale, src.location = (0.4, 0.2, 0.7), (2.0, 1.0, 0.5), (3.0, -1.0, 2.0)
     bpy.context.view_layer.update()
     assert fit(bpy, src, tolerance=2e-3, max_control_points=200) == {"FINISHED"}
@@ -575,7 +579,7 @@ def test_refine_after_applying_the_sources_rotation_and_scale(clean_scene):
     with bpy.context.temp_override(**select(bpy, surface)):
         assert bpy.ops.tcb.refine(tolerance=1e-4) == {"FINISHED"}  # the fit: 2.4e-4
     assert surface.tcb.control_points > n0
-    src.location.x += 0.01
+    src.location.x += 0.01 * size
     bpy.context.view_layer.update()
     with bpy.context.temp_override(**select(bpy, surface)):
         with pytest.raises(RuntimeError, match=r"'Patch' changed since .* use Fit Surface"):

@@ -1291,17 +1291,23 @@ def test_refine_refuses_other_points_of_the_same_count(tmp_path):
         edited = s.with_control_points(s.control_points + [0.0, 0.0, 0.05])
         assert edited.fitted_to(rounded) and not edited.fitted_to(moved)
     # float32 rounding grows with the coordinates, not the cloud's size (review: a patch 1000
-    # diagonals from the origin was refused): 4 float32 steps of the largest coordinate
+    # diagonals from the origin was refused): the caller passes what it rounded by (Blender:
+    # 4 float32 steps of the largest coordinate)
     far = (points + 1000.0).astype(np.float32)
     surf = fit_surface(far.astype(np.float64), max_iterations=1, max_control_points=150)
     again = ((far * np.float32(3.0)) / np.float32(3.0)).astype(np.float64)
-    assert not np.array_equal(again, far.astype(np.float64)) and surf.fitted_to(again)
-    # ... for float32 values only: float64 data at UTM northings (cm precision) shifted by
-    # 0.8 m had passed, 4 float32 steps of 5e6 being 1.2 m (user test)
+    steps = 4 * 2.0**-24 * np.abs(again).max()
+    assert not np.array_equal(again, far.astype(np.float64))
+    assert surf.fitted_to(again, rounding=steps)
+    assert surf.refine(again, rounding=steps, max_iterations=1).report["iterations"] == 2
+    # ... never guessed: float64 data at UTM northings (cm precision) shifted by 0.8 m had
+    # passed, 4 float32 steps of 5e6 being 1.2 m (user test), and float32-valued data so
+    # after a first fix (review)
     utm = np.round(points * 50 + [512345.67, 5123456.78, 250.0], 2)
-    surf = fit_surface(utm, max_iterations=1, max_control_points=150)
-    assert surf.fitted_to(utm.copy()) and not surf.fitted_to(utm + [0.8, 0.0, 0.0])
-    assert not surf.fitted_to(utm + [0.0, 0.0, 0.3])
+    for data in (utm, utm.astype(np.float32).astype(np.float64)):
+        surf = fit_surface(data, max_iterations=1, max_control_points=150)
+        assert surf.fitted_to(data.copy()) and not surf.fitted_to(data + [0.8, 0.0, 0.0])
+        assert not surf.fitted_to(data + [0.0, 0.0, 0.3])
 
 
 def closed_octahedron():
