@@ -781,7 +781,9 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         cached = _cache_get(self._key)
         self._reused = cached is not None
         if cached is not None:
-            # with that fit's warnings and seconds (they had been dropped: user test)
+            # with that fit's warnings and seconds (they had been dropped: user test); the
+            # entry becomes the newest (least recently used first out; review)
+            _FIT_CACHE[self._key] = _FIT_CACHE.pop(self._key)
             self._engine, self._reused_seconds = list(cached[1]), cached[2]
             return ("done", cached[0])
         core = _core()
@@ -804,11 +806,16 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 # cloud, objects merged: user test, the error spoke of a cloud only)
                 extra += list(data.notes)
                 text = str(ex)
+                if "a no-data fill value" in text:  # (in Blender's words: review)
+                    text = text.split("; leave those rows out")[0].split("; repair those")[0]
+                    text += ("; delete those vertices (in Edit Mode, e.g. box-select them in a "
+                             "side view) and fit again")
                 if len(data.sources) == 1 and f"'{data.name}'" not in text:
                     # which object (a metaball's "the mesh is closed" named none: user test)
                     src = data.sources[0]
                     kind = {"MESH": "", "META": " (a metaball)", "FONT": " (a text)",
-                            "POINTCLOUD": ""}.get(src.type, f" (a {src.type.lower()})")
+                            "CURVES": " (hair curves)", "POINTCLOUD": ""}.get(
+                        src.type, f" (a {src.type.lower()})")
                     text = f"'{data.name}'{kind}: {text}"
                 ex.args = (f"{text} ({'; '.join(extra)})" if extra else text,)
                 raise ex from None
@@ -818,8 +825,6 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 dict(points=data.points, faces=data.faces, **kwargs))
 
     def finish(self, context, surf):
-        if not getattr(self, "_reused", False):
-            _cache_put(self._key, surf, self._engine)
         data = self._data
         name = data.name
         kept = []

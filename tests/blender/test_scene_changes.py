@@ -381,3 +381,30 @@ def test_a_refused_object_is_named(clean_scene):
     bpy.ops.object.metaball_add()
     with pytest.raises(RuntimeError, match=r"Error: 'Mball' \(a metaball\): the mesh is closed"):
         bpy.ops.tcb.fit_surface()
+
+
+def test_a_no_data_fill_value_is_refused_in_blenders_words(clean_scene):
+    bpy = clean_scene
+    rng = np.random.default_rng(0)
+    pts = np.c_[rng.random((2000, 2)) * 100, rng.random(2000)]
+    pts[:50, 2] = -9999.0
+    src = add_mesh(bpy, "Tile", pts)
+    with pytest.raises(RuntimeError, match=r"'Tile': 50 of the 2000 points have z = -9999, far "
+                                           r"below .*; delete those vertices \(in Edit Mode") as err:
+        fit(bpy, src)
+    assert "points[" not in str(err.value)
+
+
+def test_a_reused_fit_stays_in_the_cache_as_the_newest(clean_scene, addon, monkeypatch):
+    """Fit A, fit B, A again (reused), fit C: A had been dropped first (review)."""
+    bpy = clean_scene
+    core = scenes.core_module()
+    calls = []
+    real = core.fit_surface
+    monkeypatch.setattr(core, "fit_surface", lambda *a, **k: calls.append(1) or real(*a, **k))
+    objs = [add_mesh(bpy, name, *wave()) for name in "ABC"]
+    objs[1].location.x, objs[2].location.x = 5.0, 10.0
+    for obj in (objs[0], objs[1], objs[0], objs[2], objs[0]):
+        bpy.context.view_layer.update()
+        assert fit(bpy, obj) == {"FINISHED"}
+    assert len(calls) == 3  # A, B, C: both later fits of A reused the first
