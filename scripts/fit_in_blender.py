@@ -56,8 +56,8 @@ BLENDER_IMPORT = {".ply": "ply_import", ".obj": "obj_import"}
 OTHER_FORMATS = (".off", ".xyz", ".txt", ".csv", ".pts", ".npy", ".npz")
 EXPORT_FORMATS = {".obj": "obj_export", ".ply": "ply_export"}
 # the limits of the Fit settings (tcb_addon/properties.py; this script checks them before
-# Blender starts)
-MIN_BUDGET, MAX_RESOLUTION = 10, 2048
+# Blender starts), and of Blender's integer settings
+MIN_BUDGET, MAX_RESOLUTION, MIN_TOLERANCE, MAX_INT = 10, 2048, 1e-9, 2**31 - 1
 # keep the coordinates of the file (Blender's OBJ importer would turn Y-up into Z-up)
 SAME_AXES = dict(forward_axis="Y", up_axis="Z")
 T0 = time.perf_counter()
@@ -159,18 +159,19 @@ def parse_args(args: list[str]) -> argparse.Namespace:
         ns.render_size = (w, h)
     except ValueError:
         ap.error(f"--render-size must look like 640x480, not {ns.render_size!r}")
-    if ns.samples < 1:
-        ap.error("--samples must be at least 1")
     # the limits of the Fit settings in Blender, which would clamp a value beyond them
     # silently (a tolerance of -1 ran as 1e-9, --resolution 0 as 2: user test)
-    if not (ns.tolerance >= 0 and math.isfinite(ns.tolerance)):
-        ap.error(f"--tolerance must be a nonnegative number (0: refine to the budget), "
+    if not (ns.tolerance == 0 or MIN_TOLERANCE <= ns.tolerance < math.inf):
+        ap.error(f"--tolerance must be 0 (refine to the budget) or at least {MIN_TOLERANCE:g}, "
                  f"got {ns.tolerance:g}")
     for option, value, least in (("--max-control-points", ns.max_control_points, MIN_BUDGET),
                                  ("--max-iterations", ns.max_iterations, 1),
-                                 ("--resolution", ns.resolution, 2)):
+                                 ("--resolution", ns.resolution, 2),
+                                 ("--samples", ns.samples, 1)):
         if value < least:
             ap.error(f"{option} must be at least {least}, got {value}")
+        if value > MAX_INT:  # (Blender's settings are 32-bit: a traceback; review)
+            ap.error(f"{option} must be at most {MAX_INT}, got {value}")
     if ns.resolution > MAX_RESOLUTION:
         ap.error(f"--resolution must be at most {MAX_RESOLUTION}, got {ns.resolution}")
     return ns
@@ -198,9 +199,11 @@ def check_paths(ns: argparse.Namespace) -> None:
             continue
         # never over the input (--export scan.obj replaced the scan with the surface: user
         # test), and a folder that can take the file, found before the fit, not after it
-        if path.exists() and path.resolve() == src.resolve():
+        if path.exists() and (path.resolve() == src.resolve() or os.path.samefile(path, src)):
             raise ScriptError(f"{option} {path} is the input file: the input is never "
                               "overwritten; write the output to another file")
+        if path.is_dir():  # (found after the fit, when the save failed: review)
+            raise ScriptError(f"{option} {path} is a folder: give a file name")
         folder = path.resolve().parent  # made if missing: its nearest existing folder
         while not folder.exists() and folder != folder.parent:
             folder = folder.parent

@@ -134,8 +134,10 @@ def test_a_mesh_with_a_hole_is_fitted_with_fill_holes(tmp_path):
 
 
 @pytest.mark.parametrize("option, value, words", [
-    ("--tolerance", "-1", "--tolerance must be a nonnegative number"),
-    ("--tolerance", "nan", "--tolerance must be a nonnegative number"),
+    ("--tolerance", "-1", "--tolerance must be 0 (refine to the budget) or at least 1e-09"),
+    ("--tolerance", "nan", "--tolerance must be 0 (refine to the budget) or at least 1e-09"),
+    ("--tolerance", "1e-12", "--tolerance must be 0 (refine to the budget) or at least 1e-09"),
+    ("--max-iterations", "99999999999", "--max-iterations must be at most 2147483647"),
     ("--max-control-points", "5", "--max-control-points must be at least 10, got 5"),
     ("--max-iterations", "0", "--max-iterations must be at least 1, got 0"),
     ("--resolution", "0", "--resolution must be at least 2, got 0"),
@@ -166,11 +168,16 @@ def test_outputs_over_the_input_or_where_they_cannot_be_written_are_refused_firs
                    + "".join(f"f {i * n + j + 1} {(i + 1) * n + j + 1} {i * n + j + 2}\n"
                              for i in range(n - 1) for j in range(n - 1)))
     before = src.read_bytes()
+    link = tmp_path / "same.obj"
+    os.link(src, link)
+    (tmp_path / "d.png").mkdir()
     for args, words in (
         (["--export", src], "--export"),
         (["--export", tmp_path / "." / "scan.obj"], "is the input file"),
         (["--render", src / "r.png"], "is a file, not a folder"),
         (["--export", src / "sub" / "s.obj"], "is a file, not a folder"),
+        (["--export", link], "is the input file"),  # (a hard link: review)
+        (["--render", tmp_path / "d.png"], "is a folder: give a file name"),
     ):
         proc = run_script(src, "-o", tmp_path / "x.blend", *args, timeout=60)
         assert words in _error_line(proc)
