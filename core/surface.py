@@ -1588,12 +1588,11 @@ def faces_warning(report: dict) -> str:
     """The words for a mesh fitted far from its faces between the vertices (``_run``)."""
     return (f"at the points the fit sampled on the mesh's faces, between its vertices, the "
             f"surface is up to {report['faces_max']:.4g} off ({report['faces_max_rel']:.2e} of "
-            f"the diagonal; report['faces_max']), "
-            f"{report['faces_max'] / max(report['max'], 1e-300):.0f} times the largest error at "
-            f"the vertices ({report['max']:.4g}), which the report's errors are: long faces the "
-            "spline does not follow, as at a sharp crease of a coarse CAD mesh, and it may be "
-            "farther between those points; a finer mesh (subdivided or remeshed) holds the "
-            "surface to the faces there")
+            f"the diagonal), {report['faces_max'] / max(report['max'], 1e-300):.0f} times the "
+            f"largest error at the vertices ({report['max']:.4g}; the errors reported are "
+            "those at the vertices), and it may be farther between those points: the spline "
+            "does not follow long faces there, as at a sharp crease of a coarse CAD mesh; a "
+            "finer mesh (subdivided or remeshed) holds the surface to the faces")
 
 
 def far_stall_check(surf: "TCBSurface", points: np.ndarray, seed: int = 0) -> None:
