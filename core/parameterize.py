@@ -156,10 +156,9 @@ def fill_value_words(found, total: int, what: str = "points") -> str:
     rows, j, value, lowest = found
     axis = "xyz"[j] if j < 3 else f"column {j}"
     k = int(rows.sum())
-    return (f"{k} of the {total} {what} {'has' if k == 1 else 'have'} {axis} = {value:g}, far "
-            "below all "
-            f"others (lowest {lowest:g}): a no-data fill value (a raster exported to points "
-            "keeps its empty cells with it), which would be fitted as data")
+    return (f"{k} of the {total} {what} {'has' if k == 1 else 'have'} {axis} = {value:g}, "
+            f"far below all others (lowest {lowest:g}): a no-data fill value (a raster "
+            "exported to points keeps its empty cells with it), which would be fitted as data")
 
 
 def _check_finite(points: np.ndarray, *, what: str = "points") -> None:
@@ -1140,8 +1139,9 @@ def isolated_points(
         rest[sample] = False
         rest = np.flatnonzero(rest)
         # the points sharing a grid cell of side gap / 2 with a non-candidate are within the
-        # gap of it (the cell's diagonal is 0.87 gap): only the others are queried (the same
-        # points as querying all of them, 0.04 s of 0.06 at 1e5 points)
+        # gap of it (the cell's diagonal is 0.87 gap): only the others are queried, with the
+        # same result (the query of all of them took 0.04 s of this function's 0.06 at 1e5
+        # points)
         lonely = rest[_without_cellmate(q[rest], ref[solid], 0.5 * gap)]
         far = lonely
         if len(lonely):

@@ -777,6 +777,15 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             kwargs["projection"] = None
             self._ignored.append(f"Projection applies to point clouds: '{data.name}' is a "
                                  "mesh, mapped through its faces")
+        # a raster's no-data fill value, in Blender's words (the engine's are Python: review)
+        held = data.points if data.faces is None else data.points[np.unique(data.faces)]
+        fill = _core().parameterize.fill_value_rows(held)
+        if fill is not None:
+            words = _core().parameterize.fill_value_words(
+                fill, len(held), "points" if data.faces is None else "vertices in faces")
+            raise bridge.SelectionError(
+                f"'{data.name}': {words}; delete those vertices (in Edit Mode, e.g. box-select "
+                "them in a side view) and fit again")
         self._key = (data.digest(), tuple(sorted(kwargs.items())))
         cached = _cache_get(self._key)
         self._reused = cached is not None
@@ -806,10 +815,6 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 # cloud, objects merged: user test, the error spoke of a cloud only)
                 extra += list(data.notes)
                 text = str(ex)
-                if "a no-data fill value" in text:  # (in Blender's words: review)
-                    text = text.split("; leave those rows out")[0].split("; repair those")[0]
-                    text += ("; delete those vertices (in Edit Mode, e.g. box-select them in a "
-                             "side view) and fit again")
                 if len(data.sources) == 1 and f"'{data.name}'" not in text:
                     # which object (a metaball's "the mesh is closed" named none: user test)
                     src = data.sources[0]
