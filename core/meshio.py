@@ -47,7 +47,7 @@ import numpy as np
 
 from .errors import FileFormatError, InvalidInputError
 from .geometry import ear_clipping, float32_rounding
-from .parameterize import FILL_VALUES
+from .parameterize import fill_value_rows
 
 __all__ = ["READ_EXTENSIONS", "WRITE_EXTENSIONS", "read_geometry", "write_mesh"]
 
@@ -1139,24 +1139,17 @@ def _dem_nodes(lo: float, hi: float, count: int, cell, axis: str) -> np.ndarray:
 
 
 # fill values of DEM formats (GDAL/ESRI -9999, SRTM -32768, float32 lowest) for cells without data
-_FILL_VALUES = FILL_VALUES  # (core.parameterize: also checked in fit_surface's input)
-
-
 def _refuse_fill_values(h: np.ndarray) -> None:
     """A DEM without a ``nodata`` key whose lowest elevation is a common fill value far (over
     1000 units) below all others: its cells have no data, and fitted as terrain they would pull
     the surface down and set the diagonal a relative tolerance is measured against."""
-    if not h.size:
-        return
-    low = float(h.min())
-    if low not in _FILL_VALUES:
-        return
-    rest = h[h != low]
-    if rest.size and float(rest.min()) > low + 1000.0:
+    found = fill_value_rows(np.asarray(h, dtype=np.float64).reshape(-1, 1))
+    if found is not None:
+        rows, _, low, lowest = found
         raise _MalformedError(
-            f"{int(np.count_nonzero(h == low))} of the DEM's {h.size} cells are {low:g}, far "
-            f"below all others (lowest {float(rest.min()):g}): a no-data fill value; store it as "
-            f"the key 'nodata' (np.savez(..., nodata={low:g})) or set those cells to NaN"
+            f"{int(rows.sum())} of the DEM's {rows.size} cells are {low:g}, far below all "
+            f"others (lowest {lowest:g}): a no-data fill value; store it as the key 'nodata' "
+            f"(np.savez(..., nodata={low:g})) or set those cells to NaN"
         )
 
 
