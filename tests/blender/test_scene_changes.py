@@ -398,6 +398,7 @@ def test_a_no_data_fill_value_is_refused_in_blenders_words(clean_scene):
 def test_a_reused_fit_stays_in_the_cache_as_the_newest(clean_scene, addon, monkeypatch):
     """Fit A, fit B, A again (reused), fit C: A had been dropped first (review)."""
     bpy = clean_scene
+    addon.tcb_addon.operators.clear_cache()  # (earlier tests' fits of the same data)
     core = scenes.core_module()
     calls = []
     real = core.fit_surface
