@@ -535,14 +535,19 @@ def local_origin(points: np.ndarray) -> np.ndarray:
     return (np.round(center / step) * step).astype(np.float32).astype(np.float64)
 
 
-def replace_mesh(obj, mesh) -> None:
-    """Give ``obj`` a new mesh datablock, keeping its materials; free the old one if unused."""
+def replace_mesh(obj, mesh, name: str | None = None) -> None:
+    """Give ``obj`` a new mesh datablock, keeping its materials; free the old one if unused.
+    Once it is freed the new mesh takes ``name`` (default: the old mesh's), which the old one
+    held while the new one was made: every Refine or Re-tessellate had added a suffix (.001,
+    .002; user test)."""
     old = obj.data
+    name = old.name if name is None else name
     for mat in old.materials:
         mesh.materials.append(mat)
     obj.data = mesh
     if old.users == 0:
         bpy.data.meshes.remove(old)
+        mesh.name = name
 
 
 def result_collection(context, name: str) -> bpy.types.Collection:

@@ -465,7 +465,7 @@ def attach(surface_obj, net_obj, surf, resolution: int) -> bpy.types.Object:
         holder.tcb.surface = surface_obj
         surface_obj.tcb.weights = holder
     else:
-        bridge.replace_mesh(holder, mesh)
+        bridge.replace_mesh(holder, mesh, f"{surface_obj.name} Weights")
 
     mod = surface_obj.modifiers.get(MODIFIER_NAME)
     if mod is None:

@@ -423,9 +423,10 @@ def moved_note(surface_obj, what: str = WRITTEN_BACK) -> str | None:
 def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = None):
     verts, faces = surf.tessellate(resolution)
     local = bridge.to_local(surface_obj, verts)
-    mesh = bridge.new_mesh(name or surface_obj.data.name, local, faces)
+    name = name or surface_obj.data.name
+    mesh = bridge.new_mesh(name, local, faces)
     mesh.shade_smooth()
-    bridge.replace_mesh(surface_obj, mesh)
+    bridge.replace_mesh(surface_obj, mesh, name)
     # the Deviation Map's material shows colours the new mesh does not have (it rendered
     # near-black after Refine, Re-tessellate or Fit again: user test)
     bridge.drop_deviation_material(mesh)
@@ -435,8 +436,9 @@ def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = No
 
 def write_net_mesh(net_obj, surf, name: str | None = None):
     pts, faces = surf.control_net()
-    mesh = bridge.new_mesh(name or net_obj.data.name, bridge.to_local(net_obj, pts), faces)
-    bridge.replace_mesh(net_obj, mesh)
+    name = name or net_obj.data.name
+    mesh = bridge.new_mesh(name, bridge.to_local(net_obj, pts), faces)
+    bridge.replace_mesh(net_obj, mesh, name)
     _remember_net_rounding(net_obj)
 
 
@@ -1215,7 +1217,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
                 pts_obj.tcb.surface = surface
                 st.deviation_points = pts_obj
             else:
-                bridge.replace_mesh(pts_obj, mesh)
+                bridge.replace_mesh(pts_obj, mesh, f"{surface.name} Deviation Points")
         elif drop_deviation_points(surface):
             # without a new copy the old one would show the distances to the surface as it
             # was (user test: its max 0.0033 beside the map's 0.094 after a net edit)
