@@ -26,6 +26,8 @@ def register():
     properties.register_props()
     if live.on_load not in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.append(live.on_load)
+    if live.on_save not in bpy.app.handlers.save_pre:
+        bpy.app.handlers.save_pre.append(live.on_save)
     # enabled with a file open: its groups are brought up to date once the data is accessible
     bpy.app.timers.register(_upgrade_open_file, first_interval=0.0)
 
@@ -44,6 +46,8 @@ def unregister():
 
     if live.on_load in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.remove(live.on_load)
+    if live.on_save in bpy.app.handlers.save_pre:
+        bpy.app.handlers.save_pre.remove(live.on_save)
     if bpy.app.timers.is_registered(_upgrade_open_file):
         bpy.app.timers.unregister(_upgrade_open_file)
     operators.clear_cache()

@@ -368,6 +368,39 @@ def drop_orphaned_weights() -> int:
     return gone
 
 
+def drop_deleted_links() -> int:
+    """Clear the pointers that objects in use (in a collection) hold to deleted objects, and
+    remove the weights of deleted surfaces (:func:`drop_orphaned_weights`). X only unlinks an
+    object that a pointer holds: a deleted scan stayed in the .blend, saved with it, through
+    its surface's source pointer, and so did a deleted surface (its spline too) through its
+    net's. Refine and the Deviation Map already refused a deleted source, so nothing is lost.
+    (Not a deleted net: the surface's live-net modifier holds it too.) How many were cleared.
+    """
+    cleared = drop_orphaned_weights()
+    for ob in bpy.data.objects:
+        if ob.library is not None or deleted(ob) or ob.tcb.role == "NONE":
+            continue
+        st = ob.tcb
+        for src in st.sources:
+            if src.object is not None and deleted(src.object):
+                src.object = None
+                cleared += 1
+        for key in ("surface", "deviation_points"):
+            if getattr(st, key) is not None and deleted(getattr(st, key)):
+                setattr(st, key, None)
+                cleared += 1
+    return cleared
+
+
+@bpy.app.handlers.persistent
+def on_save(_file) -> None:
+    """``save_pre`` handler: :func:`drop_deleted_links` (deleted objects are not written)."""
+    try:
+        drop_deleted_links()
+    except Exception as ex:  # noqa: BLE001 (a handler must not stop the file being saved)
+        print(f"TCB: could not drop the links to deleted objects: {ex}")
+
+
 def detach(surface_obj) -> None:
     """Remove the live link of ``surface_obj``: its modifier and its weights object (unless
     another surface uses it). The surface keeps its own mesh."""

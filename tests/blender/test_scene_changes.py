@@ -124,6 +124,41 @@ def test_a_deleted_source_is_named_as_deleted(clean_scene):
     assert not surface.tcb.has_deviation
 
 
+def test_a_saved_file_keeps_no_deleted_source_or_surface(clean_scene, tmp_path):
+    """X only unlinks an object a pointer holds: a deleted scan was saved in the .blend
+    through its surface's source pointer, and a deleted surface (its spline too) through its
+    net's. Saving now drops those links; the results in use keep theirs."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    other = add_mesh(bpy, "Other", *wave(), location=(5.0, 0.0, 0.0))
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    assert fit(bpy, other) == {"FINISHED"}
+    gone = bpy.context.view_layer.objects.active
+    net, weights = gone.tcb.net.name, gone.tcb.weights.name
+    assert run(bpy, bpy.ops.object.delete, src) == {"FINISHED"}
+    assert run(bpy, bpy.ops.object.delete, gone) == {"FINISHED"}
+    assert {"Scan", "Other TCB Surface"} <= set(bpy.data.objects.keys())  # (held)
+    path = tmp_path / "deleted.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    names = set(bpy.data.objects.keys())
+    assert "Scan" not in names and "Other TCB Surface" not in names and weights not in names
+    assert {"Other", "Scan TCB Surface", "Scan TCB Net", net} <= names
+    assert bpy.data.objects[net].tcb.surface is None
+    surface = bpy.data.objects["Scan TCB Surface"]
+    assert surface.tcb.net.name == "Scan TCB Net" and surface.tcb.weights is not None
+    with pytest.raises(RuntimeError, match="The source object of 'Scan TCB Surface' was "
+                                           "deleted"):
+        run(bpy, bpy.ops.tcb.refine, surface)
+    # a result whose source is in the scene keeps it
+    assert fit(bpy, bpy.data.objects["Other"]) == {"FINISHED"}
+    kept = bpy.context.view_layer.objects.active.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    assert bpy.data.objects[kept].tcb.sources[0].object.name == "Other"
+
+
 def _mean_normal(points, faces) -> np.ndarray:
     a, b, c = (points[faces[:, k]] for k in range(3))
     n = np.cross(b - a, c - a).sum(axis=0)
