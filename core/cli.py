@@ -23,7 +23,7 @@ from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 from .parameterize import fill_value_rows, fill_value_words, projection_direction
 from .refine import STALLED, SWINGS_LEFT, mostly_taken_back, replaced_default_reason
-from .surface import MAX_RESOLUTION, default_swung
+from .surface import MAX_RESOLUTION, default_swung, grid_frame
 
 __all__ = ["main"]
 
@@ -222,7 +222,8 @@ def default_resolution(control_points: int, surf=None) -> int:
     a, b, c = (uv[tri[:, k]] for k in range(3))
     covered = 0.5 * float(np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
                                  - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])).sum())
-    extent = np.ptp(np.asarray(surf.parameterization.domain_polygon), axis=0)
+    _, lo, hi = grid_frame(surf.parameterization)  # (the grid's: tessellation_uv)
+    extent = hi - lo
     side, across = float(extent.max()), float(extent.min())
     if covered >= 0.5 * side * side:
         return base

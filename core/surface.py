@@ -268,8 +268,10 @@ class TCBSurface:
 
         The domain is the disk polygon for meshes and the convex hull of the parameters for
         clouds, trimmed to where data is (triangles farther than a few data spacings from any
-        data parameter are dropped). ``resolution`` grid steps span the longer side, and at
-        least :data:`TESSELLATION_MIN_ACROSS` the shorter one (a long thin strip is not one
+        data parameter are dropped). ``resolution`` grid steps span the longer side of the
+        domain's bounding box (a cloud's: the smallest rectangle enclosing it, along whose
+        sides the grid runs, :func:`_lattice_frame`), and at least
+        :data:`TESSELLATION_MIN_ACROSS` the shorter one (a long thin strip is not one
         triangle wide); where the parameterization compresses the surface more than on
         average (a mesh's map to the disk compresses steep and outlying parts, a projection
         steep slopes), edges are split until their length times the local compression is at
@@ -305,8 +307,9 @@ class TCBSurface:
             return cached
         poly = np.asarray(self._param.domain_polygon, dtype=np.float64)
         lo, hi = poly.min(axis=0), poly.max(axis=0)
-        d = min(float(np.max(hi - lo)) / resolution,
-                float(np.min(hi - lo)) / TESSELLATION_MIN_ACROSS)
+        rot, wlo, whi = grid_frame(self._param)
+        d = min(float(np.max(whi - wlo)) / resolution,
+                float(np.min(whi - wlo)) / TESSELLATION_MIN_ACROSS)
         # boundary: every polygon edge resampled at spacing ~d (keeping the corners)
         nxt = np.roll(poly, -1, axis=0)
         seg = np.linalg.norm(nxt - poly, axis=1)
@@ -315,9 +318,11 @@ class TCBSurface:
         start = np.repeat(np.arange(len(poly)), nseg)
         boundary = poly[start] + t[:, None] * (nxt[start] - poly[start])
         # interior: grid points inside the polygon, away from the boundary
-        gu = np.arange(lo[0] + d / 2, hi[0], d)
-        gv = np.arange(lo[1] + d / 2, hi[1], d)
+        gu = np.arange(wlo[0] + d / 2, whi[0], d)
+        gv = np.arange(wlo[1] + d / 2, whi[1], d)
         grid = np.stack(np.meshgrid(gu, gv), -1).reshape(-1, 2)
+        if rot is not None:
+            grid = grid @ rot.T
         inside = self._param.contains(grid)
         # away from the boundary: more than 0.3 d from it. The boundary samples are at most d
         # apart, so a point whose nearest sample is farther than 0.8 d is more than 0.3 d from
@@ -335,6 +340,8 @@ class TCBSurface:
         number[inside] = len(boundary) + np.arange(np.count_nonzero(inside))
         lattice = _lattice(deep.reshape(len(gv), len(gu)), number.reshape(len(gv), len(gu)),
                            np.array([gu[0], gv[0]]) if len(gu) and len(gv) else None, d)
+        if rot is not None and lattice[2] is not None:  # (it takes parameters in the frame)
+            lattice = (*lattice[:2], lambda x, in_cells=lattice[2]: in_cells(x @ rot))
         lattice = (lattice[0], np.concatenate([np.arange(len(boundary)), lattice[1]]), lattice[2])
         data, ok = self._data_parameters()
         full = cKDTree(data)
@@ -1200,6 +1207,47 @@ def data_digest(points: np.ndarray) -> str:
     for s in range(0, len(p), 65536):  # in chunks: no copy of a large input
         h.update(np.ascontiguousarray(p[s : s + 65536] + 0.0).data)  # -0.0 and 0.0 alike
     return h.hexdigest()
+
+
+# _lattice_frame: a domain's smallest enclosing rectangle is used when its area is under this
+# share of the axis-aligned box's
+LATTICE_FRAME_GAIN = 0.9
+
+
+def _lattice_frame(poly: np.ndarray) -> np.ndarray | None:
+    """The rotation ``R`` (2, 2; columns: the new axes) of the smallest rectangle enclosing the
+    convex polygon ``poly`` (one of its sides lies along an edge of the polygon), turned by
+    at most 45 degrees, or None when its area is at least LATTICE_FRAME_GAIN times that of
+    the axis-aligned box (not in method.md). A tessellation's grid in that frame covers the
+    domain as it would if the data were turned to the axes: the parameters of a cloud follow
+    its principal directions, which for a square are arbitrary (Franke's square turned 45
+    degrees got half the vertices of the same square along the axes at one resolution)."""
+    e = np.roll(poly, -1, axis=0) - poly
+    length = np.linalg.norm(e, axis=1)
+    e = e[length > 0] / length[length > 0, None]
+    if len(e) < 3:
+        return None
+    n = np.c_[-e[:, 1], e[:, 0]]
+    area = np.ptp(poly @ e.T, axis=0) * np.ptp(poly @ n.T, axis=0)
+    k = int(np.argmin(area))
+    box = float(np.prod(np.ptp(poly, axis=0)))
+    if not area[k] < LATTICE_FRAME_GAIN * box:
+        return None
+    angle = np.arctan2(e[k, 1], e[k, 0])
+    angle -= 0.5 * np.pi * np.round(angle / (0.5 * np.pi))  # (a rectangle: modulo 90 degrees)
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def grid_frame(param) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
+    """``(rot, lo, hi)``: the frame of a tessellation's grid over the domain of ``param`` (a
+    :class:`Parameterization`) and the domain polygon's box in it: a cloud's smallest
+    enclosing rectangle (:func:`_lattice_frame`; the parameter axes of a square turned 45
+    degrees gave it half the vertices: user test), else the uv axes (``rot`` None)."""
+    poly = np.asarray(param.domain_polygon, dtype=np.float64)
+    rot = _lattice_frame(poly) if param.kind == "plane" else None
+    w = poly if rot is None else poly @ rot
+    return rot, w.min(axis=0), w.max(axis=0)
 
 
 def _lattice(deep: np.ndarray, number: np.ndarray, origin, d: float):

@@ -2097,6 +2097,40 @@ def test_a_long_thin_strip_is_tessellated_several_triangles_wide():
     assert sag.max() < 0.05
 
 
+def test_a_cloud_s_tessellation_grid_follows_its_enclosing_rectangle():
+    """The parameter axes of a square cloud follow its principal directions, which are
+    arbitrary: Franke's square got 2335 vertices at resolution 64 turned any way (the square
+    filled half its parameter box), and 4363 along the axes with a projection given (user
+    test). The grid now runs along the smallest rectangle enclosing the domain: the same count
+    at every turn, and the grid's lines along the square's sides."""
+    from core.surface import _lattice_frame
+
+    rng = np.random.default_rng(0)
+    xy = rng.random((3000, 2))
+    pts = np.c_[xy, np.sin(3 * xy[:, 0]) * np.cos(2 * xy[:, 1])]
+    counts = []
+    for degrees in (0.0, 20.0, 45.0):
+        a = np.radians(degrees)
+        turn = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+        surf = fit_surface(pts @ turn.T, tolerance=1e-2, max_iterations=2)
+        uv, tri = surf.tessellation_uv(32)
+        counts.append(len(uv))
+        # the interior edges are along the square's sides (or diagonals of its grid cells)
+        xyz = surf(uv) @ turn  # turned back
+        edges = xyz[tri[:, 1]] - xyz[tri[:, 0]]
+        inner = np.linalg.norm(edges[:, :2], axis=1) > 0
+        slope = np.degrees(np.arctan2(edges[inner, 1], edges[inner, 0])) % 45
+        assert np.mean(np.minimum(slope, 45 - slope) < 0.5) > 0.9, degrees
+    assert max(counts) - min(counts) <= 0.02 * max(counts), counts
+    assert min(counts) > 32 * 32 * 0.9  # (the grid covers the square: 33 x 33 points)
+    # a polygon along the axes keeps them; a thin diagonal strip turns
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
+    assert _lattice_frame(square) is None
+    strip = np.array([[0, 0], [1, 1], [0.9, 1.1], [-0.1, 0.1]])
+    rot = _lattice_frame(strip)
+    assert rot is not None and abs(abs(rot[0, 0]) - np.sqrt(0.5)) < 1e-9
+
+
 def test_a_cloud_scanned_in_lines_is_tessellated_between_them_and_a_notch_is_not():
     """A cloud's tessellation leaves out what is far from the data (an L-shaped cloud's
     notch), but the gaps between the lines of a scan made in lines are no holes: 10 profiles
