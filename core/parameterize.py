@@ -1718,6 +1718,19 @@ def _welded_pieces(points: np.ndarray, tris: np.ndarray) -> int:
     return len(np.unique(label[t.reshape(-1)]))
 
 
+def _ragged_polygons(faces) -> list[np.ndarray] | None:
+    """A sequence of polygons of different lengths (lists of vertex indices) as arrays of the
+    polygons of each length, in order of length; None if ``faces`` is not one."""
+    try:
+        rows = [np.asarray(row) for row in faces]
+    except (TypeError, ValueError):
+        return None
+    if not rows or any(r.ndim != 1 or len(r) < 3 for r in rows):
+        return None
+    size = np.array([len(r) for r in rows])
+    return [np.array([rows[i] for i in np.flatnonzero(size == k)]) for k in np.unique(size)]
+
+
 def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """Validate ``faces`` (``(f, k)`` integer, ``k >= 3``) and split polygons into fans.
 
@@ -1727,7 +1740,11 @@ def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     try:
         f = np.asarray(faces)
     except (TypeError, ValueError) as exc:
-        raise InvalidInputError(f"faces must be an (F, 3) integer array: {exc}") from None
+        polygons = _ragged_polygons(faces)
+        if polygons is None:
+            raise InvalidInputError(f"faces must be an (F, 3) integer array: {exc}") from None
+        # triangles, quads and other polygons in one list (what a mesh's polygons are)
+        return np.vstack([_as_triangles(group, n_vertices) for group in polygons])
     if f.ndim != 2 or f.shape[1] < 3:
         raise InvalidInputError(
             f"faces must be an (F, 3) array of vertex indices (or (F, 4) quads); got shape "
@@ -1754,12 +1771,21 @@ def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
         raise InvalidInputError(
             f"faces must hold integer vertex indices; got values of type {f.dtype}"
         )
+    if np.issubdtype(f.dtype, np.integer) and np.iinfo(f.dtype).max < n_vertices - 1:
+        # (uint8 faces of a 299-vertex mesh had wrapped round: "non-manifold edges")
+        raise InvalidInputError(
+            f"the faces are {f.dtype} integers, which hold indices up to "
+            f"{np.iinfo(f.dtype).max}, but the mesh has {n_vertices} vertices: the larger "
+            "indices cannot be stored (they wrap round); make the faces int32 or int64"
+        )
     f = f.astype(np.int64)
     bad = (f < 0) | (f >= n_vertices)
     if bad.any():
+        hint = ("; they run from 1 to the vertex count: numbered from 1 (as in OBJ files)? "
+                "pass faces - 1" if f.min() == 1 and f.max() == n_vertices else "")
         raise InvalidInputError(
             f"{int(bad.sum())} face indices are out of range (the mesh has {n_vertices} "
-            f"vertices, valid indices are 0..{n_vertices - 1}); fix the face list"
+            f"vertices, valid indices are 0..{n_vertices - 1}); fix the face list{hint}"
         )
     k = f.shape[1]
     j = np.arange(1, k - 1)
@@ -2151,10 +2177,18 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     out_degree = np.bincount(bf, minlength=n)
     n_pinched = int(np.count_nonzero(out_degree > 1))
     if n_pinched:
+        pinched = np.flatnonzero(out_degree > 1)
+        # a vertex duplicated at the same position, some of its faces on each copy: a slit
+        # that meets the border at a vertex of equal position (user test)
+        twins = cKDTree(p[used]).query(p[pinched], k=2)[0][:, 1] <= 0.0
+        advice = ("merge vertices at equal positions (Blender: Mesh > Clean Up > Merge by "
+                  "Distance): vertices there are duplicated, some of the faces around them on "
+                  "each copy" if twins.any() else
+                  "split or remove the faces there (Blender: Mesh > Split > Faces by Edges, "
+                  "or delete the touching faces)")
         raise TopologyError(
             f"the mesh has {n_pinched} non-manifold vertices (the surface touches itself at a "
-            "single vertex); a disk-like patch is needed: split or remove the faces there "
-            "(Blender: Mesh > Split > Faces by Edges, or delete the touching faces)"
+            f"single vertex); a disk-like patch is needed: {advice}"
         )
     bgraph = sp.coo_matrix((np.ones(len(bf)), (bf, bt)), shape=(n, n)).tocsr()
     _, blabel = connected_components(bgraph, directed=False)

@@ -1727,7 +1727,8 @@ def fit_surface(
     points : (N, 3) float
         Scanned points, or mesh vertices.
     faces : (F, 3) int, optional
-        Triangles of a disk-topology mesh (then the mesh is parameterized over the unit disk,
+        Triangles of a disk-topology mesh ((F, k) polygons, or a list of polygons of any
+        lengths, are split into fans; then the mesh is parameterized over the unit disk,
         or a rectangle when its boundary has four corners;
         otherwise the cloud is projected on its best-fit plane).
     degree : 2 (C^1, default) or 3 (C^2)

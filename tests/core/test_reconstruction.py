@@ -1316,6 +1316,34 @@ def closed_octahedron():
     return v, f
 
 
+def grid_mesh(n):
+    """An n x n grid mesh of a smooth function over [-1, 1]^2 (triangles)."""
+    x, y = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n))
+    v = np.c_[x.ravel(), y.ravel(), 0.3 * np.sin(3 * x.ravel()) * np.cos(2 * y.ravel())]
+    a = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
+    return v, np.vstack([np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]])
+
+
+def test_a_list_of_triangles_and_quads_is_a_mesh():
+    """A mesh's polygons in one list, triangles and quads mixed (numpy's "inhomogeneous
+    shape" had been the answer: user test): each polygon is split into a fan, so the fit is
+    that of the same triangles."""
+    n = 12
+    v, _ = grid_mesh(n)
+    a = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
+    quads = np.c_[a, a + 1, a + n + 1, a + n]
+    mixed = ([list(q) for q in quads[:40]] + [list(t) for t in quads[40:, [0, 1, 2]]]
+             + [list(t) for t in quads[40:, [0, 2, 3]]])
+    tris = np.vstack([quads[:40][:, [0, 1, 2]], quads[:40][:, [0, 2, 3]], quads[40:, [0, 1, 2]],
+                      quads[40:, [0, 2, 3]]])
+    surf = fit_surface(v, mixed, tolerance=1e-2)
+    ref = fit_surface(v, tris, tolerance=1e-2)
+    assert len(surf.parameterization.faces) == len(tris) == 2 * len(quads)
+    assert {tuple(sorted(t)) for t in surf.parameterization.faces} == {
+        tuple(sorted(t)) for t in tris}
+    assert surf.report["rms_rel"] < 1e-2 and ref.report["rms_rel"] < 1e-2
+
+
 def grid_with_hole(n=6):
     g = np.arange(n, dtype=float)
     v = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
@@ -1512,6 +1540,13 @@ def test_a_slot_whose_fan_bulges_away_along_a_bend_is_clipped(monkeypatch):
         # (refused as non-manifold edges: user test)
         ("transposed faces", InvalidInputError, r"got shape \(3, 48\), 3 polygons of 48 "
                                                 r"vertices: transposed\? pass faces.T"),
+        # (said "out of range; fix the face list", "non-manifold edges" and "split or remove
+        # the faces there": user test)
+        ("1-based faces", InvalidInputError, r"out of range .*numbered from 1 .*pass faces - 1"),
+        ("uint8 faces", InvalidInputError, r"the faces are uint8 integers, which hold indices "
+                                           r"up to 255, but the mesh has 400 vertices"),
+        ("duplicated vertex", TopologyError, r"2 non-manifold vertices .*Merge by Distance\): "
+                                             r"vertices there are duplicated"),
     ],
 )
 def test_bad_input_raises_a_specific_error(case, error, words):
@@ -1552,6 +1587,20 @@ def test_bad_input_raises_a_specific_error(case, error, words):
     elif case == "transposed faces":
         points, faces = grid_with_hole(6)
         faces = faces.T
+    elif case == "1-based faces":
+        points, faces = grid_with_hole(6)
+        faces = faces + 1
+    elif case == "uint8 faces":
+        points, faces = grid_mesh(20)
+        faces = faces.astype(np.uint8)
+    elif case == "duplicated vertex":  # an interior vertex copied, 3 of its faces on the copy
+        points, faces = grid_mesh(8)
+        v = 8 * 4 + 4
+        points = np.vstack([points, points[v]])
+        fan = np.flatnonzero((faces == v).any(axis=1))[:3]
+        part = faces[fan]
+        part[part == v] = len(points) - 1
+        faces[fan] = part
     elif case == "masked":
         mask = np.zeros(points.shape, dtype=bool)
         mask[[3, 8, 9], 2] = True
