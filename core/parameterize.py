@@ -1719,33 +1719,56 @@ def _welded_pieces(points: np.ndarray, tris: np.ndarray) -> int:
 
 
 def _ragged_polygons(faces) -> list[np.ndarray] | None:
-    """A sequence of polygons of different lengths (lists of vertex indices) as arrays of the
-    polygons of each length, in order of length; None if ``faces`` is not one."""
+    """The rows of ``faces``, a sequence of polygons of different lengths (lists or arrays of
+    vertex indices), as 1-D arrays; None if ``faces`` is no such sequence."""
     try:
         rows = [np.asarray(row) for row in faces]
     except (TypeError, ValueError):
         return None
-    if not rows or any(r.ndim != 1 or len(r) < 3 for r in rows):
+    if not rows or any(r.ndim != 1 for r in rows):
         return None
-    size = np.array([len(r) for r in rows])
-    return [np.array([rows[i] for i in np.flatnonzero(size == k)]) for k in np.unique(size)]
+    return rows
+
+
+def _fans(f: np.ndarray) -> np.ndarray:
+    """The triangles ``(v0, v_j, v_{j+1})``, ``j = 1..k-2``, of the polygons ``f`` (F, k),
+    polygon by polygon."""
+    k = f.shape[1]
+    j = np.arange(1, k - 1)
+    return np.stack([np.broadcast_to(f[:, :1], (len(f), k - 2)), f[:, j], f[:, j + 1]],
+                    axis=-1).reshape(-1, 3)
 
 
 def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
-    """Validate ``faces`` (``(f, k)`` integer, ``k >= 3``) and split polygons into fans.
+    """Validate ``faces`` (``(f, k)`` integer, ``k >= 3``, or a sequence of polygons of any
+    lengths) and split polygons into fans, in the order of the polygons.
 
     A polygon ``(v0, ..., v_{k-1})`` becomes the triangles ``(v0, v_j, v_{j+1})``,
     ``j = 1..k-2`` (quads: ``(a, b, c), (a, c, d)``).
     """
+    rows = None
     try:
         f = np.asarray(faces)
     except (TypeError, ValueError) as exc:
-        polygons = _ragged_polygons(faces)
-        if polygons is None:
-            raise InvalidInputError(f"faces must be an (F, 3) integer array: {exc}") from None
+        f, why = None, str(exc)
+    if f is None or (f.dtype == object and f.ndim == 1):
         # triangles, quads and other polygons in one list (what a mesh's polygons are)
-        return np.vstack([_as_triangles(group, n_vertices) for group in polygons])
-    if f.ndim != 2 or f.shape[1] < 3:
+        rows = _ragged_polygons(faces)
+        if rows is None:
+            why = why if f is None else f"got an array of {len(f)} objects"
+            raise InvalidInputError(
+                f"faces must be an (F, 3) integer array, or a list of polygons (lists of "
+                f"vertex indices): {why}") from None
+        short = [i for i, r in enumerate(rows) if len(r) < 3]
+        if short:
+            raise InvalidInputError(
+                f"{len(short)} of the {len(rows)} faces have fewer than 3 vertices (the "
+                f"first: face {short[0]}, {rows[short[0]].tolist()}); leave them out")
+        try:
+            f = np.concatenate(rows)
+        except (TypeError, ValueError) as exc:
+            raise InvalidInputError(f"faces must hold integer vertex indices: {exc}") from None
+    elif f.ndim != 2 or f.shape[1] < 3:
         raise InvalidInputError(
             f"faces must be an (F, 3) array of vertex indices (or (F, 4) quads); got shape "
             f"{f.shape}"
@@ -1755,7 +1778,7 @@ def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
             "the mesh has no faces; give faces of a disk-like patch, or parameterize the "
             "vertices as a point cloud (faces=None)"
         )
-    if len(f) in (3, 4) and f.shape[1] > 8 and any(
+    if rows is None and len(f) in (3, 4) and f.shape[1] > 8 and any(
             len(np.unique(row)) < len(row) for row in np.asarray(f)):
         # (3, F) is a transposed (F, 3), not three F-gons (refused as non-manifold edges,
         # which sent the user to repair a mesh that is fine: user test); a polygon repeats
@@ -1764,19 +1787,20 @@ def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
             f"faces must be an (F, 3) array of vertex indices (or (F, 4) quads); got shape "
             f"{f.shape}, {len(f)} polygons of {f.shape[1]} vertices: transposed? pass faces.T"
         )
-    integral = np.issubdtype(f.dtype, np.integer) or (
+    integral = (np.issubdtype(f.dtype, np.integer) and f.dtype != bool) or (
         np.issubdtype(f.dtype, np.floating) and np.all(np.isfinite(f)) and np.all(f == np.round(f))
     )
     if not integral:
         raise InvalidInputError(
             f"faces must hold integer vertex indices; got values of type {f.dtype}"
         )
-    if np.issubdtype(f.dtype, np.integer) and np.iinfo(f.dtype).max < n_vertices - 1:
-        # (uint8 faces of a 299-vertex mesh had wrapped round: "non-manifold edges")
+    if np.issubdtype(f.dtype, np.integer) and n_vertices - 1 > np.iinfo(f.dtype).max == f.max():
+        # (uint8 faces of a 299-vertex mesh had wrapped round: "non-manifold edges"; faces
+        # of a small type that stay below its largest value may leave the rest unused)
         raise InvalidInputError(
             f"the faces are {f.dtype} integers, which hold indices up to "
-            f"{np.iinfo(f.dtype).max}, but the mesh has {n_vertices} vertices: the larger "
-            "indices cannot be stored (they wrap round); make the faces int32 or int64"
+            f"{np.iinfo(f.dtype).max}, and reach it, but the mesh has {n_vertices} vertices: "
+            "larger indices cannot be stored (they wrap round); make the faces int32 or int64"
         )
     f = f.astype(np.int64)
     bad = (f < 0) | (f >= n_vertices)
@@ -1787,10 +1811,17 @@ def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
             f"{int(bad.sum())} face indices are out of range (the mesh has {n_vertices} "
             f"vertices, valid indices are 0..{n_vertices - 1}); fix the face list{hint}"
         )
-    k = f.shape[1]
-    j = np.arange(1, k - 1)
-    tris = np.stack([np.broadcast_to(f[:, :1], (len(f), k - 2)), f[:, j], f[:, j + 1]], axis=-1)
-    return tris.reshape(-1, 3)
+    if rows is None:
+        return _fans(f)
+    # fans of the polygons of each length, put back in the order of the polygons
+    size = np.array([len(r) for r in rows])
+    first = np.concatenate([[0], np.cumsum(size)[:-1]])
+    tris, owner = [], []
+    for k in np.unique(size):
+        which = np.flatnonzero(size == k)
+        tris.append(_fans(f[first[which, None] + np.arange(k)]))
+        owner.append(np.repeat(which, k - 2))
+    return np.concatenate(tris)[np.argsort(np.concatenate(owner), kind="stable")]
 
 
 def _is_cap(tris: np.ndarray, p: np.ndarray, rtol: float) -> tuple[np.ndarray, np.ndarray]:

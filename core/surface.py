@@ -270,7 +270,8 @@ class TCBSurface:
         clouds, trimmed to where data is (triangles farther than a few data spacings from any
         data parameter are dropped). ``resolution`` grid steps span the longer side of the
         domain's bounding box (a cloud's: the smallest rectangle enclosing it, along whose
-        sides the grid runs, :func:`_lattice_frame`), and at least
+        sides the grid runs, when its area is under LATTICE_FRAME_GAIN of the box's,
+        :func:`grid_frame`), and at least
         :data:`TESSELLATION_MIN_ACROSS` the shorter one (a long thin strip is not one
         triangle wide); where the parameterization compresses the surface more than on
         average (a mesh's map to the disk compresses steep and outlying parts, a projection
@@ -1242,8 +1243,9 @@ def _lattice_frame(poly: np.ndarray) -> np.ndarray | None:
 def grid_frame(param) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
     """``(rot, lo, hi)``: the frame of a tessellation's grid over the domain of ``param`` (a
     :class:`Parameterization`) and the domain polygon's box in it: a cloud's smallest
-    enclosing rectangle (:func:`_lattice_frame`; the parameter axes of a square turned 45
-    degrees gave it half the vertices: user test), else the uv axes (``rot`` None)."""
+    enclosing rectangle when its area is under LATTICE_FRAME_GAIN of the box's
+    (:func:`_lattice_frame`; a square whose parameter axes ran along its diagonals got half
+    the vertices: user test), else the uv axes (``rot`` None)."""
     poly = np.asarray(param.domain_polygon, dtype=np.float64)
     rot = _lattice_frame(poly) if param.kind == "plane" else None
     w = poly if rot is None else poly @ rot

@@ -374,19 +374,23 @@ def drop_deleted_links() -> int:
     object that a pointer holds: a deleted scan stayed in the .blend, saved with it, through
     its surface's source pointer, and so did a deleted surface (its spline too) through its
     net's. Refine and the Deviation Map already refused a deleted source, so nothing is lost.
-    (Not a deleted net: the surface's live-net modifier holds it too.) How many were cleared.
+    (Not a deleted net: the surface's live-net modifier holds it too; nor an object with a
+    fake user.) How many were cleared.
     """
+    def gone(obj) -> bool:  # (one kept with a fake user is kept on purpose: review)
+        return obj is not None and deleted(obj) and not obj.use_fake_user
+
     cleared = drop_orphaned_weights()
     for ob in bpy.data.objects:
         if ob.library is not None or deleted(ob) or ob.tcb.role == "NONE":
             continue
         st = ob.tcb
         for src in st.sources:
-            if src.object is not None and deleted(src.object):
+            if gone(src.object):
                 src.object = None
                 cleared += 1
         for key in ("surface", "deviation_points"):
-            if getattr(st, key) is not None and deleted(getattr(st, key)):
+            if gone(getattr(st, key)):
                 setattr(st, key, None)
                 cleared += 1
     return cleared

@@ -151,9 +151,16 @@ def test_a_saved_file_keeps_no_deleted_source_or_surface(clean_scene, tmp_path):
     with pytest.raises(RuntimeError, match="The source object of 'Scan TCB Surface' was "
                                            "deleted"):
         run(bpy, bpy.ops.tcb.refine, surface)
-    # a result whose source is in the scene keeps it
+    # a result whose source is in the scene keeps it, and so does one whose source was
+    # unlinked with a fake user (kept on purpose)
     assert fit(bpy, bpy.data.objects["Other"]) == {"FINISHED"}
     kept = bpy.context.view_layer.objects.active.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    assert bpy.data.objects[kept].tcb.sources[0].object.name == "Other"
+    other = bpy.data.objects["Other"]
+    other.use_fake_user = True
+    assert run(bpy, bpy.ops.object.delete, other) == {"FINISHED"}
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     bpy.ops.wm.open_mainfile(filepath=str(path))
     assert bpy.data.objects[kept].tcb.sources[0].object.name == "Other"
