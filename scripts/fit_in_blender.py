@@ -649,11 +649,20 @@ def setup_render(bpy, surface, sources, ns) -> None:
     scene.render.resolution_x, scene.render.resolution_y = ns.render_size
     scene.render.resolution_percentage = 100
     bpy.context.view_layer.update()
-    coords = [float(c) for c in verts[:: max(1, len(verts) // 4000)].ravel()]
+    # framed: the surface and its whole control net (the net's outer points had run off the
+    # picture's edges, its lines cut there)
+    shown = verts[:: max(1, len(verts) // 4000)]
+    if net is not None and net.type == "MESH" and len(net.data.vertices):
+        pts = np.empty(len(net.data.vertices) * 3, np.float32)
+        net.data.vertices.foreach_get("co", pts)
+        mn = np.array(net.matrix_world)
+        shown = np.vstack([shown, pts.reshape(-1, 3).astype(np.float64) @ mn[:3, :3].T
+                           + mn[:3, 3]])
+    coords = [float(c) for c in shown.ravel()]
     loc, _ = cam.camera_fit_coords(bpy.context.evaluated_depsgraph_get(), coords)
     # back off along the view axis so the object does not touch the frame
     depth = max((Vector(loc) - Vector(center)).dot(z), diag * 0.1)
-    cam.location = Vector(loc) + z * (0.2 * depth)
+    cam.location = Vector(loc) + z * (0.08 * depth)
     cam_data.clip_start = diag * 1e-3
     cam_data.clip_end = diag * 100
 

@@ -42,7 +42,7 @@ def obj_counts(path: Path) -> tuple[int, int]:
     return v, f
 
 
-def test_fit_export_render_nefertiti(tmp_path):
+def test_fit_export_render_nefertiti(tmp_path, clean_scene):
     blend, obj, png = tmp_path / "a" / "nef.blend", tmp_path / "nef.obj", tmp_path / "nef.png"
     proc = run_script(
         ROOT / "data" / "nefertiti.off", "-o", blend, "--tolerance", "1e-2",
@@ -61,6 +61,17 @@ def test_fit_export_render_nefertiti(tmp_path):
     rows = [ln for ln in proc.stdout.splitlines() if ln.startswith("control points")]
     cps = int(rows[0].split()[-1])
     assert 0 < cps <= 120
+    # the saved camera (F12 in the .blend) frames the surface and its whole net (the net's
+    # outer points had run off the picture)
+    bpy = clean_scene
+    from bpy_extras.object_utils import world_to_camera_view
+
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    scene = bpy.context.scene
+    net = next(o for o in bpy.data.objects if o.tcb.role == "NET")
+    seen = [world_to_camera_view(scene, scene.camera, net.matrix_world @ v.co)
+            for v in net.data.vertices]
+    assert len(seen) >= 10 and all(0 <= c.x <= 1 and 0 <= c.y <= 1 and c.z > 0 for c in seen)
 
 
 def test_fit_point_cloud_xyz_without_render(tmp_path):
