@@ -1551,6 +1551,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         if (report["faces_max"] > FACES_MAX_RATIO * report["max"]
                 and report["faces_max_rel"] > FACES_MIN_REL):
             warnings.warn(faces_warning(report), RuntimeWarning, stacklevel=3)
+    if param.faces is not None and report["control_points"] > COARSE_MESH_RATIO * report["points"]:
+        warnings.warn(coarse_mesh_warning(report), RuntimeWarning, stacklevel=3)
     if param.faces is None:
         # the RMS over the parameter area (core.refine.area_weights): a cloud of uneven density
         # meets the tolerance by it too; equal to "rms" within ~10% for an even one
@@ -1632,6 +1634,23 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
 # largest at its vertices (the bundled meshes: 1.2-2.7x; a coarse CAD plate with a crease: 44x)
 FACES_MAX_RATIO = 4.0
 FACES_MIN_REL = 1e-6  # ... and that error is above this share of the diagonal
+
+
+# a mesh's fit is warned of when its net has over this many control points per vertex: a
+# coarse mesh's flat faces are data (method.md section 5), and the fit chases the creases
+# between them (a 4 x 4 grid of a smooth function: 581 control points, the 21 x 21 grid of
+# the same function 149; nefertiti.off 2.8 per vertex; user test)
+COARSE_MESH_RATIO = 4.0
+
+
+def coarse_mesh_warning(report: dict) -> str:
+    """The words for a net much larger than its mesh (``_run``)."""
+    return (f"the net has {report['control_points']} control points for a mesh of "
+            f"{report['points']} vertices: the surface follows the mesh's flat faces, and the "
+            "creases between them take many control points to meet the tolerance at the "
+            "vertices. For a smooth surface through the vertices with a small net, fit the "
+            "vertices as a point cloud (faces=None; in Blender a copy of the mesh with its "
+            "faces deleted: Delete > Only Faces), or subdivide the mesh first")
 
 
 def faces_warning(report: dict) -> str:

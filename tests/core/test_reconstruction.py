@@ -2315,6 +2315,26 @@ def test_a_coarse_mesh_fitted_far_from_its_faces_is_reported_and_warned_of():
     assert s.report["faces_max"] <= 4 * s.report["max"]
 
 
+def test_a_coarse_mesh_whose_net_outgrows_it_is_warned_of():
+    """A 4 x 4 grid mesh of a smooth function got 581 control points (its 21 x 21 grid 149):
+    its flat faces are data, and the creases between them take many control points; no word
+    said so (user test). A net of over COARSE_MESH_RATIO control points per vertex is warned
+    of, with the way to a small net: its vertices as a point cloud, which gives one."""
+    from core.surface import COARSE_MESH_RATIO
+
+    v, f = grid_mesh(4)
+    with pytest.warns(RuntimeWarning, match=r"the net has \d+ control points for a mesh of 16 "
+                                            r"vertices: .*fit the vertices as a point cloud"):
+        s = fit_surface(v, f)
+    assert s.report["control_points"] > COARSE_MESH_RATIO * 16
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        cloud = fit_surface(v)  # (what the warning advises)
+        fine = fit_surface(*grid_mesh(21))
+    assert cloud.report["control_points"] < 16 * COARSE_MESH_RATIO
+    assert fine.report["control_points"] < 441
+
+
 def test_a_long_corridor_with_points_across_it_is_a_surface_and_a_thread_is_a_curve():
     """A road scan 5 km long and 4 m wide had been refused as "almost on a curve" (its domain
     0.8e-3 as wide as long), with 14-30 point spacings across it (user test)."""
