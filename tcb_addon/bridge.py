@@ -271,6 +271,31 @@ def modifier_names(obj) -> list:
     return out
 
 
+def _layer_collections(layer):
+    yield layer
+    for child in layer.children:
+        yield from _layer_collections(child)
+
+
+def show_advice(context, obj) -> str:
+    """How to show the hidden ``obj`` so that its modifiers are evaluated, in the Outliner's
+    words: "show it (Alt+H)" did nothing for an object whose collection is excluded (user
+    test)."""
+    layers = [lc for lc in _layer_collections(context.view_layer.layer_collection)
+              if obj.name in lc.collection.objects]
+    if layers and all(lc.exclude for lc in layers):
+        return (f"include its collection '{layers[0].name}' in the view layer (its checkbox in "
+                "the Outliner)")
+    if obj.hide_viewport:
+        return "enable it in viewports (the monitor icon in the Outliner)"
+    if obj.name in context.view_layer.objects and obj.hide_get():
+        return "show it (Alt+H)"
+    off = [lc for lc in layers if lc.hide_viewport or lc.collection.hide_viewport]
+    if off:
+        return f"show its collection '{off[0].name}' (in the Outliner)"
+    return "show it"
+
+
 def read_selection(context, objects=None) -> InputData:
     """World-space points (and faces) of the selected objects, after modifiers.
 
@@ -352,8 +377,8 @@ def read_selection(context, objects=None) -> InputData:
                                _world_faces(tris, obj.matrix_world)))
             _rounding_note(obj, pts, notes)
             if any(m.show_viewport for m in getattr(obj, "modifiers", ())):
-                notes.append(f"'{obj.name}' is hidden: read without its modifiers (show it to "
-                             "fit the modified shape)")
+                notes.append(f"'{obj.name}' is hidden: read without its modifiers ("
+                             f"{show_advice(context, obj)} to read the modified shape)")
 
     points, faces, counts, modifiers = [], [], {}, {}
     for key, obj in wanted.items():

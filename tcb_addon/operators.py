@@ -816,6 +816,10 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 # and how the selection was read (a mesh with loose vertices fitted as a point
                 # cloud, objects merged: user test, the error spoke of a cloud only)
                 extra += list(data.notes)
+                if str(ex).startswith("at least 10 points are needed") and data.faces is not None:
+                    # (the default Plane, 4 vertices: the bare count; user test)
+                    extra.append("a mesh of so few vertices can be subdivided first (Edit Mode "
+                                 "> Edge > Subdivide)")
                 text = str(ex)
                 if len(data.sources) == 1 and f"'{data.name}'" not in text:
                     # which object (a metaball's "the mesh is closed" named none: user test)
@@ -993,6 +997,13 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             faces = np.ascontiguousarray(faces[:, ::-1])
         faces_changed = key is not None and (faces is None or digest(faces) != key)
         same_points = surf.fitted_to(data.points, data.rounding)  # (a digest: once)
+        unmodified = [n for n in data.notes if "read without its modifiers" in n]
+        if (not same_points or faces_changed) and unmodified:
+            # (nothing was moved: "changed since ... (other coordinates: moved, ...)" had led;
+            # user test)
+            raise bridge.SelectionError(
+                f"{'; '.join(unmodified)}: Refine needs the shape '{surface.name}' was fitted "
+                "to")
         if not same_points or faces_changed:
             names = ", ".join(repr(o.name) for o in data.sources)
             then, now = len(surf.parameterization.uv), len(data.points)
@@ -1125,6 +1136,12 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         surface = editable_surface(context)
         data = source_data(context, surface)
         surf = stored_surface(surface)
+        unmodified = [n for n in data.notes if "read without its modifiers" in n]
+        if unmodified and not surf.fitted_to(data.points, data.rounding):
+            # (its map had measured the other shape, 10x off, with a warning: user test)
+            raise bridge.SelectionError(
+                f"{'; '.join(unmodified)}: the map measures the shape '{surface.name}' was "
+                "fitted to")
         self._surface, self._data, self._surf = surface, data, surf
         cloud = data.faces is None
         # a cloud's surface colours are computed on the job's thread too, at the surface's
@@ -1142,12 +1159,9 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         # (user test: RMS 0.2 for a fit of 1.4e-4, and nothing said why; Refine refuses)
         changed = None
         if not surf.fitted_to(data.points, data.rounding):
-            # a source hidden since the fit is read without its modifiers: nothing was
-            # edited, and fitting it again would fit the other shape (user test)
-            unmodified = [n for n in data.notes if "read without its modifiers" in n]
-            changed = ("; ".join(unmodified) + f": the distances are those of that shape, not "
-                       f"of the one '{surface.name}' was fitted to; show it (Alt+H) and make "
-                       "the map again") if unmodified else (
+            # (a source hidden since the fit, read without its modifiers, is refused in
+            # prepare: nothing was edited, and fitting it again would fit the other shape)
+            changed = (
                 f"{', '.join(repr(o.name) for o in data.sources)} changed since "
                 f"'{surface.name}' was fitted (moved, transformed or edited): the distances "
                 "are those of the data as it is now; select the source and use Fit Surface to "

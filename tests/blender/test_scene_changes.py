@@ -377,22 +377,49 @@ def test_a_linked_duplicate_of_the_net_is_said_to_move_the_surface(clean_scene):
 
 
 def test_a_hidden_source_read_without_its_modifiers_is_named_by_the_deviation_map(
-        clean_scene, capfd):
+        clean_scene):
     """Hiding the scan (to look at the coloured surface) reads it without its modifiers: the
-    map warned that it was moved or edited, and advised fitting it again (user test)."""
+    map warned that it was moved or edited, and advised fitting it again (user test); then it
+    measured the other shape (10x off) with a warning whose "show it (Alt+H)" did nothing for
+    a scan in an excluded collection (user test). It is refused, saying how to show it."""
     bpy = clean_scene
     src = add_mesh(bpy, "Scan", *grid(12, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y),
                                       triangles=True))
     src.modifiers.new("Sub", "SUBSURF").levels = 1
     assert fit(bpy, src) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
-    src.hide_set(True)
-    capfd.readouterr()
     assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
-    out = capfd.readouterr().out
-    assert "'Scan' is hidden: read without its modifiers" in out
-    assert "show it (Alt+H) and make the map again" in out
-    assert "moved, transformed or edited" not in out
+    shown = surface.tcb.deviation_max
+    src.hide_set(True)
+    with pytest.raises(RuntimeError, match=r"'Scan' is hidden: read without its modifiers "
+                                           r"\(show it \(Alt\+H\) to read the modified shape\)"
+                                           r": the map measures the shape 'Scan TCB Surface'"):
+        run(bpy, bpy.ops.tcb.deviation_map, surface)
+    src.hide_set(False)
+    coll = bpy.data.collections.new("Scans")
+    bpy.context.scene.collection.children.link(coll)
+    for c in list(src.users_collection):
+        c.objects.unlink(src)
+    coll.objects.link(src)
+    layer = bpy.context.view_layer.layer_collection.children["Scans"]
+    layer.exclude = True
+    with pytest.raises(RuntimeError, match=r"include its collection 'Scans' in the view layer "
+                                           r"\(its checkbox in the Outliner\)"):
+        run(bpy, bpy.ops.tcb.deviation_map, surface)
+    assert surface.tcb.deviation_max == shown  # (the refused maps changed nothing)
+    layer.exclude = False
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+    assert surface.tcb.deviation_max == pytest.approx(shown, rel=1e-6)
+
+
+def test_a_mesh_of_too_few_vertices_is_told_to_be_subdivided(clean_scene):
+    """The default Plane (4 vertices) got only "at least 10 points are needed" (user test)."""
+    bpy = clean_scene
+    bpy.ops.mesh.primitive_plane_add()
+    plane = bpy.context.view_layer.objects.active
+    with pytest.raises(RuntimeError, match=r"'Plane': at least 10 points are needed .*got 4.*"
+                                           r"subdivided first \(Edit Mode > Edge > Subdivide\)"):
+        fit(bpy, plane)
 
 
 def test_refine_refuses_a_budget_under_the_least_in_the_panels_words(clean_scene):
