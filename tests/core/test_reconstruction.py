@@ -2342,6 +2342,25 @@ def test_a_coarse_mesh_whose_net_outgrows_it_is_warned_of():
     assert loose.report["control_points"] < 64 and loose.report["rms_rel"] <= 1e-2
 
 
+def test_a_coarse_curved_mesh_is_not_taken_for_a_swing():
+    """Half a cylinder of 34 vertices (Blender's cylinder cut in half): the swing check looked
+    at the vertices only, whose neighbourhoods across the long faces are no slab, and flagged
+    636 places by up to 0.23 where the surface was within 0.002 of the faces; at tolerance 5e-2
+    the smoother refit it set off took smoothness 1.0 and went 7% of the diagonal off (user
+    test). A mesh's samples on its faces are data for the check too."""
+    a = np.linspace(0, np.pi, 17)
+    v = np.vstack([np.c_[np.cos(a), np.sin(a), np.full(17, z)] for z in (-1.0, 1.0)])
+    quads = np.array([[i, i + 1, 18 + i, 17 + i] for i in range(16)])
+    for kw in ({}, {"tolerance": 5e-2}, {"smoothness": 1e-4}):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            s = fit_surface(v, quads, **kw)
+        r = s.report
+        assert r["swings"]["places"] == 0 and r["smoothness"] == 1e-4, kw
+        radius = np.hypot(*s.tessellate(64)[0][:, :2].T)
+        assert np.abs(radius - 1).max() < 0.02 * r["diagonal"], kw
+
+
 def test_a_long_corridor_with_points_across_it_is_a_surface_and_a_thread_is_a_curve():
     """A road scan 5 km long and 4 m wide had been refused as "almost on a curve" (its domain
     0.8e-3 as wide as long), with 14-30 point spacings across it (user test)."""
