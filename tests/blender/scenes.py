@@ -95,3 +95,20 @@ def fit(bpy, *objs, **props):
     props.setdefault("resolution", 24)
     with bpy.context.temp_override(**select(bpy, *objs)):
         return bpy.ops.tcb.fit_surface(**props)
+
+
+def failing_fit(core, at: int = 2):
+    """``core.fit_surface`` that raises SingularSystemError at iteration ``at`` (an engine
+    failure mid-fit), with no tolerance so that it gets there."""
+    real = core.fit_surface
+
+    def failing(*args, **kwargs):
+        def callback(report):
+            if report["iteration"] == at:
+                raise core.SingularSystemError(f"injected failure at iteration {at}")
+            return False
+
+        kwargs.update(callback=callback, max_iterations=at + 3, tolerance=0.0)
+        return real(*args, **kwargs)
+
+    return failing

@@ -16,7 +16,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from scenes import (  # noqa: E402
-    ADDON, add_mesh, core_module, fit, grid, move_net_vertex, positions, select, spline_of,
+    ADDON, add_mesh, core_module, failing_fit, fit, grid, move_net_vertex, positions, select,
+    spline_of,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -977,20 +978,7 @@ def test_core_error_mid_fit_leaves_the_scene_as_it_was(clean_scene, addon, monke
     objects, the source untouched (issue 6, interruption)."""
     bpy = clean_scene
     core = core_module()
-    real = core.fit_surface
-
-    def failing(*args, **kwargs):
-        def callback(report):
-            if report["iteration"] == 2:
-                raise core.SingularSystemError("injected failure at iteration 2")
-            return False
-
-        kwargs["callback"] = callback
-        kwargs["max_iterations"] = 5
-        kwargs["tolerance"] = 0.0
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(core, "fit_surface", failing)
+    monkeypatch.setattr(core, "fit_surface", failing_fit(core))
     sys.modules[ADDON + ".tcb_addon.operators"].clear_cache()  # no cached fit may answer
     verts, faces = grid(14)
     obj = add_mesh(bpy, "Source", verts, faces)

@@ -31,7 +31,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from scenes import (  # noqa: E402
-    ADDON, add_mesh, core_module, fit, grid, move_net_vertex, positions, select, spline_of,
+    ADDON, add_mesh, core_module, failing_fit, fit, grid, move_net_vertex, positions, select,
+    spline_of,
 )
 from test_operators import add_point_cloud, draw_panels, snapshot  # noqa: E402
 
@@ -484,36 +485,24 @@ def test_esc_and_errors_in_the_worker_change_nothing(clean_scene, driver, monkey
         assert driver.reports == cancelled
         assert unchanged()
 
-    real = core.fit_surface
-
-    def failing(*args, **kwargs):
-        def callback(report):
-            if report["iteration"] == 2:
-                raise core.SingularSystemError("injected failure at iteration 2")
-            return False
-
-        kwargs.update(callback=callback, max_iterations=5, tolerance=0.0)
-        return real(*args, **kwargs)
+    def refused(engine, words):
+        """Fit through the modal path with ``engine`` as core.fit_surface: the ERROR report
+        ``words``, CANCELLED, nothing changed."""
+        monkeypatch.setattr(core, "fit_surface", engine)
+        driver.reports.clear()
+        assert driver.invoke(bpy.ops.tcb.fit_surface, src, tolerance=1e-4,
+                             resolution=16) == {"RUNNING_MODAL"}
+        assert driver.run()[0] == {"CANCELLED"}
+        assert driver.reports == [("ERROR", words)]
+        assert unchanged()
 
     ops.clear_cache()
-    monkeypatch.setattr(core, "fit_surface", failing)
-    driver.reports.clear()
-    assert driver.invoke(bpy.ops.tcb.fit_surface, src, tolerance=1e-4,
-                         resolution=16) == {"RUNNING_MODAL"}
-    assert driver.run()[0] == {"CANCELLED"}
-    assert driver.reports == [("ERROR", "injected failure at iteration 2")]
-    assert unchanged()
+    refused(failing_fit(core), "injected failure at iteration 2")
 
     def bad_input(*args, **kwargs):  # found by the engine: named after the object
         raise core.InvalidInputError("the points are all on one line")
 
-    monkeypatch.setattr(core, "fit_surface", bad_input)
-    driver.reports.clear()
-    assert driver.invoke(bpy.ops.tcb.fit_surface, src, tolerance=1e-4,
-                         resolution=16) == {"RUNNING_MODAL"}
-    assert driver.run()[0] == {"CANCELLED"}
-    assert driver.reports == [("ERROR", "'Scan': the points are all on one line")]
-    assert unchanged()
+    refused(bad_input, "'Scan': the points are all on one line")
 
     def bug(*args, **kwargs):  # not a user error: raised to Blender, after the clean-up
         raise KeyError("a bug")
