@@ -1083,8 +1083,8 @@ def adaptive_fit(
     partition of unity and vanish on the domain (:meth:`SplineSpace.meets`); reports give
     both counts (``control_points`` and ``functions``).
     With a tolerance and the automatic start, the first fits size the start: a probe with a
-    quarter of its knots (at most one per 8 of the measured points), then fresh starts with the count :func:`next_start` predicts; they
-    count as iterations. A continued run (``start_knots``) with a tolerance inserts the knots
+    quarter of its knots (at most one per 8 of the measured points), then fresh starts with
+    the count :func:`next_start` predicts; they count as iterations. A continued run (``start_knots``) with a tolerance inserts the knots
     :func:`predicted_knots` says are missing, up to doubling them. Reports say whether an
     iteration's knots were placed ``"afresh"``, ``"continued"`` or ``"inserted"``
     (``knots_placed``). The best iteration is the one that meets the tolerance, else the one of

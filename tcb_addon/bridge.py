@@ -37,6 +37,10 @@ class SelectionError(Exception):
 
 
 @dataclass
+# the words of InputData.notes for a hidden source read without its modifiers
+UNMODIFIED = "read without its modifiers"
+
+
 class InputData:
     """The merged, world-space input of a fit."""
 
@@ -65,6 +69,12 @@ class InputData:
                 parts.append(f"'{name}' has the modifier{'s' if len(mods) > 1 else ''} "
                              f"{', '.join(mods)}")
         return "; ".join(parts) or None
+
+    @property
+    def unmodified(self) -> list:
+        """The notes of hidden sources read without their modifiers (:data:`UNMODIFIED`):
+        a fit of such a source is of another shape."""
+        return [n for n in self.notes if UNMODIFIED in n]
 
     @property
     def name(self) -> str:
@@ -377,7 +387,7 @@ def read_selection(context, objects=None) -> InputData:
                                _world_faces(tris, obj.matrix_world)))
             _rounding_note(obj, pts, notes)
             if any(m.show_viewport for m in getattr(obj, "modifiers", ())):
-                notes.append(f"'{obj.name}' is hidden: read without its modifiers ("
+                notes.append(f"'{obj.name}' is hidden: {UNMODIFIED} ("
                              f"{show_advice(context, obj)} to read the modified shape)")
 
     points, faces, counts, modifiers = [], [], {}, {}

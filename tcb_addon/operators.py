@@ -997,13 +997,12 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             faces = np.ascontiguousarray(faces[:, ::-1])
         faces_changed = key is not None and (faces is None or digest(faces) != key)
         same_points = surf.fitted_to(data.points, data.rounding)  # (a digest: once)
-        unmodified = [n for n in data.notes if "read without its modifiers" in n]
-        if (not same_points or faces_changed) and unmodified:
+        if (not same_points or faces_changed) and data.unmodified:
             # (nothing was moved: "changed since ... (other coordinates: moved, ...)" had led;
             # user test)
             raise bridge.SelectionError(
-                f"{'; '.join(unmodified)}: Refine needs the shape '{surface.name}' was fitted "
-                "to")
+                f"{'; '.join(data.unmodified)}: Refine needs the shape '{surface.name}' was "
+                "fitted to")
         if not same_points or faces_changed:
             names = ", ".join(repr(o.name) for o in data.sources)
             then, now = len(surf.parameterization.uv), len(data.points)
@@ -1136,12 +1135,11 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         surface = editable_surface(context)
         data = source_data(context, surface)
         surf = stored_surface(surface)
-        unmodified = [n for n in data.notes if "read without its modifiers" in n]
-        if unmodified and not surf.fitted_to(data.points, data.rounding):
+        if data.unmodified and not surf.fitted_to(data.points, data.rounding):
             # (its map had measured the other shape, 10x off, with a warning: user test)
             raise bridge.SelectionError(
-                f"{'; '.join(unmodified)}: the map measures the shape '{surface.name}' was "
-                "fitted to")
+                f"{'; '.join(data.unmodified)}: the map measures the shape '{surface.name}' "
+                "was fitted to")
         self._surface, self._data, self._surf = surface, data, surf
         cloud = data.faces is None
         # a cloud's surface colours are computed on the job's thread too, at the surface's
