@@ -36,11 +36,11 @@ class SelectionError(Exception):
     """The selection cannot be fitted; the message is shown to the user as is."""
 
 
-@dataclass
 # the words of InputData.notes for a hidden source read without its modifiers
 UNMODIFIED = "read without its modifiers"
 
 
+@dataclass
 class InputData:
     """The merged, world-space input of a fit."""
 
