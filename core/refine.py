@@ -1083,8 +1083,8 @@ def adaptive_fit(
     partition of unity and vanish on the domain (:meth:`SplineSpace.meets`); reports give
     both counts (``control_points`` and ``functions``).
     With a tolerance and the automatic start, the first fits size the start: a probe with a
-    quarter of its knots (at most one per 8 of the measured points), then fresh starts with
-    the count :func:`next_start` predicts; they count as iterations. A continued run (``start_knots``) with a tolerance inserts the knots
+    quarter of its knots, then fresh starts with the count :func:`next_start` predicts; they
+    count as iterations. A continued run (``start_knots``) with a tolerance inserts the knots
     :func:`predicted_knots` says are missing, up to doubling them. Reports say whether an
     iteration's knots were placed ``"afresh"``, ``"continued"`` or ``"inserted"``
     (``knots_placed``). The best iteration is the one that meets the tolerance, else the one of
@@ -1162,12 +1162,7 @@ def adaptive_fit(
                           "points at most)", RuntimeWarning, stacklevel=4)
         sizing = (options.initial_knots is None and tol > 0 and options.max_iterations > 1
                   and n0 // PROBE_FRACTION >= MIN_PROBE_KNOTS)
-        # the probe: at most one knot per 8 of the measured points (a mesh's samples on its
-        # faces do not count: 16 vertices were probed with 41 knots, and any tolerance gave
-        # 140-160 control points; user test)
-        held = len(uv) if n_measured is None else n_measured
-        probe = min(n0 // PROBE_FRACTION, max(held // 8, MIN_PROBE_KNOTS // 2))
-        interior, ring_knots = place(probe if sizing else n0)
+        interior, ring_knots = place(n0 // PROBE_FRACTION if sizing else n0)
     else:
         interior = np.asarray(start_knots, dtype=np.float64)
         if ring_knots is None:

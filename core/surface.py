@@ -1656,9 +1656,10 @@ def coarse_mesh_warning(report: dict) -> str:
     return (f"the net has {report['control_points']} control points for a mesh of "
             f"{report['points']} vertices: the surface follows the mesh's flat faces, and the "
             "creases between them take many control points to meet the tolerance at the "
-            "vertices. For a smooth surface through the vertices with a small net, fit the "
-            "vertices as a point cloud (faces=None; in Blender a copy of the mesh with its "
-            "faces deleted: Delete > Only Faces), or subdivide the mesh first")
+            "vertices. For a smooth surface with a small net, subdivide the mesh first (in "
+            "Blender a Subdivision Surface modifier); or, if it is a height field over a plane, "
+            "fit its vertices as a point cloud (faces=None; in Blender a copy of the mesh with "
+            "its faces deleted: Delete > Only Faces)")
 
 
 def faces_warning(report: dict) -> str:

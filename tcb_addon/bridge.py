@@ -281,29 +281,35 @@ def modifier_names(obj) -> list:
     return out
 
 
-def _layer_collections(layer):
-    yield layer
+def _layer_paths(layer, path=()):
+    """The layer collections of a view layer, each with the path of those above it."""
+    path = (*path, layer)
+    yield path
     for child in layer.children:
-        yield from _layer_collections(child)
+        yield from _layer_paths(child, path)
 
 
 def show_advice(context, obj) -> str:
     """How to show the hidden ``obj`` so that its modifiers are evaluated, in the Outliner's
-    words: "show it (Alt+H)" did nothing for an object whose collection is excluded (user
-    test)."""
-    layers = [lc for lc in _layer_collections(context.view_layer.layer_collection)
-              if obj.name in lc.collection.objects]
-    if layers and all(lc.exclude for lc in layers):
-        return (f"include its collection '{layers[0].name}' in the view layer (its checkbox in "
+    words, step by step: "show it (Alt+H)" did nothing for an object whose collection is
+    excluded (user test), nor for one in a hidden collection, or a hidden parent collection
+    (review)."""
+    paths = [p for p in _layer_paths(context.view_layer.layer_collection)
+             if obj.name in p[-1].collection.objects]
+    if not paths:
+        return f"link it into a collection of the scene '{context.scene.name}'"
+    usable = [p for p in paths if not any(lc.exclude for lc in p)]
+    if not usable:
+        first = next(lc for lc in paths[0] if lc.exclude)
+        return (f"include the collection '{first.name}' in the view layer (its checkbox in "
                 "the Outliner)")
+    steps = [f"show the collection '{lc.name}'" for lc in usable[0]
+             if lc.hide_viewport or lc.collection.hide_viewport]
     if obj.hide_viewport:
-        return "enable it in viewports (the monitor icon in the Outliner)"
-    if obj.name in context.view_layer.objects and obj.hide_get():
-        return "show it (Alt+H)"
-    off = [lc for lc in layers if lc.hide_viewport or lc.collection.hide_viewport]
-    if off:
-        return f"show its collection '{off[0].name}' (in the Outliner)"
-    return "show it"
+        steps.append("enable it in viewports (the monitor icon in the Outliner)")
+    if obj.hide_get():
+        steps.append("show it (Alt+H)")
+    return " and ".join(steps) or "show it"
 
 
 def read_selection(context, objects=None) -> InputData:
@@ -397,8 +403,9 @@ def read_selection(context, objects=None) -> InputData:
         if n == 0:
             what = "vertices" if obj.type == "MESH" else "points"
             if not obj.visible_get():  # its geometry may come from modifiers, not evaluated
-                raise SelectionError(f"'{obj.name}' is hidden and has no {what} of its own: show "
-                                     "it (its modifiers make its geometry) and try again")
+                raise SelectionError(f"'{obj.name}' is hidden and has no {what} of its own: "
+                                     f"{show_advice(context, obj)} (its modifiers make its "
+                                     "geometry) and try again")
             if obj.type == "EMPTY":  # (instancing a collection that has no geometry)
                 raise SelectionError(
                     f"'{obj.name}' is an empty that instances no mesh or point cloud: select "

@@ -403,11 +403,23 @@ def test_a_hidden_source_read_without_its_modifiers_is_named_by_the_deviation_ma
     coll.objects.link(src)
     layer = bpy.context.view_layer.layer_collection.children["Scans"]
     layer.exclude = True
-    with pytest.raises(RuntimeError, match=r"include its collection 'Scans' in the view layer "
+    with pytest.raises(RuntimeError, match=r"include the collection 'Scans' in the view layer "
                                            r"\(its checkbox in the Outliner\)"):
         run(bpy, bpy.ops.tcb.deviation_map, surface)
     assert surface.tcb.deviation_max == shown  # (the refused maps changed nothing)
     layer.exclude = False
+    # hidden twice: its collection (by a parent's eye) and itself (review: "show it" alone)
+    parent = bpy.data.collections.new("Site")
+    bpy.context.scene.collection.children.link(parent)
+    bpy.context.scene.collection.children.unlink(coll)
+    parent.children.link(coll)
+    bpy.context.view_layer.layer_collection.children["Site"].hide_viewport = True
+    src.hide_set(True)  # (the flag is kept while the collection hides it)
+    with pytest.raises(RuntimeError, match=r"show the collection 'Site' and show it "
+                                           r"\(Alt\+H\) to read the modified shape"):
+        run(bpy, bpy.ops.tcb.deviation_map, surface)
+    bpy.context.view_layer.layer_collection.children["Site"].hide_viewport = False
+    src.hide_set(False)
     assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
     assert surface.tcb.deviation_max == pytest.approx(shown, rel=1e-6)
 
