@@ -7,7 +7,8 @@ See ``method.md`` section 4 (Parameterization). Two maps are implemented:
 * **Meshes of disk topology**: the boundary loop goes to the unit circle by chord length (or,
   when it has four corners, to a rectangle of the mesh's proportions, side by side) and the
   interior vertices are placed by Floater's mean-value weights (a Tutte embedding), one sparse
-  linear solve for ``u`` and ``v`` together.
+  linear solve for ``u`` and ``v`` together. When it distorts the triangles less, the boundary
+  keeps its own shape instead, flattened (:func:`_flattened_map`; not in method.md).
 
 Inputs that cannot be parameterized without folds (closed meshes, several boundary loops,
 non-manifold or non-orientable meshes, clouds folding over their best-fit plane) raise a
@@ -342,12 +343,14 @@ class Parameterization:
         uv: ``(n, 2) float64`` parameters of the input points, row ``i`` for point ``i``. For a
             ``"plane"`` the domain is scaled to ``[-1, 1]^2`` (the longer side spans it), for a
             ``"disk"`` it is the unit disk (or a rectangle of half-diagonal 1 in it, for a
-            boundary with four corners). Rows of mesh vertices that no face references are
+            boundary with four corners, or the mesh's own boundary flattened, in a box of
+            half-diagonal 1 centred at 0). Rows of mesh vertices that no face references are
             NaN (see ``used``).
         kind: ``"plane"`` (point cloud projected on its best-fit plane) or ``"disk"`` (mesh).
         domain_polygon: ``(b, 2) float64`` counter-clockwise polygon bounding the parameter
             domain of the data: the convex hull of ``uv`` for a plane, the boundary polygon
-            (vertices on the unit circle, or on the rectangle) for a disk.
+            (vertices on the unit circle, on the rectangle, or the flattened boundary, which
+            need not be convex) for a disk.
         used: ``(n,) bool``; False for mesh vertices that no face references (they have no
             parameter and must be left out of a fit) and for outliers left out of a point cloud
             (``drop_outliers``); their ``uv`` rows are NaN.
@@ -2064,6 +2067,102 @@ def boundary_corners(b: np.ndarray) -> np.ndarray | None:
     return corners
 
 
+# a mesh's own boundary shape (not in method.md, whose section 4 puts the boundary on a circle
+# or a square): the map with the flattened boundary is taken when its distortion
+# (:func:`_map_energy`, 1 for an isometry) exceeds 1 by less than FLAT_GAIN times the fixed
+# boundary's excess, less FLAT_MIN_GAIN. On a circle, a ragged border (a scan's edge, faces deleted in Blender) is
+# straightened and the triangles along it crushed: a 41 x 41 grid patch cut by a wavy ragged
+# border took 1272 control points at the default tolerance, flattened 144 (/tmp/lscm).
+FLAT_BOUNDARY = True
+FLAT_GAIN = 0.9
+FLAT_MIN_GAIN = 1e-6  # and by at least this much (a planar mesh maps exactly either way)
+
+
+def _angle_sums(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Sum (n,) of the 3D corner angles of the triangles at each vertex:
+    ``theta_i = sum atan2(|e_1 x e_2|, e_1 . e_2)`` over the corners at ``i``."""
+    total = np.zeros(len(p))
+    for j in range(3):
+        a = p[tris[:, j]]
+        e1, e2 = p[tris[:, (j + 1) % 3]] - a, p[tris[:, (j + 2) % 3]] - a
+        angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1),
+                           np.einsum("ij,ij->i", e1, e2))
+        total += np.bincount(tris[:, j], weights=angle, minlength=len(p))
+    return total
+
+
+def _closed_polygon(length: np.ndarray, turning: np.ndarray) -> np.ndarray | None:
+    """The plane polygon (B, 2) whose edge ``i`` (from vertex ``i`` to ``i + 1``) has about
+    ``length[i]`` and which turns left by ``turning[i]`` at vertex ``i`` (the turns sum to
+    ``2 pi``), or None. Edge ``i`` runs along ``T_i = (cos phi_i, sin phi_i)``,
+    ``phi_i = turning[1] + ... + turning[i]``; the lengths are changed as little as closes it:
+    ``l~ = l - l (T . lam)``, the least change in ``sum (l~ - l)^2 / l`` with
+    ``sum l~_i T_i = 0`` (``(sum l T T^T) lam = sum l T``; boundary-first flattening's
+    closing step, Sawhney and Crane 2017). None if a length would not stay positive."""
+    phi = np.concatenate([[0.0], np.cumsum(turning[1:])])
+    T = np.column_stack([np.cos(phi), np.sin(phi)])
+    lam = np.linalg.lstsq(np.einsum("i,ij,ik->jk", length, T, T), length @ T, rcond=None)[0]
+    closed = length * (1.0 - T @ lam)
+    if not (closed > 0).all():
+        return None
+    return np.vstack([[0.0, 0.0], np.cumsum(closed[:-1, None] * T[:-1], axis=0)])
+
+
+def _map_energy(p: np.ndarray, tris: np.ndarray, uv: np.ndarray) -> float:
+    """Distortion of the map of the triangles ``tris`` from 3D (``p``) to ``uv``: the
+    area-weighted mean of the symmetric Dirichlet energy ``(s_1^2 + s_2^2 + s_1^-2 + s_2^-2)
+    / 4`` of each triangle's linear map (singular values ``s``), after scaling ``uv`` to the
+    3D area; 1 for an isometry, infinite if a uv triangle is flipped or flat. Per triangle
+    ``|J|_F^2 = |f_1|^2 / l_1^2 + |f_2 - f_1 x_2 / l_1|^2 / y_2^2`` (``f`` the uv edges,
+    ``(l_1, 0)`` and ``(x_2, y_2)`` the 3D edges in the triangle's plane) and
+    ``|J^-1|_F^2 = |J|_F^2 / det J^2``, ``det J = area_uv / area_3D``."""
+    e1, e2 = p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]]
+    f1, f2 = uv[tris[:, 1]] - uv[tris[:, 0]], uv[tris[:, 2]] - uv[tris[:, 0]]
+    area_uv = 0.5 * (f1[:, 0] * f2[:, 1] - f1[:, 1] * f2[:, 0])
+    if not (area_uv > 0).all():
+        return float("inf")
+    l1 = np.linalg.norm(e1, axis=1)
+    area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+    ok = area > 0
+    l1, area, e1, e2, f1, f2, area_uv = (a[ok] for a in (l1, area, e1, e2, f1, f2, area_uv))
+    x2 = np.einsum("ij,ij->i", e1, e2) / l1
+    y2 = 2.0 * area / l1
+    s2 = area.sum() / area_uv.sum()  # uv scaled to the 3D area
+    col2 = f2 - f1 * (x2 / l1)[:, None]
+    frob = s2 * (np.einsum("ij,ij->i", f1, f1) / l1**2 + np.einsum("ij,ij->i", col2, col2) / y2**2)
+    det = s2 * area_uv / area
+    return float(np.sum(area * frob * (1.0 + 1.0 / det**2)) / (4.0 * area.sum()))
+
+
+def _flattened_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
+    """The mesh's map with its own boundary shape flattened: ``uv`` (n, 2) of the boundary
+    ``loop`` and of the ``interior`` vertices (NaN elsewhere), in a box of half-diagonal 1
+    centred at 0, or None. Boundary-first flattening (Sawhney and Crane, "Boundary first
+    flattening", ACM TOG 2017) with lengths kept: the boundary keeps its 3D edge lengths and
+    turns at each vertex by its geodesic curvature ``pi - theta_b`` plus the share of the
+    interior's angle defects ``K_I = 2 pi - theta_I`` that a random walk with the mean-value
+    weights carries to it (its exit probabilities, the harmonic measure ``H = a^-1 W_IB``:
+    ``carried = H^T K = W_IB^T a^-T K``, with the factor ``lu`` of ``a = D - W_II``); by
+    Gauss-Bonnet the turns sum to ``2 pi``. The interior follows by the same mean-value
+    solve as on the circle (``w``: the weight rows of the interior)."""
+    theta = _angle_sums(p, tris)
+    turning = np.pi - theta[loop]
+    if len(interior):
+        turning = turning + w[:, loop].T @ lu.solve(2.0 * np.pi - theta[interior], trans="T")
+    if not abs(turning.sum() - 2.0 * np.pi) < 1e-6:
+        return None
+    length = np.linalg.norm(p[np.roll(loop, -1)] - p[loop], axis=1)
+    edge = _closed_polygon(length, turning)
+    if edge is None:
+        return None
+    lo, hi = edge.min(axis=0), edge.max(axis=0)
+    uv = np.full((len(p), 2), np.nan)
+    uv[loop] = (edge - 0.5 * (lo + hi)) / (0.5 * np.linalg.norm(hi - lo))
+    if len(interior):
+        uv[interior] = lu.solve(np.asfortranarray(w[:, loop] @ uv[loop]))
+    return uv if np.isfinite(uv[loop]).all() and np.isfinite(uv[interior]).all() else None
+
+
 def _rectangle_boundary(seg: np.ndarray, corners: np.ndarray) -> np.ndarray:
     """Boundary parameters on a rectangle, counter-clockwise from its lower left corner
     (method.md section 4's chord-length map, side by side): the loop's edges ``seg`` (3D
@@ -2107,6 +2206,16 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     mean-value weights (:func:`_mean_value_weights`), one sparse LU solve with two right-hand
     sides. Positive weights and a convex boundary give an embedding (Tutte/Floater); every uv
     triangle is checked to have positive area anyway.
+
+    The boundary's own shape (not in method.md): :func:`_flattened_map` flattens the loop with
+    its 3D edge lengths and turning angles (the interior's Gaussian curvature carried to it)
+    and places the interior with the same mean-value solve (the factor is reused). That map is
+    taken when its distortion (:func:`_map_energy`) exceeds an isometry's by less than
+    ``FLAT_GAIN`` times the circle's or rectangle's (and has no flipped triangle). A ragged
+    border on the circle is straightened and the triangles along it crushed: a 21 x 21 grid
+    mesh without one boundary triangle needed 546 control points at the default tolerance
+    (145 flattened), a 60-degree cap cut from a grid with a staircase border 781 (143), the
+    scanned face 824 (719). Steep peaks (three_peaks.off) keep the circle.
 
     Cleaning: polygons are split into fans; faces with a repeated vertex and repeated faces are
     dropped; zero-area caps are flipped away (:func:`_flip_caps`); faces are re-oriented
@@ -2260,12 +2369,14 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     interior = used.copy()
     interior[loop] = False
     ii = np.flatnonzero(interior)
+    w = lu = None
     if len(ii):
         w = _mean_value_weights(p, tris, n)[ii]
         a = sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w[:, ii]
         rhs = w[:, loop] @ uv[loop]
         try:
-            sol = splu(sp.csc_matrix(a)).solve(np.asfortranarray(rhs))
+            lu = splu(sp.csc_matrix(a))
+            sol = lu.solve(np.asfortranarray(rhs))
         except RuntimeError as exc:  # singular factor
             raise ParameterizationError(
                 f"the mean-value system is singular ({exc}); the mesh has degenerate "
@@ -2277,6 +2388,13 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
                 "triangles: clean it up (Blender: Mesh > Clean Up > Degenerate Dissolve)"
             )
         uv[ii] = sol
+
+    # the boundary's own shape instead, when that distorts the triangles less (FLAT_GAIN)
+    flat = _flattened_map(p, tris, loop, ii, w, lu) if FLAT_BOUNDARY else None
+    if flat is not None:
+        fixed_energy, flat_energy = _map_energy(p, tris, uv), _map_energy(p, tris, flat)
+        if flat_energy - 1.0 < FLAT_GAIN * (fixed_energy - 1.0) - FLAT_MIN_GAIN:
+            uv = flat
 
     # fold-over check: det(a, b, c) > 0 for every uv triangle
     ua, ub, uc = uv[tris[:, 0]], uv[tris[:, 1]], uv[tris[:, 2]]

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import ConvexHull, Delaunay, cKDTree
 
 from .configurations import Configurations
 from .errors import CancelledError, FileFormatError, InvalidInputError, TCBError
@@ -675,8 +675,11 @@ class TCBSurface:
 
     def _on_edge(self, x: np.ndarray) -> np.ndarray:
         """Mask of the parameters ``x`` (in the domain) on its polygon's boundary: outside it
-        when moved away from its vertex mean by 1e-9 of its size."""
+        when moved away from its vertex mean by 1e-9 of its size (a polygon that is not
+        convex: within 1e-9 of its size of an edge)."""
         v, c = self._convex_domain()[:2]
+        if not self._domain_convex:
+            return _distance_to_polygon(x, v) <= 1e-9 * float(np.ptp(v, axis=0).max())
         away = x - c
         length = np.sqrt(np.einsum("ij,ij->i", away, away))
         nudge = 1e-9 * float(np.ptp(v, axis=0).max()) / np.maximum(length, 1e-300)
@@ -745,13 +748,15 @@ class TCBSurface:
         return self._space.combine(uv, self._c, [(0, 0), (1, 0), (0, 1)])
 
     def _convex_domain(self):
-        """The domain polygon prepared for :meth:`_in_domain` / :meth:`_into_domain`: it is
-        convex (a cloud's convex hull; a mesh's boundary on the unit circle or a rectangle).
+        """The domain polygon prepared for :meth:`_in_domain` / :meth:`_into_domain`: mostly
+        convex (a cloud's convex hull; a mesh's boundary on the unit circle or a rectangle);
+        a mesh's flattened boundary need not be (``self._domain_convex`` says which).
         Vertices ``v`` (CCW, starting at the smallest angle around the vertex mean ``c``),
         their angles, the edges and a KD-tree of the vertices."""
         cached = self._domain_cache
         if cached is None:
             v = np.asarray(self._param.domain_polygon, dtype=np.float64)
+            self._domain_convex = _is_convex(v)
             c = v.mean(axis=0)
             ang = np.arctan2(v[:, 1] - c[1], v[:, 0] - c[0])
             start = int(np.argmin(ang))
@@ -762,10 +767,13 @@ class TCBSurface:
         return cached
 
     def _in_domain(self, x: np.ndarray) -> np.ndarray:
-        """Mask of ``x`` in the (convex) domain polygon, closed to 1e-12 of its size: the
-        vertex wedge around ``c`` that holds ``x`` (a binary search by angle) names the one
-        edge to test (O(log n) per point instead of every edge)."""
+        """Mask of ``x`` in the domain polygon, closed to 1e-12 of its size: for a convex one
+        the vertex wedge around ``c`` that holds ``x`` (a binary search by angle) names the
+        one edge to test (O(log n) per point instead of every edge); else the even-odd test
+        of :meth:`domain_contains`."""
         v, c, ang, ab, _ = self._convex_domain()
+        if not self._domain_convex:
+            return self._param.contains(x)
         i = (np.searchsorted(ang, np.arctan2(x[:, 1] - c[1], x[:, 0] - c[0]), side="right")
              - 1) % len(v)
         rel = x - np.take(v, i, axis=0)
@@ -788,6 +796,9 @@ class TCBSurface:
         y = x[out]
         if n <= 32:
             cand = np.broadcast_to(np.arange(n), (len(y), n))
+        elif not self._domain_convex:  # (no wedges: the edges at the 8 nearest vertices)
+            _, near = tree.query(y, k=8)
+            cand = np.concatenate([near, near - 1], axis=1) % n
         else:
             w = (np.searchsorted(ang, np.arctan2(y[:, 1] - c[1], y[:, 0] - c[0]),
                                  side="right") - 1)[:, None] + np.arange(-2, 3)
@@ -1240,14 +1251,33 @@ def _lattice_frame(poly: np.ndarray) -> np.ndarray | None:
     return np.array([[c, -s], [s, c]])
 
 
+def _is_convex(v: np.ndarray) -> bool:
+    """Whether the CCW polygon ``v`` (b, 2) turns left (or goes straight) at every vertex, to
+    1e-12 of its size squared."""
+    e = np.roll(v, -1, axis=0) - v
+    f = np.roll(e, -1, axis=0)
+    turn = e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0]
+    return bool((turn >= -1e-12 * float(np.ptp(v, axis=0).max()) ** 2).all())
+
+
+def convex_domain(polygon) -> np.ndarray:
+    """The CCW polygon (b, 2) itself when it is convex, else its convex hull (a mesh's
+    flattened boundary, :mod:`.parameterize`)."""
+    v = np.asarray(polygon, dtype=np.float64)
+    return v if _is_convex(v) else v[ConvexHull(v).vertices]
+
+
 def grid_frame(param) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
     """``(rot, lo, hi)``: the frame of a tessellation's grid over the domain of ``param`` (a
-    :class:`Parameterization`) and the domain polygon's box in it: a cloud's smallest
-    enclosing rectangle when its area is under LATTICE_FRAME_GAIN of the box's
-    (:func:`_lattice_frame`; a square whose parameter axes ran along its diagonals got half
-    the vertices: user test), else the uv axes (``rot`` None)."""
+    :class:`Parameterization`) and the domain polygon's box in it: the smallest rectangle
+    enclosing a cloud's domain, or a mesh's flattened boundary (not on the unit circle; a
+    rectangle is axis-aligned already), when its area is under LATTICE_FRAME_GAIN of the
+    box's (:func:`_lattice_frame`; a square whose parameter axes ran along its diagonals got
+    half the vertices: user test), else the uv axes (``rot`` None)."""
     poly = np.asarray(param.domain_polygon, dtype=np.float64)
-    rot = _lattice_frame(poly) if param.kind == "plane" else None
+    circle = param.kind == "disk" and np.allclose(np.hypot(poly[:, 0], poly[:, 1]), 1.0,
+                                                  rtol=0, atol=1e-12)
+    rot = None if circle else _lattice_frame(convex_domain(poly))
     w = poly if rot is None else poly @ rot
     return rot, w.min(axis=0), w.max(axis=0)
 
