@@ -2134,26 +2134,68 @@ def _map_energy(p: np.ndarray, tris: np.ndarray, uv: np.ndarray) -> float:
     return float(np.sum(area * frob * (1.0 + 1.0 / det**2)) / (4.0 * area.sum()))
 
 
+def _cotan_weights(p: np.ndarray, tris: np.ndarray, n: int) -> sp.csr_matrix:
+    """The cotangent weights ``C`` (``(n, n)`` CSR, symmetric): ``c_ij = (cot alpha_ij +
+    cot beta_ij) / 2``, ``alpha_ij, beta_ij`` the angles opposite edge ``ij`` in its two
+    triangles (one on the boundary); ``L = diag(C 1) - C`` is the Dirichlet energy's matrix
+    of the piecewise linear functions on the mesh."""
+    rows, cols, vals = [], [], []
+    for a, b, c in ((tris[:, 0], tris[:, 1], tris[:, 2]), (tris[:, 1], tris[:, 2], tris[:, 0]),
+                    (tris[:, 2], tris[:, 0], tris[:, 1])):
+        e1, e2 = p[b] - p[a], p[c] - p[a]
+        cross = np.linalg.norm(np.cross(e1, e2), axis=1)
+        half_cot = 0.5 * np.einsum("ij,ij->i", e1, e2) / np.maximum(cross, 1e-300)
+        rows += [b, c]
+        cols += [c, b]
+        vals += [half_cot, half_cot]
+    return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(n, n)).tocsr()
+
+
+def _carried_curvature(p, tris, loop, interior, defect, w, lu) -> np.ndarray:
+    """The share of the interior's angle defects ``K_I`` (``defect``) that each boundary
+    vertex of ``loop`` takes: boundary-first flattening's Dirichlet-to-Neumann map (Sawhney
+    and Crane 2017, with the boundary's scale kept, ``u_B = 0``): solve ``L_II u_I = -K_I``
+    with the cotangent Laplacian (:func:`_cotan_weights`), then ``h_B = (L u)_B = C_IB^T
+    L_II^-1 K_I``; ``sum h_B = sum K_I``. If that system is singular or its solution not
+    finite (degenerate triangles), the harmonic measure of the mean-value weights ``w`` (the
+    exit probabilities of their random walk, ``H = a^-1 W_IB``, with the factor ``lu`` of
+    ``a = D - W_II``) carries them instead: ``h_B = W_IB^T a^-T K_I``."""
+    c = _cotan_weights(p, tris, len(p))[interior]
+    lap = sp.diags(np.asarray(c.sum(axis=1)).ravel()) - c[:, interior]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # (a singular factor is caught below)
+            carried = c[:, loop].T @ splu(sp.csc_matrix(lap)).solve(defect)
+        if np.isfinite(carried).all():
+            return carried
+    except RuntimeError:
+        pass
+    return w[:, loop].T @ lu.solve(defect, trans="T")
+
+
 def _flattened_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
     """The mesh's map with its own boundary shape flattened: ``uv`` (n, 2) of the boundary
     ``loop`` and of the ``interior`` vertices (NaN elsewhere), in a box of half-diagonal 1
     centred at 0, or None. Boundary-first flattening (Sawhney and Crane, "Boundary first
     flattening", ACM TOG 2017) with lengths kept: the boundary keeps its 3D edge lengths and
-    turns at each vertex by its geodesic curvature ``pi - theta_b`` plus the share of the
-    interior's angle defects ``K_I = 2 pi - theta_I`` that a random walk with the mean-value
-    weights carries to it (its exit probabilities, the harmonic measure ``H = a^-1 W_IB``:
-    ``carried = H^T K = W_IB^T a^-T K``, with the factor ``lu`` of ``a = D - W_II``); by
+    turns at each vertex by its geodesic curvature ``pi - theta_b`` plus its share of the
+    interior's angle defects ``K_I = 2 pi - theta_I`` (:func:`_carried_curvature`); by
     Gauss-Bonnet the turns sum to ``2 pi``. The interior follows by the same mean-value
-    solve as on the circle (``w``: the weight rows of the interior)."""
+    solve as on the circle (``w``: the weight rows of the interior, ``lu``: their factor).
+    None when the flattened boundary is not a simple polygon: a ramp of more than one turn
+    develops into a loop that overlaps itself (review: every uv triangle positive, distortion
+    1.0, and the fit stuck at 4.5% of the diagonal)."""
     theta = _angle_sums(p, tris)
     turning = np.pi - theta[loop]
     if len(interior):
-        turning = turning + w[:, loop].T @ lu.solve(2.0 * np.pi - theta[interior], trans="T")
+        turning = turning + _carried_curvature(p, tris, loop, interior,
+                                               2.0 * np.pi - theta[interior], w, lu)
     if not abs(turning.sum() - 2.0 * np.pi) < 1e-6:
         return None
     length = np.linalg.norm(p[np.roll(loop, -1)] - p[loop], axis=1)
     edge = _closed_polygon(length, turning)
-    if edge is None:
+    if edge is None or not simple_polygon(edge):
         return None
     lo, hi = edge.min(axis=0), edge.max(axis=0)
     uv = np.full((len(p), 2), np.nan)

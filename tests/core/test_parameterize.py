@@ -1507,3 +1507,28 @@ def test_meshes_with_ragged_borders_are_fitted_with_small_nets() -> None:
         bary = np.array([[i, j, 8 - i - j] for i in range(9) for j in range(9 - i)]) / 8.0
         dense = np.einsum("bk,fkd->fbd", bary, pts[faces]).reshape(-1, 3)  # on the faces
         assert cKDTree(dense).query(v)[0].max() < 5e-3 * diag
+
+
+def test_a_ramp_of_more_than_one_turn_keeps_the_circle() -> None:
+    """A helical ramp (a strip of radii 0.5-1 climbing 0.15 per radian) of 1.5 turns flattens
+    into a loop that overlaps itself: every uv triangle is positive and the distortion is
+    that of an isometry, but the domain polygon is not simple (the fit had stalled at 4.5% of
+    the diagonal: review). The circle or rectangle is kept; half a turn is flattened."""
+    def ramp(turns):
+        t, r = np.meshgrid(np.linspace(0, 2 * np.pi * turns, int(60 * turns) + 1),
+                           np.linspace(0.5, 1.0, 9))
+        n, m = t.shape[1], t.shape[0]
+        i, j = np.meshgrid(np.arange(n - 1), np.arange(m - 1))
+        a = (j * n + i).ravel()
+        faces = np.concatenate([np.column_stack([a, a + 1, a + n + 1]),
+                                np.column_stack([a, a + n + 1, a + n])])
+        t, r = t.ravel(), r.ravel()
+        return np.column_stack([r * np.cos(t), r * np.sin(t), 0.15 * t]), faces
+
+    pts, faces = ramp(1.5)
+    par = parameterize_mesh(pts, faces)
+    np.testing.assert_array_equal(par.uv, fixed_boundary_map(pts, faces).uv)
+    pts, faces = ramp(0.5)
+    par = parameterize_mesh(pts, faces)
+    assert not np.array_equal(par.uv, fixed_boundary_map(pts, faces).uv)
+    check_disk(par, pts)

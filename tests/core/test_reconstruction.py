@@ -886,7 +886,7 @@ def test_a_mesh_flaring_out_at_its_border_is_reported(smoothness, beyond):
         flat = fit_surface(points, faces, smoothness=smoothness)
     assert flat.report["swings"]["places"] == 0
     v, _ = flat.tessellate(128)
-    assert np.ptp(v, axis=0).max() < 1.001 * np.ptp(points, axis=0).max()
+    assert np.ptp(v, axis=0).max() < 1.005 * np.ptp(points, axis=0).max()
 
 
 def test_a_steep_surface_bending_between_points_of_its_hull_is_no_swing():
@@ -1513,7 +1513,9 @@ def test_a_slot_that_winds_around_a_bend_is_closed_in_the_map_of_its_fan(monkeyp
                         lambda xy: simple.append(real(xy)) or simple[-1])
     with pytest.warns(RuntimeWarning, match="vertices are in no face"):
         surf = fit_surface(P, F, fill_holes=True)
-    assert simple == [False, True]  # across the slot, then in the fans' map
+    # across the slot, then in the fans' map (then the flattened boundary's checks, a
+    # simple polygon each time)
+    assert simple[:2] == [False, True] and all(simple[2:])
     par = surf.parameterization
     assert len(par.faces) == 2 * len(F) and par.faces.max() < len(P) and len(lost) == 13
     assert np.all(orient2d(*(par.uv[par.faces[:, k]] for k in range(3))) > 0)
