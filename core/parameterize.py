@@ -2070,9 +2070,12 @@ def boundary_corners(b: np.ndarray) -> np.ndarray | None:
 # a mesh's own boundary shape (not in method.md, whose section 4 puts the boundary on a circle
 # or a square): the map with the flattened boundary is taken when its distortion
 # (:func:`_map_energy`, 1 for an isometry) exceeds 1 by less than FLAT_GAIN times the fixed
-# boundary's excess, less FLAT_MIN_GAIN. On a circle, a ragged border (a scan's edge, faces deleted in Blender) is
-# straightened and the triangles along it crushed: a 41 x 41 grid patch cut by a wavy ragged
-# border took 1272 control points at the default tolerance, flattened 144 (/tmp/lscm).
+# boundary's excess, less FLAT_MIN_GAIN. On a circle, a ragged border (a scan's edge, faces
+# deleted in Blender) is straightened and the triangles along it crushed: a 41 x 41 grid patch
+# cut by a wavy ragged border took 1272 control points at the default tolerance, flattened 140
+# (benchmarks/mesh_maps.py). The gain is generous: the circle's failure (crushed triangles)
+# costs far more than the flattened map's (area distortion of a curved patch); a review
+# measured patch-01 (distortion excess 0.69 of the rectangle's) at 0.9-1.1x the control points.
 FLAT_BOUNDARY = True
 FLAT_GAIN = 0.9
 FLAT_MIN_GAIN = 1e-6  # and by at least this much (a planar mesh maps exactly either way)
@@ -2228,7 +2231,8 @@ def _rectangle_boundary(seg: np.ndarray, corners: np.ndarray) -> np.ndarray:
 def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
                       fill_holes: bool = False, _fill_from: int | None = None
                       ) -> Parameterization:
-    """Parameterize a triangle (or quad) mesh of disk topology over the unit disk.
+    """Parameterize a triangle (or quad) mesh of disk topology over the unit disk (or a
+    rectangle, or its own boundary flattened: below).
 
     ``fill_holes``: a mesh with holes (boundary loops besides the outer one, each at most
     half its size) is mapped as if they were filled (:func:`_with_holes_filled`), instead
@@ -2256,8 +2260,9 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     ``FLAT_GAIN`` times the circle's or rectangle's (and has no flipped triangle). A ragged
     border on the circle is straightened and the triangles along it crushed: a 21 x 21 grid
     mesh without one boundary triangle needed 546 control points at the default tolerance
-    (145 flattened), a 60-degree cap cut from a grid with a staircase border 781 (143), the
-    scanned face 824 (719). Steep peaks (three_peaks.off) keep the circle.
+    (140 flattened), a 60-degree cap cut from a grid with a staircase border 781 (141), the
+    scanned face 824 (722; benchmarks/mesh_maps.py). Steep peaks (three_peaks.off) keep their
+    rectangle.
 
     Cleaning: polygons are split into fans; faces with a repeated vertex and repeated faces are
     dropped; zero-area caps are flipped away (:func:`_flip_caps`); faces are re-oriented
@@ -2697,6 +2702,6 @@ def parameterize(
     if projection is not None:
         raise InvalidInputError(
             "a projection direction applies to point clouds; a mesh is parameterized by its "
-            "faces (over the unit disk): leave the projection automatic (in Blender: Auto)"
+            "faces (flattened): leave the projection automatic (in Blender: Auto)"
         )
     return parameterize_mesh(points, faces, fill_holes=fill_holes)

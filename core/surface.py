@@ -1789,7 +1789,8 @@ def fit_surface(
     faces : (F, 3) int, optional
         Triangles of a disk-topology mesh ((F, k) polygons, or a list of polygons of any
         lengths, are split into fans; then the mesh is parameterized over the unit disk,
-        or a rectangle when its boundary has four corners;
+        or a rectangle when its boundary has four corners, or its own boundary flattened
+        when that distorts the triangles less;
         otherwise the cloud is projected on its best-fit plane).
     degree : 2 (C^1, default) or 3 (C^2)
     mode : "tcb" (feature-sensitive configurations) or "dcb" (Delaunay configurations); any case
