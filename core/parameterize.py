@@ -2079,6 +2079,27 @@ def boundary_corners(b: np.ndarray) -> np.ndarray | None:
 FLAT_BOUNDARY = True
 FLAT_GAIN = 0.9
 FLAT_MIN_GAIN = 1e-6  # and by at least this much (a planar mesh maps exactly either way)
+FLAT_PINCH = 2.0  # and no two boundary vertices come this many times closer in uv than in 3D
+
+
+def _pinch(q: np.ndarray, edge: np.ndarray, k: int = 12, apart: int = 3) -> float:
+    """How much closer the flattened boundary ``edge`` (B, 2) brings boundary vertices
+    together than they are in 3D (``q``, (B, 3)): the largest ``|q_i - q_j| / (s |x_i -
+    x_j|)`` over the ``k`` nearest boundary vertices ``j`` in the plane of each ``i`` that are
+    more than ``apart`` steps away along the loop (``s``: 3D per plane length of the loop).
+    About 1 when the flattened loop keeps its shape; a ramp of 0.95 turn flattens into a loop
+    whose two ends nearly meet (3.8; 0.98 turn 6.5) while they are a climb apart, and the
+    spline has to jump the gap (review: a swing warning, the surface 1% of the diagonal off
+    the mesh). Measured 1.00-1.07 on every other benchmarks/mesh_maps.py mesh."""
+    B = len(edge)
+    s = (np.linalg.norm(np.roll(q, -1, axis=0) - q, axis=1).sum()
+         / np.linalg.norm(np.roll(edge, -1, axis=0) - edge, axis=1).sum())
+    d, j = cKDTree(edge).query(edge, k=min(k, B))
+    steps = np.abs(np.arange(B)[:, None] - j)
+    steps = np.minimum(steps, B - steps)
+    far = np.linalg.norm(q[:, None, :] - q[j], axis=2)
+    ratio = far / np.maximum(s * d, 1e-300)
+    return float(ratio[steps > apart].max(initial=0.0))
 
 
 def _angle_sums(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
@@ -2188,7 +2209,9 @@ def _flattened_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
     solve as on the circle (``w``: the weight rows of the interior, ``lu``: their factor).
     None when the flattened boundary is not a simple polygon: a ramp of more than one turn
     develops into a loop that overlaps itself (review: every uv triangle positive, distortion
-    1.0, and the fit stuck at 4.5% of the diagonal)."""
+    1.0, and the fit stuck at 4.5% of the diagonal); or when it brings parts of the border
+    together that are far apart in 3D (:func:`_pinch` above FLAT_PINCH: a ramp of just under
+    one turn)."""
     theta = _angle_sums(p, tris)
     turning = np.pi - theta[loop]
     if len(interior):
@@ -2198,7 +2221,7 @@ def _flattened_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
         return None
     length = np.linalg.norm(p[np.roll(loop, -1)] - p[loop], axis=1)
     edge = _closed_polygon(length, turning)
-    if edge is None or not simple_polygon(edge):
+    if edge is None or not simple_polygon(edge) or _pinch(p[loop], edge) > FLAT_PINCH:
         return None
     lo, hi = edge.min(axis=0), edge.max(axis=0)
     uv = np.full((len(p), 2), np.nan)

@@ -1078,8 +1078,8 @@ def adaptive_fit(
     criterion, the iterations fit a seeded random subset of that size (their reports say
     ``sampled_points``) and the best iteration's space is fitted to all points at the end
     (``refit`` of the returned state: points, seconds, phases).
-    The control-point budget counts the functions whose support meets ``domain`` (a convex CCW
-    polygon, default the convex hull of ``uv``): the others only carry the border rings'
+    The control-point budget counts the functions whose support meets ``domain`` (a CCW polygon,
+    whose convex hull is used; default the convex hull of ``uv``): the others only carry the border rings'
     partition of unity and vanish on the domain (:meth:`SplineSpace.meets`); reports give
     both counts (``control_points`` and ``functions``).
     With a tolerance and the automatic start, the first fits size the start: a probe with a

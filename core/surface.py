@@ -678,8 +678,8 @@ class TCBSurface:
         when moved away from its vertex mean by 1e-9 of its size (a polygon that is not
         convex: within 1e-9 of its size of an edge)."""
         v, c = self._convex_domain()[:2]
-        if not self._domain_convex:
-            return _distance_to_polygon(x, v) <= 1e-9 * float(np.ptp(v, axis=0).max())
+        if not self._domain_convex:  # (review: every edge for every point took 2x the search)
+            return self._onto_edges(x)[1] <= (1e-9 * float(np.ptp(v, axis=0).max())) ** 2
         away = x - c
         length = np.sqrt(np.einsum("ij,ij->i", away, away))
         nudge = 1e-9 * float(np.ptp(v, axis=0).max()) / np.maximum(length, 1e-300)
@@ -783,20 +783,25 @@ class TCBSurface:
 
     def _into_domain(self, x: np.ndarray, lo, hi) -> np.ndarray:
         """``x`` clipped to the box ``[lo, hi]`` and then, where outside the data's domain
-        polygon, moved to the nearest point of its boundary: closest points lie on the
-        trimmed surface, not on its extension over the border rings. Candidate edges: the
-        one whose wedge holds the point and its neighbours, and those at the two nearest
-        vertices (all edges of polygons of at most 32)."""
+        polygon, moved to the nearest point of its boundary (:meth:`_onto_edges`): closest
+        points lie on the trimmed surface, not on its extension over the border rings."""
         x = np.clip(x, lo, hi)
         out = np.flatnonzero(~self._in_domain(x))
         if len(out) == 0:
             return x
+        x[out] = self._onto_edges(x[out])[0]
+        return x
+
+    def _onto_edges(self, y: np.ndarray):
+        """The nearest points of the domain polygon's boundary to ``y`` (m, 2) and their
+        squared distances, over candidate edges: all edges of polygons of at most 32; for a
+        convex one the edge whose wedge holds the point and its neighbours, and those at the
+        two nearest vertices; else those at the 8 nearest vertices."""
         v, c, ang, ab, tree = self._convex_domain()
         n = len(v)
-        y = x[out]
         if n <= 32:
             cand = np.broadcast_to(np.arange(n), (len(y), n))
-        elif not self._domain_convex:  # (no wedges: the edges at the 8 nearest vertices)
+        elif not self._domain_convex:  # (no wedges)
             _, near = tree.query(y, k=8)
             cand = np.concatenate([near, near - 1], axis=1) % n
         else:
@@ -809,8 +814,9 @@ class TCBSurface:
         t = np.clip(t / np.maximum(np.einsum("mej,mej->me", e, e), 1e-300), 0.0, 1.0)
         proj = a + t[..., None] * e
         gap = np.einsum("mej,mej->me", y[:, None, :] - proj, y[:, None, :] - proj)
-        x[out] = proj[np.arange(len(y)), gap.argmin(axis=1)]
-        return x
+        best = gap.argmin(axis=1)
+        rows = np.arange(len(y))
+        return proj[rows, best], gap[rows, best]
 
     def _newton_closest(self, p, x, start, lo, hi, iterations, keep_in=None, size=0.0):
         """Gauss-Newton from ``x`` (with the surface and its gradient there, ``start``) inside
