@@ -2226,7 +2226,7 @@ def _flattened_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
     # place) opened 5 degrees wide by 5 of curvature. The surface there must bridge the gap
     # in the plane from both sides, which meet at other angles in 3D than in the plane: a
     # kink no C^1 spline reaches (user test: the fit stalled at 1.2% of the diagonal with
-    # 486 control points; on the circle the tolerance with 678). Measured at most 0.29 of
+    # 486 control points; on the circle the tolerance with 602). Measured at most 0.29 of
     # the gap on the benchmarks/mesh_maps.py meshes, 0.98 at the slit's tip.
     angle = theta[loop] - carried  # the angle of the domain at each boundary vertex
     reflex = angle > np.pi
