@@ -31,15 +31,15 @@ sys.path.insert(0, str(ROOT))
 import core.parameterize as pz  # noqa: E402
 from core import fit_surface  # noqa: E402
 from core.meshio import read_geometry  # noqa: E402
+from holes import f, grid as quad_grid  # noqa: E402
 
 
-def grid(n: int, height=lambda x, y: 0.3 * np.sin(3 * x) * np.cos(2 * y)):
-    """An n x n grid mesh over the unit square, lifted by ``height``."""
-    x, y = (a.ravel() for a in np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n)))
-    i, j = (a.ravel() for a in np.meshgrid(np.arange(n - 1), np.arange(n - 1)))
-    a = j * n + i
-    faces = np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]
-    return np.c_[x, y, height(x, y)], faces
+def grid(n: int, height=f):
+    """An n x n grid mesh over the unit square (benchmarks/holes.py's), its cells split into
+    triangles, lifted by ``height``."""
+    pts, cells, _, _ = quad_grid(n)
+    pts[:, 2] = height(pts[:, 0], pts[:, 1])
+    return pts, np.r_[cells[:, [0, 1, 2]], cells[:, [0, 2, 3]]]
 
 
 def ragged(n: int = 41):
