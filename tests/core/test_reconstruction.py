@@ -857,7 +857,7 @@ def test_every_spike_the_fit_misses_is_counted_and_not_taken_for_a_fold():
 
 
 @pytest.mark.parametrize("smoothness, beyond", [(0.0, 1.0), (1e-7, 0.01)])
-def test_a_mesh_flaring_out_at_its_border_is_reported(smoothness, beyond):
+def test_a_mesh_flaring_out_at_its_border_is_reported(smoothness, beyond, monkeypatch):
     """nefertiti.off fitted with smoothness 0 (the Blender option offers it) reached its
     tolerance, max error 0.3% of the diagonal, while the surface flared out to z = 20-27 at
     its border, 3 diagonals off the scan (1e-7: 0.2 diagonals), between the boundary vertices
@@ -869,13 +869,9 @@ def test_a_mesh_flaring_out_at_its_border_is_reported(smoothness, beyond):
     import core.parameterize as pz
 
     points, faces = read_geometry(DATA / "nefertiti.off")
-    old = pz.FLAT_BOUNDARY
-    try:
-        pz.FLAT_BOUNDARY = False
-        with pytest.warns(RuntimeWarning, match="swings away from the data"):
-            surf = fit_surface(points, faces, smoothness=smoothness)
-    finally:
-        pz.FLAT_BOUNDARY = old
+    with monkeypatch.context() as m, pytest.warns(RuntimeWarning, match="swings away from"):
+        m.setattr(pz, "FLAT_BOUNDARY", False)
+        surf = fit_surface(points, faces, smoothness=smoothness)
     sw = surf.report["swings"]
     assert sw["places"] > 0 and sw["largest_rel"] > beyond
     assert surf.report["smoothness"] == smoothness
