@@ -6,8 +6,10 @@ Cases: the three bundled meshes; a 21 x 21 grid mesh of ``0.3 sin 3x cos 2y`` wh
 without one boundary triangle (a notch); a 41 x 41 grid patch of a smooth function cut by a
 wavy, ragged border (a scan's edge: a staircase of grid edges); 60-, 90- and 120-degree spherical
 caps cut from a grid (staircase borders); half a cylinder; the scanned face without 15 of its
-faces along the border (faces deleted in Blender: each leaves a notch). Columns: the map the default takes
-("circle", "rectangle" or "flattened"), the distortion of each map (``_map_energy``: 1 for an
+faces along the border (faces deleted in Blender: each leaves a notch); a comb of fingers 0.2 wide
+cut from a 40 x 40 grid of ``0.3 sin 3x cos 2y`` over [-1, 1]^2 and of ``0.8 sin 3x cos 2y`` (its
+development overlaps itself). Columns: the map the default takes ("circle", "rectangle",
+"flattened", or "projected": the flattened loop refused, ``core.parameterize._projected_map``), the distortion of each map (``_map_energy``: 1 for an
 isometry), then for the fixed boundary ("fixed") and the default ("now") the control points,
 RMS and max error at the vertices over the diagonal, and seconds of ``fit_surface``.
 Default settings otherwise.
@@ -82,6 +84,21 @@ def face_frayed():
     return pts, np.delete(faces, drop, axis=0)
 
 
+def comb(height, n: int = 40, finger: float = 0.2):
+    """An n x n grid mesh over [-1, 1]^2 lifted by ``height``, without every other strip of
+    cells ``finger`` wide above y = -0.3: a comb."""
+    pts, cells, _, _ = quad_grid(n)
+    pts = 2 * pts - 1
+    pts[:, 2] = height(pts[:, 0], pts[:, 1])
+    c = pts[cells].mean(axis=1)
+    cells = cells[~((c[:, 1] > -0.3) & (((c[:, 0] + 1) / finger).astype(int) % 2 == 1))]
+    faces = np.r_[cells[:, [0, 1, 2]], cells[:, [0, 2, 3]]]
+    used = np.unique(faces)
+    index = np.full(len(pts), -1)
+    index[used] = np.arange(len(used))
+    return pts[used], index[faces]
+
+
 def cases(quick: bool) -> dict:
     out = {name: read_geometry(ROOT / "data" / f"{name}.off")
            for name in ("nefertiti", "patch-01", "three_peaks")}
@@ -96,6 +113,8 @@ def cases(quick: bool) -> dict:
     out["cap 120"] = cap(120)
     out["half cylinder"] = half_cylinder()
     out["face, frayed"] = face_frayed()
+    out["comb, wavy"] = comb(lambda x, y: 0.3 * np.sin(3 * x) * np.cos(2 * y))
+    out["comb, steep"] = comb(lambda x, y: 0.8 * np.sin(3 * x) * np.cos(2 * y))
     return out
 
 
@@ -111,10 +130,17 @@ def fit(pts, faces, tol, flat: bool):
         pz.FLAT_BOUNDARY = True
 
 
-def which(par, fixed) -> str:
-    """The map ``par`` took: the circle, the rectangle (both: as ``fixed``) or flattened."""
+def which(par, fixed, pts, faces) -> str:
+    """The map ``par`` took: the circle, the rectangle (both: as ``fixed``), flattened or
+    projected (what it takes without ``PROJECTED_BOUNDARY`` is ``fixed``)."""
     if not np.array_equal(np.asarray(par.uv), np.asarray(fixed.uv), equal_nan=True):
-        return "flattened"
+        pz.PROJECTED_BOUNDARY = False
+        try:
+            alone = pz.parameterize(pts, faces)
+        finally:
+            pz.PROJECTED_BOUNDARY = True
+        same = np.array_equal(np.asarray(alone.uv), np.asarray(fixed.uv), equal_nan=True)
+        return "projected" if same else "flattened"
     poly = np.asarray(par.domain_polygon)
     return "circle" if np.allclose(np.hypot(poly[:, 0], poly[:, 1]), 1.0) else "rectangle"
 
@@ -123,12 +149,15 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--tolerances", type=float, nargs="+", default=None)
+    ap.add_argument("--only", nargs="+", default=None, help="the cases of these names only")
     args = ap.parse_args()
     tols = args.tolerances or ([1e-3] if args.quick else [1e-2, 1e-3, 1e-4])
     print("| mesh | vertices | map | energy fixed | energy now | tol | fixed: cp | RMS | max "
           "| s | now: cp | RMS | max | s |")
     print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name, (pts, faces) in cases(args.quick).items():
+        if args.only and name not in args.only:
+            continue
         pz.FLAT_BOUNDARY = False
         fixed = pz.parameterize(pts, faces)
         pz.FLAT_BOUNDARY = True
@@ -136,7 +165,7 @@ def main() -> None:
         p = np.asarray(pts, dtype=np.float64)
         energy = [pz._map_energy(p, np.asarray(m.faces), np.asarray(m.uv)) for m in (fixed, par)]
         for tol in tols:
-            row = [name, str(int(np.asarray(par.used).sum())), which(par, fixed),
+            row = [name, str(int(np.asarray(par.used).sum())), which(par, fixed, pts, faces),
                    f"{energy[0]:.3f}", f"{energy[1]:.3f}", f"{tol:g}"]
             for flat_on in (False, True):
                 surf, sec = fit(pts, faces, tol, flat_on)

@@ -389,6 +389,8 @@ def _fit(args) -> int:
     if swings.get("places"):  # core.surface.data_swings: the warning above says what to do
         rows.append(("swings off data", f"up to {swings['largest']:.4g} ({swings['largest_rel']:.2e} "
                                         f"of the diagonal) at {swings['places']} places"))
+    if r.get("folded"):  # core.surface.mesh_folds: the warning above says what to do
+        rows.append(("folded over", f"{r['folded']:.2%} of the mesh's area"))
     rows += [
         ("surface", f"{args.output} ({len(verts)} vertices, {len(tris)} triangles, resolution "
                     f"{resolution}" + ("" if args.resolution else ", automatic") + ")"),

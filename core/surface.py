@@ -1425,19 +1425,66 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0):
     ``p = sum b_i p_i``, ``uv = sum b_i uv_i``. Fitting these as well as the vertices fits the
     mesh as a surface instead of interpolating a few hundred vertices (method.md section 5).
     """
-    rng = np.random.default_rng(seed)
-    a, b, c = (points[faces[:, j]] for j in range(3))
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    if not area.sum() > 0:
-        return np.zeros((0, 3)), np.zeros((0, 2))
-    face = rng.choice(len(faces), size=count, p=area / area.sum())
-    r1, r2 = rng.random(count), rng.random(count)
-    s = np.sqrt(r1)
-    bary = np.stack([1 - s, s * (1 - r2), s * r2], axis=1)
+    face, bary = _area_samples(points, faces, count, seed)
     tri = faces[face]
     p = np.einsum("nk,nkj->nj", bary, points[tri])
     x = np.einsum("nk,nkj->nj", bary, uv[tri])
     return p, x
+
+
+def _area_samples(points, faces, count: int, seed: int = 0):
+    """``count`` random points (seeded) on the triangles ``faces`` of ``points``, in proportion
+    to their 3D area: the face (count,) of each and its barycentric coordinates (count, 3)
+    (``s = sqrt(r_1)``: ``(1 - s, s (1 - r_2), s r_2)``, uniform on the triangle); none if
+    the faces have no area."""
+    rng = np.random.default_rng(seed)
+    a, b, c = (points[faces[:, j]] for j in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    if not area.sum() > 0:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    face = rng.choice(len(faces), size=count, p=area / area.sum())
+    r1, r2 = rng.random(count), rng.random(count)
+    s = np.sqrt(r1)
+    return face, np.stack([1 - s, s * (1 - r2), s * r2], axis=1)
+
+
+# the fold check of a mesh's fit (mesh_folds): points sampled on its faces, and the share of
+# its area above which the surface is warned of. Measured on the benchmarks/mesh_maps.py
+# meshes (/tmp/s29/fold1e4.py of the twenty-ninth session): 0 at the default tolerance, at
+# most 0.04% at 1e-4 (three_peaks.off, the scanned face 0.03%); at 1e-2 three_peaks.off
+# 0.39% (a coarse fit, 5.4% of the diagonal off, turning over near a peak; 0 at 3e-3). A
+# comb of fingers on a steep surface 0.2% at the default tolerance (1.7% at 1e-2), the
+# ragged patch with noise of 0.5% of its diagonal 0.37%, of 1% 2.0% at 1e-2.
+FOLD_SAMPLES = 10_000
+FOLDED_SHARE = 1e-3
+
+
+def mesh_folds(space, control_points, points, uv, faces, seed: int = 0,
+               count: int = FOLD_SAMPLES) -> float:
+    """The share of a mesh's area where the surface ``space`` with ``control_points`` faces
+    against the mesh (``points``, ``uv`` its parameters, ``faces`` counter-clockwise in
+    ``uv``): at ``count`` points sampled on the faces by area (:func:`_area_samples`), the
+    share with ``(S_u x S_v) . n < 0``. ``n = sum b_k n_k`` is the mesh's normal interpolated
+    from its vertices' (``n_k``: the sum of ``(b - a) x (c - a)`` over the faces at ``k``);
+    the mesh's own piecewise linear map has ``S_u x S_v`` along ``(b - a) x (c - a)`` on each
+    face, as the uv triangles are counter-clockwise. A surface that folds over itself (its
+    normal turned against the data's) is wrong, however close to the data its points are:
+    the fit of a mesh whose map crushes its faces (a comb of narrow fingers on the circle)
+    can fold between the data where the tolerance is met at them; a noisy mesh chased by
+    knots crumples (method.md section 4 asks to report folds, not silently return them)."""
+    face, bary = _area_samples(points, faces, count, seed)
+    if not len(face):
+        return 0.0
+    corner = np.cross(points[faces[:, 1]] - points[faces[:, 0]],
+                      points[faces[:, 2]] - points[faces[:, 0]])
+    normal = np.column_stack([
+        sum(np.bincount(faces[:, j], weights=corner[:, d], minlength=len(points))
+            for j in range(3)) for d in range(3)])
+    tri = faces[face]
+    n = np.einsum("nk,nkj->nj", bary, normal[tri])
+    su, sv = space.combine(np.einsum("nk,nkj->nj", bary, uv[tri]), control_points,
+                           derivatives=((1, 0), (0, 1)))
+    return float(np.mean(np.einsum("ij,ij->i", np.cross(su, sv), n) < 0.0))
 
 
 # how far (in grid steps) the tessellation's points are moved for qhull (_domain_triangles)
@@ -1499,17 +1546,22 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     def data_checks(fit_state, errs):
         """The layers and spikes checks of a fit (below), for a cloud: the layers' gap and
         the spikes' (found, largest, more) or None (``spikes`` off), given the fit's errors
-        at the points (``errs``); (None, None) for a mesh. Made on another thread while the
+        at the points (``errs``), and None; for a mesh (None, None, the share of its area
+        where the surface folds over: :func:`mesh_folds`). Made on another thread while the
         swing check runs: they read the fit's control points and errors only."""
-        if param.faces is not None or param.axes is None:  # (a mesh's faces hold one layer)
-            return None, None
+        if param.faces is not None:  # (a mesh's faces hold one layer)
+            return None, None, mesh_folds(fit_state.space, fit_state.fit.control_points,
+                                          norm.apply(points), np.asarray(param.uv),
+                                          np.asarray(param.faces), options.seed)
+        if param.axes is None:
+            return None, None, None
         C = norm.undo(fit_state.fit.control_points)
         sub = np.random.default_rng(options.seed).permutation(len(uv))[:LAYER_POINTS]
         across = ((points[used][sub] - fit_state.space.combine(uv[sub], C)[0])
                   @ np.asarray(param.axes)[2])
         gap = data_layers(uv[sub], across, options.seed)
         return gap, (data_spikes(points[used], errs, np.asarray(param.axes)[2])
-                     if spikes else None)
+                     if spikes else None), None
 
     if not subsampled:
         early = background(lambda state=best: data_checks(
@@ -1641,7 +1693,11 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     if places:
         warnings.warn(swing_warning(report), RuntimeWarning, stacklevel=3)
     report["layers"] = 0.0
-    gap, spiky = checks
+    gap, spiky, folded = checks
+    if folded is not None:
+        report["folded"] = folded
+        if folded > FOLDED_SHARE:
+            warnings.warn(folds_warning(report), RuntimeWarning, stacklevel=3)
     # (layers closer than twice the tolerance are within it: no matter, as for swings)
     if gap is not None and gap > 2.0 * max(options.tolerance, 0.0) * (
             diagonal if options.relative else 1.0):
@@ -1696,6 +1752,26 @@ def coarse_mesh_warning(report: dict) -> str:
             "Blender a Subdivision Surface modifier); or, if it is a height field over a plane, "
             "fit its vertices as a point cloud (faces=None; in Blender a copy of the mesh with "
             "its faces deleted: Delete > Only Faces)")
+
+
+def folds_warning(report: dict) -> str:
+    """The words for ``report["folded"]`` (:func:`mesh_folds`), with what to do: first what
+    most likely helps, by how the fit stopped (at the tolerance: a coarse fit over steep
+    slopes or a crushed map; short of it: noise)."""
+    causes = {
+        "loose": "a tolerance too loose for steep slopes, which the surface cuts across "
+                 "(tighten it)",
+        "crushed": "narrow fingers or slits along the border, which the parameter map crushes "
+                   "(cut the mesh into simpler pieces)",
+        "noise": "a mesh noisier than the tolerance, whose noise the knots chase (loosen the "
+                 "tolerance or smooth the mesh first; in Blender a Smooth or Corrective Smooth "
+                 "modifier)",
+    }
+    order = (("loose", "crushed", "noise") if report.get("stop_reason") == "tolerance reached"
+             else ("noise", "crushed", "loose"))
+    return (f"the surface folds over itself on {report['folded']:.1%} of the mesh's area (its "
+            "normal turns against the mesh's there, which the errors at the vertices do not "
+            "show); the usual causes: " + "; ".join(causes[k] for k in order))
 
 
 def faces_warning(report: dict) -> str:

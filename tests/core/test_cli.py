@@ -99,6 +99,36 @@ def test_a_surface_swinging_off_the_data_is_a_warning_line_and_a_row(tmp_path, c
     assert row and float(row.group(1)) > 5.0 and int(row.group(2)) > 0, out
 
 
+def test_a_surface_folding_over_its_mesh_is_a_warning_line_and_a_row(tmp_path, capsys):
+    """A comb of narrow fingers on a steep surface, fitted at 1e-2 of the diagonal: the
+    surface folds over on 1.7% of the mesh's area (core.surface.mesh_folds). One warning
+    says so (a "warning:" line on stderr in a shell: previous test), the table has a row
+    with the share the saved spline's report holds; a mesh whose surface does not fold has
+    neither."""
+    from core import cli
+    from meshes import comb_mesh
+
+    mesh = tmp_path / "comb.obj"
+    write_mesh(mesh, *comb_mesh(lambda x, y: 0.8 * np.sin(3 * x) * np.cos(2 * y)))
+    spline = tmp_path / "comb.npz"
+    with warnings.catch_warnings(record=True) as caught:  # in-process: pytest takes warnings
+        warnings.simplefilter("always")
+        assert cli.main(["fit", str(mesh), "-o", str(tmp_path / "s.obj"), "--tolerance", "1e-2",
+                         "--spline", str(spline), "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    said = [str(w.message) for w in caught if "folds over" in str(w.message)]
+    assert len(said) == 1 and said[0].startswith("the surface folds over itself on")
+    row = re.search(r"^folded over\s+(\S+)% of the mesh's area$", out, re.M)
+    folded = TCBSurface.load(spline).report["folded"]
+    assert row and folded > 0.005 and float(row.group(1)) == round(100 * folded, 2), out
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert cli.main(["fit", str(ROOT / "data" / "nefertiti.off"), "-o",
+                         str(tmp_path / "f.obj"), "--tolerance", "1e-2", "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    assert "folded over" not in out and not any("folds over" in str(w.message) for w in caught)
+
+
 def test_progress_of_an_uneven_cloud_and_the_automatic_resolution(tmp_path):
     """A cloud of uneven density goes on while its RMS over the area misses the tolerance:
     each progress line shows that RMS too (user test: "rms below the tolerance, and it goes

@@ -1,0 +1,23 @@
+"""Meshes shared by the core tests."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def comb_mesh(height, n: int = 40, finger: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
+    """An n x n grid mesh over [-1, 1]^2 lifted by ``height``, its quads split into triangles
+    (counter-clockwise from +z), with every other strip of quads ``finger`` wide cut away
+    above y = -0.3: a comb of fingers. Only the vertices in faces are kept."""
+    u, v = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n))
+    pts = np.column_stack([u.ravel(), v.ravel(), height(u.ravel(), v.ravel())])
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
+    a = (j * n + i).ravel()
+    quads = np.column_stack([a, a + 1, a + n + 1, a + n])
+    c = pts[quads].mean(axis=1)
+    quads = quads[~((c[:, 1] > -0.3) & (((c[:, 0] + 1) / finger).astype(int) % 2 == 1))]
+    faces = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    used = np.unique(faces)
+    index = np.full(len(pts), -1)
+    index[used] = np.arange(len(used))
+    return pts[used], index[faces]
