@@ -408,6 +408,27 @@ class Parameterization:
         inside = _points_in_polygon(x, self.domain_polygon, tol)
         return bool(inside[0]) if single else inside
 
+    def in_holes(self, uv: np.ndarray) -> np.ndarray:
+        """Mask (m,) of the parameters ``uv`` (m, 2) inside one of the holes that were filled
+        for the map (``holes``; ``fill_holes=True``): there the surface spans a gap, with no
+        data under it. The holes are the loops of the faces' border edges (edges of one face)
+        besides the outer ``boundary``, all tested at once by the even-odd rule
+        (:func:`_points_in_polygon`); a point on a hole's border may count either way. All
+        False when no hole was filled."""
+        x = np.atleast_2d(np.asarray(uv, dtype=np.float64))
+        if self.holes is None or self.faces is None or self.boundary is None:
+            return np.zeros(len(x), dtype=bool)
+        f = np.asarray(self.faces)
+        start, end = f.ravel(), np.roll(f, -1, axis=1).ravel()
+        n = len(self.uv)
+        key = np.minimum(start, end) * n + np.maximum(start, end)
+        _, index, count = np.unique(key, return_inverse=True, return_counts=True)
+        border = count[index.reshape(-1)] == 1
+        outer = np.zeros(n, dtype=bool)
+        outer[np.asarray(self.boundary)] = True
+        hole = border & ~outer[start]  # (a hole's loop shares no vertex with the outer one)
+        return _points_in_polygon(x, self.uv[start[hole]], 0.0, ends=self.uv[end[hole]])
+
     def project(self, points: np.ndarray) -> np.ndarray:
         """Parameters of new 3D points of a plane parameterization.
 
@@ -427,8 +448,11 @@ class Parameterization:
         return ((p - self.origin) @ self.axes[:2].T) / self.scale
 
 
-def _points_in_polygon(x: np.ndarray, poly: np.ndarray, tol: float) -> np.ndarray:
+def _points_in_polygon(x: np.ndarray, poly: np.ndarray, tol: float,
+                       ends: np.ndarray | None = None) -> np.ndarray:
     """Even-odd point-in-polygon test with an on-edge tolerance; see Parameterization.contains.
+    The edges run from each vertex of ``poly`` to the next, or to the same row of ``ends``
+    when given (several loops at once, in any order: the parity counts all their edges).
 
     Vectorized over (point, edge) pairs; only the pairs that can matter are formed: with the
     points sorted by ``v``, an edge is straddled exactly by the points with ``v`` in
@@ -443,7 +467,7 @@ def _points_in_polygon(x: np.ndarray, poly: np.ndarray, tol: float) -> np.ndarra
     out = np.zeros(len(x), dtype=bool)
     if not len(a) or not len(x):
         return out
-    b = np.roll(a, -1, axis=0)
+    b = np.roll(a, -1, axis=0) if ends is None else np.asarray(ends, dtype=np.float64).reshape(-1, 2)
     e = b - a
     ee = np.einsum("ij,ij->i", e, e)
     ee_safe = np.where(ee > 0.0, ee, 1.0)

@@ -1182,7 +1182,10 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
                 surf_dist, has_data = distances_at_vertices(verts, feet[counted], fitted_dist)
         else:
             surf_dist = bridge.nearest_distances(verts, data.points, data.faces)
-            has_data = np.ones(len(surf_dist), dtype=bool)
+            has_data = ~_over_holes(surface, surf, len(verts))
+            # (over a filled hole the distance to the mesh's faces is the hole's size: it had
+            # set the colour range, 0.149 against the data's 0.0114; user test)
+            surf_dist = np.where(has_data, surf_dist, 0.0)
         vmax = float(max(surf_dist.max(initial=0.0), fitted_dist.max(initial=0.0)))
         colors = bridge.ramp_colors(surf_dist, vmax)
         colors[~has_data, :3] = NO_DATA_COLOR
@@ -1255,7 +1258,9 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         what = "loose vertices (in no face)" if data.faces is not None else "outliers"
         note = f" ({left_out} {what} left out of the fit not counted)" if left_out else ""
         if no_data:
-            note += f"; {no_data} surface vertices with no data near them are grey"
+            where = ("over the mesh's filled holes (no data there)" if data.faces is not None
+                     else "with no data near them")
+            note += f"; {no_data} surface vertices {where} are grey"
         note += "".join(f"; {n}" for n in data.notes)  # e.g. a hidden source read without modifiers
         self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.deviation_rms:.4g}, max "
                               f"{st.deviation_data_max:.4g}; color range 0 - {vmax:.4g}{note}")  # fmt: skip
@@ -1283,6 +1288,19 @@ def _painted_vertices(context, surface, surf) -> np.ndarray:
         if len(uv) == n:
             return np.asarray(surf(uv), dtype=np.float64)
     return bridge.read_world_positions(surface)
+
+
+def _over_holes(surface, surf, n: int) -> np.ndarray:
+    """Mask of the ``n`` vertices of the surface's mesh that lie over a hole the fit spanned
+    (Fill Holes: ``core.parameterize.Parameterization.in_holes`` at the tessellation's
+    parameters); none when no hole was filled or when the mesh's vertices are not the
+    tessellation's (a modifier of the user's changed their count)."""
+    if not (surf.report or {}).get("holes_filled"):
+        return np.zeros(n, dtype=bool)
+    uv, _ = surf.tessellation_uv(surface.tcb.resolution)
+    if len(uv) != n:
+        return np.zeros(n, dtype=bool)
+    return surf.parameterization.in_holes(uv)
 
 
 def _counted(surf, n: int) -> np.ndarray:

@@ -728,6 +728,22 @@ def test_a_mesh_with_a_hole_is_refused_unless_fill_holes_is_on(clean_scene, addo
     truth = 0.3 * (v[inside, 0] ** 2 - 0.5 * v[inside, 1] ** 2)
     assert np.abs(v[inside, 2] - truth).max() < 0.01 * np.ptp(verts[:, 2])
     assert snapshot(obj) == before
+    # the Deviation Map greys the vertices over the hole (no data under them) and leaves
+    # them out of the colour range: their distance to the mesh's faces, the hole's size, had
+    # set it (0.149 against the data's 0.0114; user test)
+    capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.deviation_map(points_copy=False) == {"FINISHED"}
+    dev, rgba = _deviation_of(surface)
+    uv, _ = surf.tessellation_uv(surface.tcb.resolution)
+    over = surf.parameterization.in_holes(uv)
+    assert over[inside].all() and (over <= (np.hypot(
+        v[:, 0] - 0.2, v[:, 1] + 0.1) < 0.3 + 0.1)).all()  # (the hole: radius 0.3, cells 0.09)
+    assert (_grey(rgba) == over).all() and (dev[over] == 0).all()
+    assert surface["tcb_deviation_no_data"] == over.sum()
+    assert surface.tcb.deviation_max < 2 * surface.tcb.deviation_data_max
+    assert (f"{over.sum()} surface vertices over the mesh's filled holes (no data there) are "
+            "grey") in capfd.readouterr().out
     cloud = add_point_cloud(bpy, "Cloud", verts[used])
     assert fit(bpy, cloud, fill_holes=True) == {"FINISHED"}
     assert "Fill Holes applies to meshes" in capfd.readouterr().out

@@ -839,6 +839,29 @@ def test_mesh_with_a_hole_reports_the_number_of_boundary_loops() -> None:
         parameterize(pts, faces[keep])
 
 
+def test_in_holes_marks_the_parameters_over_the_filled_holes_only() -> None:
+    """With ``fill_holes=True`` the surface spans each hole with no data under it (the Deviation
+    Map greys it there). ``in_holes`` is True inside the uv loops of the holes' borders (two
+    square holes of a 8 x 8 grid, and one of three cells with a reflex corner) and False on
+    every face of the mesh (a point inside each); a mesh without holes has none."""
+    pts, faces = grid_mesh(8)  # 7 x 7 cells; cell (i, j) has triangles c and c + 49
+    keep = np.ones(len(faces), bool)
+    holes = [[2 * 7 + 2], [4 * 7 + 4, 4 * 7 + 5, 5 * 7 + 4]]  # (an L of three cells)
+    for cells in holes:
+        keep[cells] = False
+        keep[np.asarray(cells) + 49] = False
+    par = parameterize_mesh(pts, faces[keep], fill_holes=True)
+    assert len(par.holes) == 2
+    tri = par.uv[par.faces]
+    inside_faces = tri.mean(axis=1)
+    assert not par.in_holes(inside_faces).any()
+    for cells in holes:  # the centre of each removed triangle, in uv: the mean of its corners'
+        gone = faces[np.r_[cells, np.asarray(cells) + 49]]
+        assert par.in_holes(par.uv[gone].mean(axis=1)).all()
+    whole = parameterize_mesh(pts, faces)
+    assert whole.holes is None and not whole.in_holes(inside_faces).any()
+
+
 def test_non_manifold_edge_is_reported_with_its_count() -> None:
     pts, faces = grid_mesh(5)
     # a fin on the interior edge (6, 7): three faces share it
