@@ -118,7 +118,8 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
                 lo = st.deviation_max * bridge.RAMP_STOPS[i]
                 box.label(text=f"{lo:.4g}" + (" (max)" if i == n - 1 else ""),
                           icon=legend_icon(bridge.LEGEND_ICONS[i]))  # fmt: skip
-            if surface.get(NO_DATA_KEY, 0):  # a cloud's surface vertices far from all data
+            # a cloud's surface vertices far from all data, a mesh's over its filled holes
+            if surface.get(NO_DATA_KEY, 0):
                 box.label(text="no data nearby", icon=legend_icon("SEQUENCE_COLOR_09"))
         layout.operator("tcb.export_spline", icon="EXPORT")
 
