@@ -1972,6 +1972,33 @@ def _orient_consistently(tris: np.ndarray, edge_id: np.ndarray) -> np.ndarray:
     return out
 
 
+def _split_vertices(tris: np.ndarray, edge_id: np.ndarray) -> np.ndarray:
+    """The vertices (sorted) whose faces form more than one fan: the faces at a vertex, joined
+    where they share an edge at it, fall into several groups. Two sheets touch there: a bow
+    tie on the border, or a part that meets the rest at one vertex inside it (an eye touching
+    a head), which the border alone does not show (the mesh then had "3 boundary loops" or
+    "handles or tunnels", and the vertex was never named: user test). The corners ``3 f + j``
+    (of vertex ``tris[f, j]``) are the nodes; the two faces of each interior edge ``(a, b)``
+    join their corners at ``a`` and at ``b`` (``edge_id`` as for
+    :func:`_orient_consistently`, no edge in more than two faces); a vertex whose corners lie
+    in more than one connected component is split."""
+    nf = len(tris)
+    he_from = tris.reshape(-1).astype(np.int64)
+    start = np.arange(3 * nf)  # the corner at the half-edge's first vertex ...
+    end = 3 * (start // 3) + (start % 3 + 1) % 3  # ... and at its second
+    order = np.argsort(edge_id, kind="stable")
+    sid = edge_id[order]
+    pair = np.flatnonzero(sid[1:] == sid[:-1])
+    h1, h2 = order[pair], order[pair + 1]
+    same = he_from[h1] == he_from[h2]  # (both faces run the edge the same way)
+    rows = np.concatenate([start[h1], end[h1]])
+    cols = np.concatenate([np.where(same, start[h2], end[h2]), np.where(same, end[h2], start[h2])])
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * nf, 3 * nf))
+    _, label = connected_components(graph, directed=False)
+    fans = np.bincount(np.unique(he_from * (3 * nf) + label) // (3 * nf))
+    return np.flatnonzero(fans > 1)
+
+
 def _mean_value_weights(p: np.ndarray, tris: np.ndarray, n: int) -> sp.csr_matrix:
     """Floater's mean-value weights ``W`` (``(n, n)`` CSR, positive on mesh edges).
 
@@ -2472,21 +2499,24 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
             "some faces to open it"
         )
     bf, bt = he_from[on_boundary], he_to[on_boundary]
-    out_degree = np.bincount(bf, minlength=n)
-    n_pinched = int(np.count_nonzero(out_degree > 1))
-    if n_pinched:
-        pinched = np.flatnonzero(out_degree > 1)
+    pinched = _split_vertices(tris, edge_id)
+    if len(pinched):
         # a vertex duplicated at the same position, some of its faces on each copy: a slit
         # that meets the border at a vertex of equal position (user test)
         twins = cKDTree(p[used]).query(p[pinched], k=2)[0][:, 1] <= 0.0
         advice = ("merge vertices at equal positions (Blender: Mesh > Clean Up > Merge by "
                   "Distance): vertices there are duplicated, some of the faces around them on "
                   "each copy" if twins.any() else
-                  "split or remove the faces there (Blender: Mesh > Split > Faces by Edges, "
-                  "or delete the touching faces)")
+                  "split or remove the faces there (Blender: Select > Select All by Trait > "
+                  f"Non Manifold with only Vertices on finds {'it' if len(pinched) == 1 else 'them'}"
+                  "; then Mesh > Split > Faces by Edges, or delete the touching faces)")
+        where = ", ".join(f"{c:.6g}" for c in p[pinched[0]])
         raise TopologyError(
-            f"the mesh has {n_pinched} non-manifold vertices (the surface touches itself at a "
-            f"single vertex); a disk-like patch is needed: {advice}"
+            f"the mesh has {len(pinched)} non-manifold "
+            + ("vertex" if len(pinched) == 1 else "vertices")
+            + f" (the surface touches itself at a single vertex, "
+            + ("" if len(pinched) == 1 else "the first ")
+            + f"at ({where})); a disk-like patch is needed: {advice}"
         )
     bgraph = sp.coo_matrix((np.ones(len(bf)), (bf, bt)), shape=(n, n)).tocsr()
     _, blabel = connected_components(bgraph, directed=False)

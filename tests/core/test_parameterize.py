@@ -906,8 +906,35 @@ def test_a_mesh_whose_faces_share_no_vertices_is_told_to_merge_them() -> None:
 
 def test_bowtie_vertex_is_a_topology_error() -> None:
     pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]], float)
-    with pytest.raises(TopologyError, match="non-manifold vertices"):
+    with pytest.raises(TopologyError, match=r"1 non-manifold vertex \(the surface touches itself "
+                       r"at a single vertex, at \(0, 0, 0\)\).*Non Manifold .* finds it;"):
         parameterize(pts, np.array([[0, 1, 2], [0, 3, 4]]))
+
+
+def test_a_sheet_touching_the_mesh_at_an_inner_vertex_is_named() -> None:
+    """A cone of three faces whose apex is an inner vertex of a grid mesh (as an eye touching
+    a head at one vertex, left after Merge by Distance): the border shows two loops (the
+    grid's and the cone's rim), and the error had said "2 boundary loops" (with
+    fill_holes=True: "handles or tunnels") without naming the vertex (user test). The
+    vertex's faces form two fans: it is named, with its position, for both settings; two
+    such cones name the first of two."""
+    pts, faces = grid_mesh(5)
+    apex = 12  # (0.5, 0.5): inside the grid
+    rim = pts[apex] + np.array([[0.1, 0, 0.3], [-0.05, 0.08, 0.3], [-0.05, -0.08, 0.3]])
+    cone = np.array([[apex, 25, 26], [apex, 26, 27], [apex, 27, 25]])
+    where = ", ".join(f"{c:.6g}" for c in pts[apex])
+    for fill in (False, True):
+        with pytest.raises(TopologyError, match=r"1 non-manifold vertex \(the surface touches "
+                           rf"itself at a single vertex, at \({re.escape(where)}\)\)"):
+            parameterize_mesh(np.vstack([pts, rim]), np.vstack([faces, cone]), fill_holes=fill)
+    second = rim - pts[apex] + pts[6]
+    with pytest.raises(TopologyError, match=r"2 non-manifold vertices \(the surface touches "
+                       r"itself at a single vertex, the first at \(0.25, 0.25, .*finds them;"):
+        parameterize_mesh(np.vstack([pts, rim, second]),
+                          np.vstack([faces, cone, np.where(cone == apex, 6, cone + 3)]))
+    assert len(pz._split_vertices(faces, np.unique(np.sort(np.c_[
+        faces.ravel(), np.roll(faces, -1, axis=1).ravel()], axis=1), axis=0,
+        return_inverse=True)[1].ravel())) == 0
 
 
 def test_moebius_strip_is_not_orientable() -> None:
