@@ -7,8 +7,8 @@ without one boundary triangle (a notch); a 41 x 41 grid patch of a smooth functi
 wavy, ragged border (a scan's edge: a staircase of grid edges); 60-, 90- and 120-degree spherical
 caps cut from a grid (staircase borders); half a cylinder; the scanned face without 15 of its
 faces along the border (faces deleted in Blender: each leaves a notch); a comb of fingers 0.2 wide
-cut from a 40 x 40 grid of ``0.3 sin 3x cos 2y`` over [-1, 1]^2 and of ``0.8 sin 3x cos 2y`` (its
-development overlaps itself). Columns: the map the default takes ("circle", "rectangle",
+cut from a 40 x 40 grid of ``0.3 sin 3x cos 2y`` over [-1, 1]^2, of ``0.8 sin 3x cos 2y`` and of
+``1.2 sin 3x cos 2y`` (their developments overlap themselves). Columns: the map the default takes ("circle", "rectangle",
 "flattened", or "projected": the flattened loop refused, ``core.parameterize._projected_map``), the distortion of each map (``_map_energy``: 1 for an
 isometry), then for the fixed boundary ("fixed") and the default ("now") the control points,
 RMS and max error at the vertices over the diagonal, and seconds of ``fit_surface``.
@@ -115,6 +115,7 @@ def cases(quick: bool) -> dict:
     out["face, frayed"] = face_frayed()
     out["comb, wavy"] = comb(lambda x, y: 0.3 * np.sin(3 * x) * np.cos(2 * y))
     out["comb, steep"] = comb(lambda x, y: 0.8 * np.sin(3 * x) * np.cos(2 * y))
+    out["comb, steeper"] = comb(lambda x, y: 1.2 * np.sin(3 * x) * np.cos(2 * y))
     return out
 
 

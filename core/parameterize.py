@@ -2135,23 +2135,26 @@ FLAT_WEDGE = 0.5  # and no reflex angle changes by this share of the gap it leav
 PROJECTED_BOUNDARY = True  # a flattened loop refused: its projection tried (_projected_map)
 
 
-def _pinch(q: np.ndarray, edge: np.ndarray, k: int = 12, apart: int = 3) -> float:
-    """How much closer the flattened boundary ``edge`` (B, 2) brings boundary vertices
-    together than they are in 3D (``q``, (B, 3)): the largest ``|q_i - q_j| / (s |x_i -
-    x_j|)`` over the ``k`` nearest boundary vertices ``j`` in the plane of each ``i`` that are
-    more than ``apart`` steps away along the loop (``s``: 3D per plane length of the loop).
-    About 1 when the flattened loop keeps its shape; a ramp of 0.95 turn flattens into a loop
-    whose two ends nearly meet (3.8; 0.98 turn 6.5) while they are a climb apart, and the
-    spline has to jump the gap (review: a swing warning, the surface 1% of the diagonal off
-    the mesh). Measured 1.00-1.07 on every other benchmarks/mesh_maps.py mesh."""
+def _pinch(q: np.ndarray, edge: np.ndarray, stretch: np.ndarray, k: int = 12,
+           apart: int = 3) -> float:
+    """How much closer a map's boundary ``edge`` (B, 2) brings boundary vertices together than
+    they are in 3D (``q``, (B, 3)), against the map's own stretch there: the largest ``|q_i -
+    q_j| / (max(s_i, s_j) |x_i - x_j|)`` over the ``k`` nearest boundary vertices ``j`` in the
+    plane of each ``i`` that are more than ``apart`` steps away along the loop (``s =
+    stretch``: 3D per uv length at each boundary vertex, the largest over the mesh's edges at
+    it, :func:`_vertex_stretch`). About 1 when the loop keeps its shape; a ramp of 0.95 turn
+    flattens into a loop whose two ends nearly meet (3.8; 0.98 turn 6.5) while they are a climb
+    apart, and the spline has to jump the gap (review: a swing warning, the surface 1% of the
+    diagonal off the mesh). Measured 0.93-1.07 on every other benchmarks/mesh_maps.py mesh,
+    flattened. Against the loop's mean stretch instead, a comb on a steep surface (0.8 sin 3x
+    cos 2y) projected scored 2.0 across its gaps, whose 3D width is that of its steep slopes
+    (1.3 against the stretch of the edges there; the ramp's ends 3.8 either way)."""
     B = len(edge)
-    s = (np.linalg.norm(np.roll(q, -1, axis=0) - q, axis=1).sum()
-         / np.linalg.norm(np.roll(edge, -1, axis=0) - edge, axis=1).sum())
     d, j = cKDTree(edge).query(edge, k=min(k, B))
     steps = np.abs(np.arange(B)[:, None] - j)
     steps = np.minimum(steps, B - steps)
     far = np.linalg.norm(q[:, None, :] - q[j], axis=2)
-    ratio = far / np.maximum(s * d, 1e-300)
+    ratio = far / np.maximum(np.maximum(stretch[:, None], stretch[j]) * d, 1e-300)
     return float(ratio[steps > apart].max(initial=0.0))
 
 
@@ -2286,24 +2289,29 @@ def _flattened_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
         return None
     length = np.linalg.norm(p[np.roll(loop, -1)] - p[loop], axis=1)
     edge = _closed_polygon(length, turning)
-    return None if edge is None else _inside_boundary(p, edge, loop, interior, w, lu)
+    return None if edge is None else _inside_boundary(p, tris, edge, loop, interior, w, lu)
 
 
-def _inside_boundary(p, edge, loop, interior, w, lu) -> np.ndarray | None:
+def _inside_boundary(p, tris, edge, loop, interior, w, lu) -> np.ndarray | None:
     """The map ``uv`` (n, 2) with the boundary ``loop`` on the counter-clockwise polygon
     ``edge`` (B, 2), scaled into a box of half-diagonal 1 centred at 0, and the ``interior``
     placed by the mean-value solve (``w``, ``lu``: as for :func:`_flattened_map`); NaN
-    elsewhere. None when the polygon is not simple, when it brings parts of the border
-    together that are far apart in 3D (:func:`_pinch` above FLAT_PINCH), or when a
-    coordinate is not finite."""
-    if not simple_polygon(edge) or _pinch(p[loop], edge) > FLAT_PINCH:
+    elsewhere. None when the polygon is not simple, when a coordinate is not finite, or when
+    it brings parts of the border together that are far apart in 3D (:func:`_pinch` above
+    FLAT_PINCH, with the stretch of the triangles ``tris`` at the boundary)."""
+    if not simple_polygon(edge):
         return None
     lo, hi = edge.min(axis=0), edge.max(axis=0)
     uv = np.full((len(p), 2), np.nan)
     uv[loop] = (edge - 0.5 * (lo + hi)) / (0.5 * np.linalg.norm(hi - lo))
     if len(interior):
         uv[interior] = lu.solve(np.asfortranarray(w[:, loop] @ uv[loop]))
-    return uv if np.isfinite(uv[loop]).all() and np.isfinite(uv[interior]).all() else None
+    if not (np.isfinite(uv[loop]).all() and np.isfinite(uv[interior]).all()):
+        return None
+    at = np.isin(tris, loop).any(axis=1)  # (the triangles at the boundary)
+    stretch = _vertex_stretch(p, uv, tris[at].ravel(), np.roll(tris[at], -1, axis=1).ravel(),
+                              np.isfinite(uv[:, 0]))
+    return None if _pinch(p[loop], uv[loop], stretch[loop]) > FLAT_PINCH else uv
 
 
 def _projected_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
@@ -2339,7 +2347,7 @@ def _projected_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
         if np.dot(edge[:, 0], np.roll(edge[:, 1], -1)) < np.dot(np.roll(edge[:, 0], -1),
                                                                  edge[:, 1]):
             edge[:, 1] = -edge[:, 1]
-        uv = _inside_boundary(p, edge, loop, interior, w, lu)
+        uv = _inside_boundary(p, tris, edge, loop, interior, w, lu)
         energy = np.inf if uv is None else _map_energy(p, tris, uv)
         if energy < least:
             best, least = uv, energy
