@@ -23,7 +23,7 @@ from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 from .parameterize import fill_value_rows, fill_value_words, projection_direction
 from .refine import STALLED, SWINGS_LEFT, mostly_taken_back, replaced_default_reason
-from .surface import MAX_RESOLUTION, default_swung, grid_frame
+from .surface import FOLDED_SHARE, MAX_RESOLUTION, default_swung, grid_frame
 
 __all__ = ["main"]
 
@@ -389,7 +389,7 @@ def _fit(args) -> int:
     if swings.get("places"):  # core.surface.data_swings: the warning above says what to do
         rows.append(("swings off data", f"up to {swings['largest']:.4g} ({swings['largest_rel']:.2e} "
                                         f"of the diagonal) at {swings['places']} places"))
-    if r.get("folded"):  # core.surface.mesh_folds: the warning above says what to do
+    if r.get("folded", 0.0) > FOLDED_SHARE:  # core.surface.mesh_folds: warned of above
         rows.append(("folded over", f"{r['folded']:.2%} of the mesh's area"))
     rows += [
         ("surface", f"{args.output} ({len(verts)} vertices, {len(tris)} triangles, resolution "
