@@ -2292,10 +2292,11 @@ def _flattened_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
     return None if edge is None else _inside_boundary(p, tris, edge, loop, interior, w, lu)
 
 
-def _inside_boundary(p, tris, edge, loop, interior, w, lu) -> np.ndarray | None:
+def _inside_boundary(p, tris, edge, loop, interior, w, lu, inner=None) -> np.ndarray | None:
     """The map ``uv`` (n, 2) with the boundary ``loop`` on the counter-clockwise polygon
     ``edge`` (B, 2), scaled into a box of half-diagonal 1 centred at 0, and the ``interior``
-    placed by the mean-value solve (``w``, ``lu``: as for :func:`_flattened_map`); NaN
+    placed by the mean-value solve (``w``, ``lu``: as for :func:`_flattened_map`), or at
+    ``inner`` (its positions in the frame of ``edge``, scaled alike) when given; NaN
     elsewhere. None when the polygon is not simple, when a coordinate is not finite, or when
     it brings parts of the border together that are far apart in 3D (:func:`_pinch` above
     FLAT_PINCH, with the stretch of the triangles ``tris`` at the boundary)."""
@@ -2304,7 +2305,9 @@ def _inside_boundary(p, tris, edge, loop, interior, w, lu) -> np.ndarray | None:
     lo, hi = edge.min(axis=0), edge.max(axis=0)
     uv = np.full((len(p), 2), np.nan)
     uv[loop] = (edge - 0.5 * (lo + hi)) / (0.5 * np.linalg.norm(hi - lo))
-    if len(interior):
+    if len(interior) and inner is not None:
+        uv[interior] = (inner - 0.5 * (lo + hi)) / (0.5 * np.linalg.norm(hi - lo))
+    elif len(interior):
         uv[interior] = lu.solve(np.asfortranarray(w[:, loop] @ uv[loop]))
     if not (np.isfinite(uv[loop]).all() and np.isfinite(uv[interior]).all()):
         return None
@@ -2316,26 +2319,29 @@ def _inside_boundary(p, tris, edge, loop, interior, w, lu) -> np.ndarray | None:
 
 def _projected_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
     """The mesh's map with its boundary projected onto a plane (method.md section 4's
-    projection of point clouds, applied to the border only; not in method.md), or None:
-    ``x_b = (p_b - o) . [e_1, e_2]`` for a unit normal ``n`` and ``e_1, e_2`` completing it to
-    an orthonormal frame, turned counter-clockwise (``x_b``'s second coordinate negated if the
-    loop's signed area is negative), and the interior placed by the same mean-value solve
-    (:func:`_inside_boundary`, which also refuses it as it refuses a flattened loop). Two
-    normals are tried, and the map that distorts the triangles less (:func:`_map_energy`)
-    is returned: the faces' area-weighted mean normal (``sum (b - a) x (c - a)``: where a
-    height field faces; its principal axes tilt with its heights, 50 degrees on a comb on
-    1.5 sin 3x cos 2y) and the least principal axis of the vertices (which turns a ramp of
-    0.95 turn so that its ends stay apart). Tried when :func:`_flattened_map` is None. A
-    comb of fingers on a wavy surface develops into fingers that bend into each other (a
-    flattened loop that overlaps itself), and on the circle its fingers are crushed to
-    slivers (distortion 96 against 1.01 projected; 982 control points against 149 at the
-    default tolerance, with 0.2% of the surface folded over; benchmarks/mesh_maps.py).
-    Mean-value weights inside a boundary that is not convex may flip triangles; that map's
-    distortion is infinite."""
+    projection of point clouds; not in method.md), or None: ``x_b = (p_b - o) . [e_1, e_2]``
+    for a unit normal ``n`` and ``e_1, e_2`` completing it to an orthonormal frame, turned
+    counter-clockwise (``e_2`` negated if the loop's signed area is negative); the interior
+    placed by the same mean-value solve, or projected alike (:func:`_inside_boundary`, which
+    refuses a map as it refuses a flattened loop). Two normals are tried: the faces'
+    area-weighted mean normal (``sum (b - a) x (c - a)``: where a height field faces; its
+    principal axes tilt with its heights, 50 degrees on a comb on 1.5 sin 3x cos 2y) and the
+    least principal axis of the vertices (which turns a ramp of 0.95 turn so that its ends
+    stay apart). Of each interior the map that distorts the triangles less
+    (:func:`_map_energy`) is kept, and the projected interior is returned when its distortion
+    exceeds 1 by less than FLAT_GAIN times the mean-value one's. Tried when
+    :func:`_flattened_map` is None. A comb of fingers on a wavy surface develops into fingers
+    that bend into each other (a flattened loop that overlaps itself), and on the circle its
+    fingers are crushed to slivers (distortion 96 against 1.01 projected; 982 control points
+    against 149 at the default tolerance, with 0.2% of the surface folded over;
+    benchmarks/mesh_maps.py). Mean-value weights inside a boundary that is not convex may
+    flip triangles (a comb on 1.5 sin 3x cos 2y), and they strain a steep one (0.8 sin 3x
+    cos 2y: 1.37 against 1.18 projected whole, 569 control points against 199); the
+    projection of a height field along its mean normal flips none."""
     ids = np.concatenate([loop, interior])
     centre = p[ids].mean(axis=0)
     facing = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]]).sum(axis=0)
-    best, least = None, np.inf
+    best = {"mean-value": (np.inf, None), "projected": (np.inf, None)}
     for normal in (facing, principal_axes(p[ids] - centre)[1][2]):
         size = np.linalg.norm(normal)
         if not size > 0:
@@ -2343,15 +2349,21 @@ def _projected_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
         normal = normal / size
         e1 = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
         e1 /= np.linalg.norm(e1)
-        edge = (p[loop] - centre) @ np.column_stack([e1, np.cross(normal, e1)])
+        frame = np.column_stack([e1, np.cross(normal, e1)])
+        edge = (p[loop] - centre) @ frame
         if np.dot(edge[:, 0], np.roll(edge[:, 1], -1)) < np.dot(np.roll(edge[:, 0], -1),
                                                                  edge[:, 1]):
+            frame[:, 1] = -frame[:, 1]
             edge[:, 1] = -edge[:, 1]
-        uv = _inside_boundary(p, tris, edge, loop, interior, w, lu)
-        energy = np.inf if uv is None else _map_energy(p, tris, uv)
-        if energy < least:
-            best, least = uv, energy
-    return best
+        for kind, inner in (("mean-value", None), ("projected", (p[interior] - centre) @ frame)):
+            uv = _inside_boundary(p, tris, edge, loop, interior, w, lu, inner)
+            energy = np.inf if uv is None else _map_energy(p, tris, uv)
+            if energy < best[kind][0]:
+                best[kind] = (energy, uv)
+    (smooth, smooth_uv), (flat, flat_uv) = best["mean-value"], best["projected"]
+    # (the projected interior only when it distorts clearly less: a ramp of 0.95 turn
+    # projected whole, 1.0080 against 1.0081, had a 7x larger max error, 1.9e-2)
+    return flat_uv if flat - 1.0 < FLAT_GAIN * (smooth - 1.0) else smooth_uv
 
 
 def _rectangle_boundary(seg: np.ndarray, corners: np.ndarray) -> np.ndarray:

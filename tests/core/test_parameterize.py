@@ -587,28 +587,28 @@ def check_projected(par: Parameterization, pts: np.ndarray, fixed: Parameterizat
     to a similarity (a reflection allowed) along the faces' mean normal or the least
     principal axis of the vertices: its distances to the loop's centroid and between each
     vertex and the next are the projected ones times one common scale, to 1e-9. Returns
-    which normal: "mean normal" or "principal axis"."""
+    which normal: "mean normal" or "principal axis" (and " projected whole" when every
+    vertex is that projection, not only the boundary)."""
     check_box(par, pts, fixed)
     b, tri = par.boundary, par.faces
     q = pts[par.used]
-    uv = par.uv[b]
-
-    def similar(normal) -> bool:
+    def similar(normal, ids=b) -> bool:
         normal = normal / np.linalg.norm(normal)
-        x = pts[b] - np.outer(pts[b] @ normal, normal)  # the loop in the plane, in 3D
+        x = pts[ids] - np.outer(pts[ids] @ normal, normal)  # in the plane, in 3D
         to_centre = np.linalg.norm(x - x.mean(axis=0), axis=1)
-        scale = np.linalg.norm(uv - uv.mean(axis=0), axis=1).sum() / to_centre.sum()
-        return (np.allclose(np.linalg.norm(uv - uv.mean(axis=0), axis=1), scale * to_centre,
+        at = par.uv[ids]
+        scale = np.linalg.norm(at - at.mean(axis=0), axis=1).sum() / to_centre.sum()
+        return (np.allclose(np.linalg.norm(at - at.mean(axis=0), axis=1), scale * to_centre,
                             rtol=0, atol=1e-9)
-                and np.allclose(np.linalg.norm(np.roll(uv, -1, axis=0) - uv, axis=1),
+                and np.allclose(np.linalg.norm(np.roll(at, -1, axis=0) - at, axis=1),
                                 scale * np.linalg.norm(np.roll(x, -1, axis=0) - x, axis=1),
                                 rtol=0, atol=1e-9))
 
     mean_normal = np.cross(pts[tri[:, 1]] - pts[tri[:, 0]], pts[tri[:, 2]] - pts[tri[:, 0]]).sum(0)
-    if similar(mean_normal):
-        return "mean normal"
-    assert similar(np.linalg.svd(q - q.mean(axis=0), full_matrices=False)[2][2])
-    return "principal axis"
+    axis = np.linalg.svd(q - q.mean(axis=0), full_matrices=False)[2][2]
+    name, normal = ("mean normal", mean_normal) if similar(mean_normal) else ("principal axis", axis)
+    assert similar(normal)
+    return name + (" projected whole" if similar(normal, np.flatnonzero(par.used)) else "")
 
 
 def check_flattened(par: Parameterization, pts: np.ndarray, fixed: Parameterization) -> None:
@@ -1680,14 +1680,17 @@ def test_a_comb_on_a_wavy_surface_keeps_its_projected_shape(monkeypatch) -> None
     the fingers into each other, so the flattened loop is refused (it overlaps itself); on the
     circle the fingers were crushed to slivers (distortion 96), and the fit took 982 control
     points at the default tolerance with 0.2% of the surface folded over (user test;
-    benchmarks/mesh_maps.py). The loop projected onto a plane is simple and is taken
-    (distortion 1.01): 149 control points, the tolerance met, and the surface faces the way
-    the mesh's faces do everywhere (:func:`against_faces`). On 0.8 sin 3x cos 2y it is
-    projected too: across its gaps the 3D width is that of its steep slopes (:func:`core.
-    parameterize._pinch` 1.3 against the stretch of the triangles there; against the loop's
-    mean stretch it scored 2.0, and the circle took 1110 control points with 0.2% of the
-    surface folded over): 569 and no fold. On 1.5 sin 3x cos 2y the mean-value interior
-    flips triangles inside both projected loops, and the circle is kept."""
+    benchmarks/mesh_maps.py). The loop projected along the faces' mean normal is simple and
+    is taken, the interior placed by mean-value weights (distortion 1.0096; projected whole
+    1.0100): 149 control points, the tolerance met, and the surface faces the way the mesh's
+    faces do everywhere (:func:`against_faces`). On 0.8 sin 3x cos 2y the mean-value interior
+    strains (1.37) and the projection of every vertex is taken (1.18): 199 control points and
+    no fold (the circle: 1110 and 0.2% folded over; a mean-value interior 569). Across its
+    gaps the 3D width is that of its steep slopes (:func:`core.parameterize._pinch` below 1.5
+    against the stretch of the triangles there; against the loop's mean stretch above
+    FLAT_PINCH, which had refused it). On 1.5 sin 3x cos 2y mean-value weights flip triangles
+    and the projection of every vertex is taken (user test: the circle took 1115 control
+    points; 2000 and 4% folded over with fingers one face wide)."""
     from core import fit_surface
 
     pts, faces = comb_mesh(lambda x, y: 0.3 * np.sin(3 * x) * np.cos(2 * y))
@@ -1710,7 +1713,9 @@ def test_a_comb_on_a_wavy_surface_keeps_its_projected_shape(monkeypatch) -> None
 
     pts, faces = comb_mesh(lambda x, y: 0.8 * np.sin(3 * x) * np.cos(2 * y))
     par = parameterize_mesh(pts, faces)
-    check_disk(par, pts)  # (check_projected)
+    check_disk(par, pts)
+    assert check_projected(par, pts, fixed_boundary_map(pts, faces)) == (
+        "mean normal projected whole")
     b = par.boundary
     assert pz._pinch(pts[b], par.uv[b], par.stretch[b]) < 1.5
     whole = np.full(len(b), np.linalg.norm(pts[np.roll(b, -1)] - pts[b], axis=1).sum()
@@ -1719,43 +1724,52 @@ def test_a_comb_on_a_wavy_surface_keeps_its_projected_shape(monkeypatch) -> None
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         surf = fit_surface(pts, faces)
-    assert surf.report["control_points"] <= 650 and surf.report["rms_rel"] <= 1e-3
+    assert surf.report["control_points"] <= 250 and surf.report["rms_rel"] <= 1e-3
     assert against_faces(surf, pts) == 0.0
 
-    steeper = comb_mesh(lambda x, y: 1.5 * np.sin(3 * x) * np.cos(2 * y))
-    np.testing.assert_array_equal(parameterize_mesh(*steeper).uv,
-                                  fixed_boundary_map(*steeper).uv)
+    pts, faces = comb_mesh(lambda x, y: 1.5 * np.sin(3 * x) * np.cos(2 * y))
+    par = parameterize_mesh(pts, faces)
+    check_disk(par, pts)
+    assert check_projected(par, pts, fixed_boundary_map(pts, faces)) == (
+        "mean normal projected whole")
+
+
+def noisy_patch(noise: float = 0.01):
+    """The ragged patch of 0.2 sin 4x cos 3y + 0.1 xy with Gaussian noise of ``noise`` times
+    its diagonal on every coordinate of every vertex (seeded), and the patch without it."""
+    clean, faces = ragged_patch(height=lambda x, y: 0.2 * np.sin(4 * x) * np.cos(3 * y)
+                                + 0.1 * x * y)
+    diagonal = np.linalg.norm(np.ptp(clean[np.unique(faces)], axis=0))
+    noisy = clean + noise * diagonal * np.random.default_rng(0).standard_normal(clean.shape)
+    return noisy, clean, faces
 
 
 def test_a_surface_that_folds_over_its_mesh_is_warned_of() -> None:
-    """A comb on 1.2 sin 3x cos 2y keeps the circle (as the previous test's steepest), where
-    its fingers are crushed to slivers: the fit meets the tolerance at the data, and between
-    them the surface turns over (its normal against the mesh's) on 0.3% of the area, which
-    was returned without a word (user test, on a comb that is now projected). The report's
-    share (``core.surface.mesh_folds``: 10 000 random points, against both the face's normal
-    and the mesh's normal interpolated from its vertices') agrees with one measured
-    independently (:func:`against_faces`) within 1.5x; and a RuntimeWarning says so and what
-    to do. The wavy comb's fit (previous
-    test) reports 0 and no warning."""
+    """A ragged patch with noise of 1% of its diagonal, fitted to 1e-2: the knots chase the
+    noise and between the vertices the surface turns over (its normal against the mesh's)
+    on 1.5% of the area, which was returned without a word (user test: noisy scans). The
+    report's share (``core.surface.mesh_folds``: 10 000 random points, against both the
+    face's normal and the mesh's normal interpolated from its vertices') agrees within 2x
+    with the share that faces against the noise-free patch (:func:`against_faces`: 2.7%;
+    against the noisy faces themselves 9.8%: their own wrinkles); and a RuntimeWarning says
+    so and what to do. The noise-free patch reports 0 and no warning."""
     from core import fit_surface
 
-    pts, faces = comb_mesh(lambda x, y: 1.2 * np.sin(3 * x) * np.cos(2 * y))
-    np.testing.assert_array_equal(parameterize_mesh(pts, faces).uv,
-                                  fixed_boundary_map(pts, faces).uv)
-    with pytest.warns(RuntimeWarning, match=r"the surface folds over itself on 0\.[0-9]% of "
+    noisy, clean, faces = noisy_patch()
+    with pytest.warns(RuntimeWarning, match=r"the surface folds over itself on 1\.[0-9]% of "
                       r"the mesh's area .*: on a smooth mesh with steep slopes, a tolerance "
                       r"too loose .*cut the mesh into simpler pieces.*; on a noisy mesh .*"
                       r"smooth the mesh first"):
-        surf = fit_surface(pts, faces)
+        surf = fit_surface(noisy, faces, tolerance=1e-2)
     share = surf.report["folded"]
-    assert 1e-3 < share < 1e-2
-    measured = against_faces(surf, pts)
-    assert measured / 1.5 < share < 1.5 * measured
+    assert 5e-3 < share < 5e-2
+    measured = against_faces(surf, clean)
+    assert measured / 2 < share < 2 * measured
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
-        assert fit_surface(*comb_mesh(lambda x, y: 0.3 * np.sin(3 * x) * np.cos(2 * y))
-                           ).report["folded"] == 0.0
+        warnings.filterwarnings("ignore", "[0-9]+ of the [0-9]+ vertices are in no face")
+        assert fit_surface(clean, faces, tolerance=1e-2).report["folded"] == 0.0
 
 
 def test_a_crease_between_large_and_small_faces_is_no_fold() -> None:
