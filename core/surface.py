@@ -1782,12 +1782,15 @@ def coarse_mesh_warning(report: dict) -> str:
 def folds_warning(report: dict) -> str:
     """The words for ``report["folded"]`` (:func:`mesh_folds`), with what to do: first what
     most likely helps, by how the fit stopped (at the tolerance: a coarse fit over steep
-    slopes or a crushed map; short of it: noise)."""
+    slopes; short of it: noise). The map's distortion does not tell a crushed map from a
+    noisy mesh (a ragged patch with noise of 1% of its diagonal, on the circle: distortion
+    above 10 as a comb on the circle has, 83-96), so a crushed map is named second."""
     causes = {
         "loose": "on a smooth mesh with steep slopes, a tolerance too loose for them, which "
                  "the surface cuts across (tighten it)",
         "crushed": "narrow fingers or slits along the border, which the parameter map crushes "
-                   "(cut the mesh into simpler pieces)",
+                   "(cut the mesh into simpler pieces and fit each; in Blender select one in "
+                   "Edit Mode, then Mesh > Separate > Selection)",
         "noise": "on a noisy mesh (its faces wrinkled at the scale of the tolerance or "
                  "finer), knots that chase the noise (loosen the tolerance or smooth the mesh "
                  "first; in Blender a Smooth or Corrective Smooth modifier)",

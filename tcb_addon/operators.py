@@ -343,6 +343,12 @@ def _as_stored(fn, resolution: int):
     return run
 
 
+def folded_over(tcb) -> bool:
+    """Whether the surface folds over its mesh on more than the share the engine warns of
+    (the panel then shows the share: the warning is gone once the report is)."""
+    return tcb.folded > _core().surface.FOLDED_SHARE
+
+
 def source_data(context, surface_obj) -> bridge.InputData:
     sources = [s.object for s in surface_obj.tcb.sources]
     # deleted (X): in no collection, kept alive by the pointer (user test: the deleted scan
@@ -361,6 +367,7 @@ def store_stats(tcb, surf, settings: dict) -> None:
     tcb.control_points = int(rep.get("control_points", len(surf.control_points)))
     tcb.iterations = int(rep.get("iterations", 0))
     tcb.holes_filled = int(rep.get("holes_filled", 0))
+    tcb.folded = float(rep.get("folded", 0.0))
     tcb.stop_reason = str(rep.get("stop_reason", ""))
     for key in ("rms", "max", "rms_rel", "max_rel", "rms_area", "seconds"):
         setattr(tcb, key, float(rep.get(key, 0.0)))

@@ -214,6 +214,8 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     seconds: FloatProperty(name="Seconds", precision=2)
     stop_reason: StringProperty(name="Stopped")  # why the adaptive loop stopped
     holes_filled: IntProperty(name="Holes Spanned")  # a mesh's holes the surface spans
+    # the share of a mesh's area where the surface folds over it (core.surface.mesh_folds)
+    folded: FloatProperty(name="Folded Over", precision=6)
     # settings of the last fit / refine
     tolerance: FloatProperty(precision=6)
     relative: BoolProperty()

@@ -7,9 +7,10 @@ selected (nothing, a camera, a result object, ...).
 import bpy
 
 from . import bridge
-from .operators import (NO_DATA_KEY, SPLINE_KEY, converted_problem, is_max, live_link_problem,
-                        live_moved_problem, net_copy_note, net_modifier_problem,
-                        net_vertex_problem, result_objects, stack_problem, uneven_density)
+from .operators import (NO_DATA_KEY, SPLINE_KEY, converted_problem, folded_over, is_max,
+                        live_link_problem, live_moved_problem, net_copy_note,
+                        net_modifier_problem, net_vertex_problem, result_objects, stack_problem,
+                        uneven_density)
 from .properties import FIT_KEYS, RESULT_KEYS, draw_fit_settings
 
 
@@ -76,6 +77,7 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
                              " (default swung)" if st.smoothness_smoother else ""),
              f"{st.smoothness:.3g}"),
             *((("Holes Spanned", f"{st.holes_filled}"),) if st.holes_filled else ()),
+            *((("Folded Over", f"{100 * st.folded:.2g} %"),) if folded_over(st) else ()),
             ("Seconds", f"{st.seconds:.2f}"),
         ):
             grid.label(text=label)

@@ -423,6 +423,37 @@ def test_a_surface_that_swings_off_the_data_is_a_warning(clean_scene, capfd, mon
     assert "Smoothness (default swung)" in labels, labels
 
 
+def test_a_surface_that_folds_over_its_mesh_is_a_warning_and_a_panel_row(clean_scene, capfd):
+    """A noisy scan-like grid mesh (noise of 1% of its diagonal) fitted to 1e-2: the surface
+    folds over between the vertices (core.surface.mesh_folds). The summary is a WARNING that
+    says so, and the panel keeps the share after the report is gone (user test: nothing
+    showed it once the report had scrolled away); a clean mesh has neither."""
+    from meshes import noisy_grid
+
+    bpy = clean_scene
+    verts, faces = noisy_grid()
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    capfd.readouterr()
+    assert fit(bpy, scan, tolerance=1e-2) == {"FINISHED"}
+    text = capfd.readouterr().out
+    assert "Warning: TCB:" in text and "the surface folds over itself on 1." in text, text
+    surface = bpy.context.view_layer.objects.active
+    folded = spline_of(surface).report["folded"]
+    assert surface.tcb.folded == pytest.approx(folded) and folded > 0.005
+    log = draw_panels(bpy, [surface])
+    labels = [e[1] for e in log if e[0] == "label"]
+    assert "Folded Over" in labels
+    assert labels[labels.index("Folded Over") + 1] == f"{100 * folded:.2g} %"
+    clean, faces = grid(24)
+    obj = add_mesh(bpy, "Clean", clean, faces)
+    capfd.readouterr()
+    assert fit(bpy, obj, tolerance=1e-2) == {"FINISHED"}
+    assert "folds over" not in capfd.readouterr().out
+    surface = bpy.context.view_layer.objects.active
+    assert surface.tcb.folded == 0.0
+    assert "Folded Over" not in [e[1] for e in draw_panels(bpy, [surface]) if e[0] == "label"]
+
+
 def test_refine_says_that_it_replaces_edits_of_the_net(clean_scene, capfd):
     bpy = clean_scene
     verts, faces = grid(16)

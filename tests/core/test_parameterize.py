@@ -1758,13 +1758,15 @@ def test_a_surface_that_folds_over_its_mesh_is_warned_of() -> None:
     noisy, clean, faces = noisy_patch()
     with pytest.warns(RuntimeWarning, match=r"the surface folds over itself on 1\.[0-9]% of "
                       r"the mesh's area .*: on a smooth mesh with steep slopes, a tolerance "
-                      r"too loose .*cut the mesh into simpler pieces.*; on a noisy mesh .*"
-                      r"smooth the mesh first"):
+                      r"too loose .*cut the mesh into simpler pieces and fit each; in Blender "
+                      r"select one in Edit Mode, then Mesh > Separate > Selection\); on a noisy "
+                      r"mesh .*smooth the mesh first"):
         surf = fit_surface(noisy, faces, tolerance=1e-2)
     share = surf.report["folded"]
     assert 5e-3 < share < 5e-2
     measured = against_faces(surf, clean)
     assert measured / 2 < share < 2 * measured
+
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
