@@ -1450,11 +1450,11 @@ def _area_samples(points, faces, count: int, seed: int = 0):
 
 # the fold check of a mesh's fit (mesh_folds): points sampled on its faces, and the share of
 # its area above which the surface is warned of. Measured on the benchmarks/mesh_maps.py
-# meshes (/tmp/s29/fold1e4.py of the twenty-ninth session): 0 at the default tolerance, at
-# most 0.04% at 1e-4 (three_peaks.off, the scanned face 0.03%); at 1e-2 three_peaks.off
-# 0.39% (a coarse fit, 5.4% of the diagonal off, turning over near a peak; 0 at 3e-3). A
-# comb of fingers on a steep surface 0.2% at the default tolerance (1.7% at 1e-2), the
-# ragged patch with noise of 0.5% of its diagonal 0.37%, of 1% 2.0% at 1e-2.
+# meshes (/tmp/s29/shares2.py of the twenty-ninth session): 0 at the default tolerance, at
+# most 0.04% at 1e-4 (three_peaks.off); at 1e-2 three_peaks.off 0.45% (a coarse fit, 5.4% of
+# the diagonal off, turning over near a peak; 0 at 3e-3). The ragged patch with noise of
+# 0.5% of its diagonal 0.20% at the default tolerance, of 1% 1.4% (and 2.1% at 1e-2); a
+# V-groove between faces of unequal sizes 0-0.01% (review).
 FOLD_SAMPLES = 10_000
 FOLDED_SHARE = 1e-3
 
