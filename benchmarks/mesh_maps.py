@@ -6,15 +6,17 @@ Cases: the three bundled meshes; a 21 x 21 grid mesh of ``0.3 sin 3x cos 2y`` wh
 without one boundary triangle (a notch); a 41 x 41 grid patch of a smooth function cut by a
 wavy, ragged border (a scan's edge: a staircase of grid edges); 60-, 90- and 120-degree spherical
 caps cut from a grid (staircase borders); half a cylinder; the scanned face without 15 of its
-faces along the border (faces deleted in Blender: each leaves a notch); a comb of fingers 0.2 wide
-cut from a 40 x 40 grid of ``0.3 sin 3x cos 2y`` over [-1, 1]^2, of ``0.8 sin 3x cos 2y`` and of
-``1.2 sin 3x cos 2y`` (their developments overlap themselves). Columns: the map the default takes ("circle", "rectangle",
-"flattened", or "projected": the flattened loop refused, ``core.parameterize._projected_map``), the distortion of each map (``_map_energy``: 1 for an
+faces along the border (faces deleted in Blender: each leaves a notch); a comb of fingers 0.2
+wide cut from a 40 x 40 grid of ``0.3 sin 3x cos 2y`` over [-1, 1]^2, of ``0.8 sin 3x cos 2y``
+and of ``1.2 sin 3x cos 2y`` (their developments overlap themselves). Columns: the map the
+default takes ("circle", "rectangle", "flattened", or "projected": the flattened loop refused,
+``core.parameterize._projected_map``), the distortion of each map (``_map_energy``: 1 for an
 isometry), then for the fixed boundary ("fixed") and the default ("now") the control points,
 RMS and max error at the vertices over the diagonal, and seconds of ``fit_surface``.
 Default settings otherwise.
 
     .venv/bin/python benchmarks/mesh_maps.py [--quick] [--tolerances 1e-2 1e-3 1e-4]
+        [--only NAME ...]
 """
 
 from __future__ import annotations

@@ -467,7 +467,8 @@ def _points_in_polygon(x: np.ndarray, poly: np.ndarray, tol: float,
     out = np.zeros(len(x), dtype=bool)
     if not len(a) or not len(x):
         return out
-    b = np.roll(a, -1, axis=0) if ends is None else np.asarray(ends, dtype=np.float64).reshape(-1, 2)
+    b = (np.roll(a, -1, axis=0) if ends is None
+         else np.asarray(ends, dtype=np.float64).reshape(-1, 2))
     e = b - a
     ee = np.einsum("ij,ij->i", e, e)
     ee_safe = np.where(ee > 0.0, ee, 1.0)
@@ -2130,7 +2131,7 @@ def boundary_corners(b: np.ndarray) -> np.ndarray | None:
 FLAT_BOUNDARY = True
 FLAT_GAIN = 0.9
 FLAT_MIN_GAIN = 1e-6  # and by at least this much (a planar mesh maps exactly either way)
-FLAT_PINCH = 2.0  # and no two boundary vertices come this many times closer in uv than in 3D
+FLAT_PINCH = 2.0  # and no boundary vertices come this many times closer in uv than in 3D (_pinch)
 FLAT_WEDGE = 0.5  # and no reflex angle changes by this share of the gap it leaves (_flattened_map)
 PROJECTED_BOUNDARY = True  # a flattened loop refused: its projection tried (_projected_map)
 
@@ -2528,13 +2529,14 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
                   "Distance): vertices there are duplicated, some of the faces around them on "
                   "each copy" if twins.any() else
                   "split or remove the faces there (Blender: Select > Select All by Trait > "
-                  f"Non Manifold with only Vertices on finds {'it' if len(pinched) == 1 else 'them'}"
-                  "; then Mesh > Split > Faces by Edges, or delete the touching faces)")
+                  "Non Manifold with only Vertices on finds "
+                  + ("it" if len(pinched) == 1 else "them")
+                  + "; then Mesh > Split > Faces by Edges, or delete the touching faces)")
         where = ", ".join(f"{c:.6g}" for c in p[pinched[0]])
         raise TopologyError(
             f"the mesh has {len(pinched)} non-manifold "
             + ("vertex" if len(pinched) == 1 else "vertices")
-            + f" (the surface touches itself at a single vertex, "
+            + " (the surface touches itself at a single vertex, "
             + ("" if len(pinched) == 1 else "the first ")
             + f"at ({where})); a disk-like patch is needed: {advice}"
         )

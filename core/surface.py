@@ -1783,8 +1783,9 @@ def folds_warning(report: dict) -> str:
     """The words for ``report["folded"]`` (:func:`mesh_folds`), with what to do: first what
     most likely helps, by how the fit stopped (at the tolerance: a coarse fit over steep
     slopes; short of it: noise). The map's distortion does not tell a crushed map from a
-    noisy mesh (a ragged patch with noise of 1% of its diagonal, on the circle: distortion
-    above 10 as a comb on the circle has, 83-96), so a crushed map is named second."""
+    noisy mesh (a ragged patch with noise of 1% of its diagonal kept the circle, with a
+    distortion above 10, as a comb's on the circle, 83-96), so a crushed map is named
+    second."""
     causes = {
         "loose": "on a smooth mesh with steep slopes, a tolerance too loose for them, which "
                  "the surface cuts across (tighten it)",
