@@ -1920,6 +1920,15 @@ def _flip_caps(tris: np.ndarray, p: np.ndarray, rtol: float = 1e-10,
     return tris
 
 
+def _edge_pairs(edge_id: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two half-edges ``(h1, h2)`` of each edge that two faces share, from the undirected
+    edge id of every half-edge (every edge has one or two half-edges)."""
+    order = np.argsort(edge_id, kind="stable")
+    sid = edge_id[order]
+    pair = np.flatnonzero(sid[1:] == sid[:-1])  # positions of interior-edge pairs in `order`
+    return order[pair], order[pair + 1]
+
+
 def _orient_consistently(tris: np.ndarray, edge_id: np.ndarray) -> np.ndarray:
     """Flip triangles so that every interior edge is traversed once in each direction.
 
@@ -1944,10 +1953,7 @@ def _orient_consistently(tris: np.ndarray, edge_id: np.ndarray) -> np.ndarray:
     he_from = tris.reshape(-1)
     he_to = np.roll(tris, -1, axis=1).reshape(-1)
     face_of = np.repeat(np.arange(nf), 3)
-    order = np.argsort(edge_id, kind="stable")
-    sid = edge_id[order]
-    pair = np.flatnonzero(sid[1:] == sid[:-1])  # positions of interior-edge pairs in `order`
-    h1, h2 = order[pair], order[pair + 1]
+    h1, h2 = _edge_pairs(edge_id)
     f1, f2 = face_of[h1], face_of[h2]
     consistent = he_from[h1] == he_to[h2]  # opposite directions
     s = (~consistent).astype(np.int64)
@@ -1987,10 +1993,7 @@ def _split_vertices(tris: np.ndarray, edge_id: np.ndarray) -> np.ndarray:
     he_from = tris.reshape(-1).astype(np.int64)
     start = np.arange(3 * nf)  # the corner at the half-edge's first vertex ...
     end = 3 * (start // 3) + (start % 3 + 1) % 3  # ... and at its second
-    order = np.argsort(edge_id, kind="stable")
-    sid = edge_id[order]
-    pair = np.flatnonzero(sid[1:] == sid[:-1])
-    h1, h2 = order[pair], order[pair + 1]
+    h1, h2 = _edge_pairs(edge_id)
     same = he_from[h1] == he_from[h2]  # (both faces run the edge the same way)
     rows = np.concatenate([start[h1], end[h1]])
     cols = np.concatenate([np.where(same, start[h2], end[h2]), np.where(same, end[h2], start[h2])])
@@ -2159,16 +2162,26 @@ def _pinch(q: np.ndarray, edge: np.ndarray, stretch: np.ndarray, k: int = 12,
     return float(ratio[steps > apart].max(initial=0.0))
 
 
-def _angle_sums(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Sum (n,) of the 3D corner angles of the triangles at each vertex:
-    ``theta_i = sum atan2(|e_1 x e_2|, e_1 . e_2)`` over the corners at ``i``."""
-    total = np.zeros(len(p))
+def corner_angles(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """The 3D angle (f, 3) of each triangle at each of its corners ``tris[:, j]``:
+    ``atan2(|e_1 x e_2|, e_1 . e_2)`` of the edges ``e_1, e_2`` leaving it."""
+    out = np.empty(tris.shape)
     for j in range(3):
         a = p[tris[:, j]]
         e1, e2 = p[tris[:, (j + 1) % 3]] - a, p[tris[:, (j + 2) % 3]] - a
-        angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1),
-                           np.einsum("ij,ij->i", e1, e2))
-        total += np.bincount(tris[:, j], weights=angle, minlength=len(p))
+        out[:, j] = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1),
+                               np.einsum("ij,ij->i", e1, e2))
+    return out
+
+
+def _angle_sums(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Sum (n,) of the 3D corner angles of the triangles at each vertex:
+    ``theta_i = sum atan2(|e_1 x e_2|, e_1 . e_2)`` over the corners at ``i``
+    (:func:`corner_angles`)."""
+    angle = corner_angles(p, tris)
+    total = np.zeros(len(p))
+    for j in range(3):  # (corner by corner: the sums as they were, to the last bit)
+        total += np.bincount(tris[:, j], weights=angle[:, j], minlength=len(p))
     return total
 
 

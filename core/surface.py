@@ -39,8 +39,8 @@ from .fit import (AUTO_SMOOTHNESS, DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL
 from .geometry import column_bounds, float32_rounding
 from .parallel import background
 from .parameterize import (
-    Parameterization, _as_points, _check_finite, box_normalization, fill_value_rows,
-    fill_value_words, local_scatter, normalize, parameterize, spike_points,
+    Parameterization, _as_points, _check_finite, box_normalization, corner_angles,
+    fill_value_rows, fill_value_words, local_scatter, normalize, parameterize, spike_points,
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
                      check_callback, prefetch_swing_triangles, swing_places)
@@ -1500,14 +1500,11 @@ def _vertex_normals(points, faces) -> tuple[np.ndarray, np.ndarray]:
     corner = np.cross(points[faces[:, 1]] - points[faces[:, 0]],
                       points[faces[:, 2]] - points[faces[:, 0]])
     unit = corner / np.maximum(np.linalg.norm(corner, axis=1, keepdims=True), 1e-300)
+    angle = corner_angles(points, faces)
     normal = np.zeros((len(points), 3))
     for j in range(3):
-        a = points[faces[:, j]]
-        e1, e2 = points[faces[:, (j + 1) % 3]] - a, points[faces[:, (j + 2) % 3]] - a
-        angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1),
-                           np.einsum("ij,ij->i", e1, e2))
         for d in range(3):
-            normal[:, d] += np.bincount(faces[:, j], weights=angle * unit[:, d],
+            normal[:, d] += np.bincount(faces[:, j], weights=angle[:, j] * unit[:, d],
                                         minlength=len(points))
     return corner, normal
 
