@@ -383,6 +383,9 @@ def _fit(args) -> int:
     if "faces_max" in r:  # a mesh: between its vertices too
         rows.append(("on the faces", f"RMS {r['faces_rms']:.4g}, max {r['faces_max']:.4g} "
                                      f"({r['faces_max_rel']:.2e} of the diagonal)"))
+    if r["stop_reason"] == STALLED and r.get("noise", 0.0) > 0:  # a mesh (local_noise)
+        rows.append(("mesh noise", f"{r['noise']:.4g} ({r['noise_rel']:.2e} of the diagonal; "
+                                   "a tighter fit would follow it)"))
     if "rms_area" in r:  # a cloud: the RMS over its area (uneven density)
         rows.append(("RMS over area", f"{r['rms_area']:.4g} ({r['rms_area_rel']:.2e} of the diagonal)"))
     swings = r.get("swings") or {}

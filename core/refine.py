@@ -1065,6 +1065,7 @@ def adaptive_fit(
     domain: np.ndarray | None = None,
     balance: bool = False,
     start_degree: int | None = None,
+    measured_only: bool = False,
 ) -> tuple[IterationState, list[dict], str]:
     """Run the loop of method.md section 6 on parameters ``uv`` and (normalized) ``points``.
 
@@ -1098,7 +1099,9 @@ def adaptive_fit(
     the fit of the lowest estimated RMS at new points (the RMS times
     :func:`new_point_factor`; for a cloud of uneven density the larger of that and the same
     estimate of the RMS over the area, with the area weights' effective number of points),
-    and a default smoothness is then cross-validated.
+    and a default smoothness is then cross-validated. With ``measured_only`` (a noisy mesh)
+    that estimate counts only the first ``n_measured`` points: the rest are samples on its
+    faces, its vertices interpolated.
     An insertion after which the surface swings away from the data between points
     (:func:`swing_places`; not in method.md) is taken back: its report says ``swings`` and
     ``knots_taken_back``, it is never returned, and the insertion is made again from the fit
@@ -1195,6 +1198,8 @@ def adaptive_fit(
             n_measured = int(np.searchsorted(pick, n_measured))
         uv, points = uv[pick], points[pick]
         weights = None if weights is None else weights[pick]
+    # the points that count against the net's size at new points (new_point_factor, _stalled)
+    n_data = n_measured if measured_only and n_measured is not None else len(uv)
 
     # the RMS over the area (point clouds): weights of the points fitted (the iterations' and,
     # after sampled iterations, all), made when first needed
@@ -1220,7 +1225,7 @@ def adaptive_fit(
         shape (2.7x with 150 when the area RMS is not asked for). Blind once the control
         points pass 0.9 ``n_eff`` (:func:`new_point_factor`'s cap): a sparse part of fewer
         points than the net has control points is interpolated, noise and all."""
-        est = rms * float(new_point_factor(n_ctrl, len(uv)))
+        est = rms * float(new_point_factor(n_ctrl, n_data))
         if rms_area is not None:
             w = area[(id(uv), len(e))]
             n_eff = len(e) / float(np.mean(w * w))
@@ -1424,7 +1429,7 @@ def adaptive_fit(
         # the error has stopped falling (noise in the data; a tolerance below its level): more
         # knots fit the noise, so stop rather than spend the budget on it
         kept = [h for h in history if "knots_taken_back" not in h]  # estimates: one each
-        if tol > 0 and _stalled(kept, len(uv), estimates if balance and STALL_DOF else None):
+        if tol > 0 and _stalled(kept, n_data, estimates if balance and STALL_DOF else None):
             reason = STALLED
             if quiet is not None and quiet is not best:
                 best.fit.basis = None

@@ -40,7 +40,8 @@ from .geometry import column_bounds, float32_rounding
 from .parallel import background
 from .parameterize import (
     Parameterization, _as_points, _check_finite, box_normalization, corner_angles,
-    fill_value_rows, fill_value_words, local_scatter, normalize, parameterize, spike_points,
+    fill_value_rows, fill_value_words, local_noise, local_scatter, normalize, parameterize,
+    spike_points,
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
                      check_callback, prefetch_swing_triangles, swing_places)
@@ -1556,6 +1557,11 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
                                 seed=options.seed)
         fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
     domain = np.asarray(param.domain_polygon, dtype=np.float64)
+    # a mesh's noise (its vertices' scatter across a smooth surface through them): where it is
+    # not small against the tolerance, the loop counts the vertices alone against the net's size
+    # (mesh_noise_counts)
+    noise = (local_noise(q, seed=options.seed)
+             if param.faces is not None and options.tolerance > 0 else None)
     if not subsampled:  # the swing check's triangles, made while the loop runs
         prefetch_swing_triangles(uv, options.seed)
     best, hist, reason = adaptive_fit(
@@ -1563,6 +1569,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         callback=callback, history_offset=len(history), unit=norm.scale,
         n_measured=None if subsampled else len(uv), domain=domain,
         balance=param.faces is None, start_degree=start_degree,
+        measured_only=noise is not None and mesh_noise_counts(noise, options, diag_norm,
+                                                              norm.scale),
     )
 
     def data_checks(fit_state, errs):
@@ -1647,6 +1655,9 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     }
     if faces_key is not None:  # (and the same faces: faces_digest)
         report["faces_digest"] = faces_key
+    if noise is not None:  # a mesh's noise (local_noise), in the user's units
+        report["noise"] = noise * norm.scale
+        report["noise_rel"] = noise / diag_norm
     if param.faces is not None and not subsampled and len(best.fit.errors) > len(uv):
         # the errors at the points the fit sampled on the mesh's faces: between the vertices
         # of a coarse mesh the surface can be far from the faces where the errors at the
@@ -1750,6 +1761,28 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # times there, 8.1 times folded)
         far_stall_check(surf, points[used], options.seed)
     return surf
+
+
+# A mesh's points sampled on its faces are its vertices interpolated: where its noise
+# (core.parameterize.local_noise) is at least this share of an RMS tolerance (a third of a max
+# one), the loop's estimate of the error at new points and its stall test count its vertices
+# alone against the net's size (core.refine.adaptive_fit's measured_only). Counting all the
+# samples, a grid mesh of 41 x 41 vertices with noise of 0.2-0.5% of its diagonal took the
+# budget of 2000 control points at the default tolerance, more than it has vertices, to follow
+# its noise (0.5% of the diagonal at 81 x 81: 1.3% of its area folded over); with the vertices
+# 148-152 (563-734 at 81 x 81), as its vertices alone fitted as a cloud (143-150). A clean mesh
+# scores about 0 and keeps the samples' count: a fit that counted its vertices stopped early as
+# if stalled at a tight tolerance (a half cylinder of 961 vertices at 1e-4: 160 control points
+# and 3.0e-4 instead of 1891 and 1.0e-4; /tmp/s30/cmp.py of the thirtieth session).
+NOISE_COUNTS = 0.3
+
+
+def mesh_noise_counts(noise: float, options, diagonal: float, unit: float) -> bool:
+    """Whether a mesh's ``noise`` (normalized units: ``diagonal`` the bounding box's there,
+    ``unit`` the user's per normalized one) is at least :data:`NOISE_COUNTS` of the tolerance
+    of ``options`` (RMS; a third of a max tolerance)."""
+    tol = options.tolerance * (diagonal if options.relative else 1.0 / unit)
+    return noise >= NOISE_COUNTS * (tol if str(options.criterion).lower() == "rms" else tol / 3.0)
 
 
 # a mesh's fit is warned of when on its faces the largest error is over this many times the

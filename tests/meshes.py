@@ -23,11 +23,17 @@ def comb_mesh(height, n: int = 40, finger: float = 0.2) -> tuple[np.ndarray, np.
     return pts[used], index[faces]
 
 
+def wavy(x, y):
+    """The height field of :func:`noisy_grid`."""
+    return 0.2 * np.sin(4 * x) * np.cos(3 * y) + 0.1 * x * y
+
+
 def noisy_grid(n: int = 41, noise: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
-    """An n x n grid mesh over [0, 1]^2 of 0.2 sin 4x cos 3y + 0.1 xy with Gaussian noise of
-    ``noise`` times its diagonal on every coordinate of every vertex (seeded): a noisy scan."""
+    """An n x n grid mesh over [0, 1]^2 of :func:`wavy` (0.2 sin 4x cos 3y + 0.1 xy) with
+    Gaussian noise of ``noise`` times its diagonal on every coordinate of every vertex
+    (seeded): a noisy scan."""
     u, v = (a.ravel() for a in np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n)))
-    pts = np.column_stack([u, v, 0.2 * np.sin(4 * u) * np.cos(3 * v) + 0.1 * u * v])
+    pts = np.column_stack([u, v, wavy(u, v)])
     pts += noise * np.linalg.norm(np.ptp(pts, axis=0)) * np.random.default_rng(0).standard_normal(
         pts.shape)
     i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))

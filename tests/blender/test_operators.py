@@ -281,6 +281,28 @@ def test_a_tolerance_below_the_noise_says_the_data_look_noisy(clean_scene, capfd
     assert state.smoothness > 1e-4
 
 
+def test_a_noisy_mesh_whose_error_stopped_falling_is_told_its_noise(clean_scene, capfd):
+    """A scanned mesh with noise of 0.2% of its diagonal at a tolerance of 0.1% (the engine's
+    default): the fit stops because the error stopped falling, with about 150 control points
+    (it took 1573 before core.surface.NOISE_COUNTS), and the summary gives the mesh's noise
+    as well as the RMS reached, so the user knows what tolerance the scan allows."""
+    from meshes import noisy_grid
+
+    bpy = clean_scene
+    scan = add_mesh(bpy, "Scan", *noisy_grid(41, 0.002))
+    capfd.readouterr()
+    assert fit(bpy, scan, tolerance=1e-3) == {"FINISHED"}
+    text = capfd.readouterr().out
+    assert "Warning: TCB:" in text and "the error stopped falling" in text, text
+    said = re.search(r"the mesh's vertices scatter (\S+) \((\S+)% of the diagonal\) across a "
+                     r"smooth surface", text)
+    assert said, text
+    report = spline_of(bpy.context.view_layer.objects.active).report
+    assert float(said.group(1)) == pytest.approx(report["noise"], rel=1e-3)
+    assert float(said.group(2)) == pytest.approx(100 * report["noise_rel"], rel=2e-3)
+    assert report["control_points"] < 300
+
+
 def test_an_error_stopped_far_above_the_noise_is_not_called_noise(clean_scene, capfd):
     """A steep surface folded over its projection plane (Renka's F7 on a 71 x 71 grid, turned,
     with noise of 0.5% of its extent; tests/core's far-stall test): the error stopped falling

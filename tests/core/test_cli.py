@@ -7,6 +7,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from core import TCBSurface
 from core.meshio import read_geometry, write_mesh
@@ -127,6 +128,29 @@ def test_a_surface_folding_over_its_mesh_is_a_warning_line_and_a_row(tmp_path, c
                          str(tmp_path / "f.obj"), "--tolerance", "1e-2", "--quiet"]) == 0
     out, err = capsys.readouterr()
     assert "folded over" not in out and not any("folds over" in str(w.message) for w in caught)
+    assert "mesh noise" not in out  # (the tolerance reached: next test)
+
+
+def test_a_noisy_mesh_whose_error_stopped_falling_has_its_noise_in_the_table(tmp_path, capsys):
+    """A grid mesh with noise of 0.2% of its diagonal at the default tolerance (0.1%): the
+    error stops falling (core.surface.NOISE_COUNTS), and the table gives the mesh's noise
+    (core.parameterize.local_noise), the level a tighter tolerance would follow."""
+    from core import cli
+    from meshes import noisy_grid
+
+    mesh = tmp_path / "scan.obj"
+    write_mesh(mesh, *noisy_grid(41, 0.002))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert cli.main(["fit", str(mesh), "-o", str(tmp_path / "s.obj"), "--quiet"]) == 0
+    out, _ = capsys.readouterr()
+    assert "(the error stopped falling)" in out, out
+    row = re.search(r"^mesh noise\s+(\S+) \((\S+) of the diagonal; a tighter fit would follow "
+                    r"it\)$", out, re.M)
+    assert row, out
+    diagonal = np.linalg.norm(np.ptp(read_geometry(mesh)[0], axis=0))
+    assert float(row.group(1)) == pytest.approx(float(row.group(2)) * diagonal, rel=5e-3)
+    assert 0.85 * 0.002 < float(row.group(2)) < 1.05 * 0.002
 
 
 def test_progress_of_an_uneven_cloud_and_the_automatic_resolution(tmp_path):

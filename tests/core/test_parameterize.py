@@ -1731,6 +1731,27 @@ def test_a_comb_on_a_wavy_surface_keeps_its_projected_shape(monkeypatch) -> None
     fitted(pts, faces, 250)
 
 
+@pytest.mark.parametrize("n, noise", [(41, 0.0002), (41, 0.002), (81, 0.005)])
+def test_local_noise_measures_a_mesh_s_noise_and_not_its_curvature(n: int, noise: float) -> None:
+    """``local_noise``: a grid mesh of a smooth function with Gaussian noise of a known share
+    of its diagonal on every coordinate scores that share (0.88-1.0x of it), whatever the
+    share; the same grid without noise scores under 1% of the smallest noise, and so do a
+    coarse grid and the steep comb, whose scatter about local planes (``local_scatter``,
+    which counts curvature) is 9x the largest noise. Fewer points than its largest
+    neighbourhood: 0."""
+    pts, _ = noisy_grid(n, noise)
+    diagonal = np.linalg.norm(np.ptp(pts, axis=0))
+    assert 0.85 * noise < pz.local_noise(pts) / diagonal < 1.05 * noise
+    clean = noisy_grid(n, 0.0)[0]
+    assert pz.local_noise(clean) / np.linalg.norm(np.ptp(clean, axis=0)) < 2e-6
+    for coarse in (noisy_grid(21, 0.0)[0],
+                   comb_mesh(lambda x, y: 1.2 * np.sin(3 * x) * np.cos(2 * y))[0]):
+        diagonal = np.linalg.norm(np.ptp(coarse, axis=0))
+        assert pz.local_noise(coarse) / diagonal < 2e-6
+        assert pz.local_scatter(coarse)[0] / diagonal > 1.5e-3
+    assert pz.local_noise(pts[:40]) == 0.0
+
+
 def test_a_surface_that_folds_over_its_mesh_is_warned_of() -> None:
     """A grid mesh with noise of 1% of its diagonal (tests/meshes.py), fitted to 1e-2: the
     knots chase the noise and between the vertices the surface turns over (its normal against

@@ -192,6 +192,54 @@ def test_a_tolerance_below_the_noise_stops_when_the_error_stops_falling():
     assert r["stop_reason"] == "tolerance reached"
 
 
+def off_wavy(surf, faces) -> float:
+    """RMS distance (over the bounding box's diagonal) of ``surf`` from the noise-free height
+    field of tests/meshes.py's noisy_grid, at 20 000 random points of the mesh's faces in the
+    parameters, 0.02 inside the unit square (height differences times the cosine of the slope)."""
+    from meshes import wavy
+
+    uv = np.asarray(surf.parameterization.uv)
+    rng = np.random.default_rng(5)
+    corners = uv[faces[rng.integers(len(faces), size=20_000)]]
+    x, y, z = surf((corners * rng.dirichlet([1, 1, 1], 20_000)[:, :, None]).sum(axis=1)).T
+    gx = 0.8 * np.cos(4 * x) * np.cos(3 * y) + 0.1 * y  # the height field's gradient
+    gy = -0.6 * np.sin(4 * x) * np.sin(3 * y) + 0.1 * x
+    off = (z - wavy(x, y)) / np.sqrt(1 + gx * gx + gy * gy)
+    inside = (np.minimum(x, y) > 0.02) & (np.maximum(x, y) < 0.98)
+    return float(np.sqrt(np.mean(off[inside] ** 2)) / surf.report["diagonal"])
+
+
+def test_a_noisy_mesh_counts_its_vertices_and_stops_when_its_error_stops_falling(monkeypatch):
+    """A grid mesh of 41 x 41 vertices with noise of 0.2% of its diagonal, at the default
+    tolerance (0.1%, below the noise). A mesh is fitted to its vertices and to points sampled
+    on its faces, 20 per vertex: counted against them, the net's estimated error at new
+    points did not rise, and the run took 1573 control points, more than the mesh has
+    vertices, 1.31e-3 of the diagonal off the noise-free surface. Its noise measured
+    (``report["noise"]``, core.parameterize.local_noise) is above 0.3 times the tolerance, so
+    the vertices alone count: the error stops falling at about 150 control points, 5.7e-4 off.
+    A clean mesh measures no noise and counts the samples (a fit that counted its vertices
+    stopped a half cylinder at 1e-4 early, as if stalled)."""
+    from meshes import noisy_grid
+
+    noisy, faces = noisy_grid(41, 0.002)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        surf = fit_surface(noisy, faces)
+    r = surf.report
+    assert r["stop_reason"] == refine.STALLED and r["control_points"] < 300
+    assert 0.85 * 0.002 < r["noise_rel"] < 1.05 * 0.002
+    assert r["noise"] == pytest.approx(r["noise_rel"] * r["diagonal"], rel=1e-12)
+    off = off_wavy(surf, faces)
+    assert off < 8e-4
+    monkeypatch.setattr(core.surface, "NOISE_COUNTS", np.inf)  # the samples counted
+    chased = fit_surface(noisy, faces)
+    assert chased.report["control_points"] > 1000 and off_wavy(chased, faces) > 1.5 * off
+    monkeypatch.undo()
+    clean, _ = noisy_grid(41, 0.0)
+    r = fit_surface(clean, faces).report
+    assert r["noise"] == 0.0 and r["stop_reason"] == "tolerance reached"
+
+
 def test_few_noisy_points_per_control_point_stop_on_the_error_at_new_points():
     """4000 points with noise 0.01, a tolerance far below it. With 2-6 points per control point
     the training RMS keeps falling as the net fits the noise (knots^-0.13 to -0.38: the run

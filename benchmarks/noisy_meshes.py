@@ -1,0 +1,92 @@
+"""Noisy meshes: how many control points a scan's noise costs, and how far from the noise-free
+shape the fit ends, with the mesh's vertices counted alone against the net (the default where
+the mesh's noise is at least ``core.surface.NOISE_COUNTS`` of the tolerance) or its points
+sampled on the faces counted too (``samples``: NOISE_COUNTS set to infinity), in the same run.
+
+    .venv/bin/python benchmarks/noisy_meshes.py [--quick] [--tolerances 1e-3 1e-4]
+
+Cases: grid meshes of ``0.2 sin 4x cos 3y + 0.1 xy`` over the unit square (tests/meshes.py's
+``noisy_grid``) of 41 x 41 and 81 x 81 vertices, and the bundled ``three_peaks.off`` (1907
+vertices), with Gaussian noise of the given share of the diagonal on every coordinate of every
+vertex (seeded); and clean meshes, where nothing may change (``three_peaks.off`` and a 41 x 41
+grid, noise 0). Columns: the noise given and measured (``report["noise_rel"]``,
+``core.parameterize.local_noise``), both over the diagonal; then per variant the control
+points, the stop reason, the RMS at the vertices over the diagonal, *true*: the RMS distance over
+the diagonal of the surface at the vertices' parameters from the vertices without noise, the
+share of the mesh's area where the surface folds over (``report["folded"]``), and seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+import core.surface as S  # noqa: E402
+from core import fit_surface  # noqa: E402
+from core.meshio import read_geometry  # noqa: E402
+from meshes import noisy_grid  # noqa: E402
+
+STOPS = {"tolerance reached": "tolerance", "control-point budget reached": "budget",
+         "the error stopped falling": "stalled"}
+
+
+def cases(quick: bool) -> list:
+    """(name, noise share, clean vertices, noisy vertices, faces)."""
+    out = []
+    grids = [(41, 0.002), (41, 0.005)] if quick else [
+        (41, 0.0), (41, 0.001), (41, 0.002), (41, 0.005), (81, 0.002), (81, 0.005)]
+    for n, noise in grids:
+        clean, faces = noisy_grid(n, 0.0)
+        out.append((f"grid {n} x {n}", noise, clean, noisy_grid(n, noise)[0], faces))
+    if not quick:
+        clean, faces = read_geometry(ROOT / "data" / "three_peaks.off")
+        diagonal = np.linalg.norm(np.ptp(clean, axis=0))
+        for noise in (0.0, 0.001, 0.003):
+            shaken = clean + noise * diagonal * np.random.default_rng(0).standard_normal(
+                clean.shape)
+            out.append(("three_peaks.off", noise, clean, shaken, faces))
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="two noisy grids at 1e-3")
+    ap.add_argument("--tolerances", type=float, nargs="*")
+    args = ap.parse_args()
+    tolerances = args.tolerances or ([1e-3] if args.quick else [1e-3, 1e-4])
+    print("| mesh | vertices | noise | measured | tolerance | variant | cp | stop | RMS | true "
+          "| folded | s |")
+    print("|---|---:|---:|---:|---:|---|---:|---|---:|---:|---:|---:|")
+    counts = S.NOISE_COUNTS
+    for name, noise, clean, noisy, faces in cases(args.quick):
+        for tol in tolerances:
+            for variant in ("samples", "now"):
+                S.NOISE_COUNTS = np.inf if variant == "samples" else counts
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        t0 = time.perf_counter()
+                        surf = fit_surface(noisy, faces, tolerance=tol)
+                        seconds = time.perf_counter() - t0
+                finally:
+                    S.NOISE_COUNTS = counts
+                r = surf.report
+                at = surf(np.asarray(surf.parameterization.uv))
+                true = np.sqrt(np.mean(np.sum((at - clean) ** 2, axis=1))) / r["diagonal"]
+                print(f"| {name} | {len(noisy)} | {noise:g} | {r['noise_rel']:.2e} | {tol:g} | "
+                      f"{variant} | {r['control_points']} | "
+                      f"{STOPS.get(r['stop_reason'], r['stop_reason'])} | {r['rms_rel']:.2e} | "
+                      f"{true:.2e} | {100 * r['folded']:.2f}% | {seconds:.1f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
