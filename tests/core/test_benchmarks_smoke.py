@@ -96,3 +96,19 @@ def test_holes_quick():
     assert [r[:2] for r in rows] == [["round (41 grid)", "fan"], ["round (41 grid)", "shipped"],
                                      ["C", "fan"], ["C", "shipped"]]
     assert 2 * int(rows[3][2]) < int(rows[2][2]), rows
+
+
+def test_noisy_meshes_quick():
+    """``benchmarks/noisy_meshes.py --quick``: for each noisy grid mesh at a tolerance below its
+    noise, the default (the vertices counted) takes under a fifth of the control points of the
+    faces' samples counted, and ends at least 1.5x closer to the mesh without noise."""
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "noisy_meshes.py"),
+                          "--quick"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = [[c.strip() for c in r.split("|")[1:-1]] for r in res.stdout.splitlines()
+            if r.startswith("| grid")]
+    assert [(r[2], r[5]) for r in rows] == [
+        (noise, variant) for noise in ("0.002", "0.005") for variant in ("samples", "now")]
+    for samples, now in zip(rows[::2], rows[1::2]):
+        assert now[7] == "stalled" and 5 * int(now[6]) < int(samples[6]), (samples, now)
+        assert 1.5 * float(now[9]) < float(samples[9]), (samples, now)
