@@ -23,7 +23,7 @@ from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 from .parameterize import fill_value_rows, fill_value_words, projection_direction
 from .refine import STALLED, SWINGS_LEFT, mostly_taken_back, replaced_default_reason
-from .surface import FOLDED_SHARE, MAX_RESOLUTION, default_swung, grid_frame
+from .surface import FOLDED_SHARE, MAX_RESOLUTION, default_swung, grid_frame, stopped_at_noise
 
 __all__ = ["main"]
 
@@ -383,9 +383,9 @@ def _fit(args) -> int:
     if "faces_max" in r:  # a mesh: between its vertices too
         rows.append(("on the faces", f"RMS {r['faces_rms']:.4g}, max {r['faces_max']:.4g} "
                                      f"({r['faces_max_rel']:.2e} of the diagonal)"))
-    if r["stop_reason"] == STALLED and r.get("noise", 0.0) > 0:  # a mesh (local_noise)
-        rows.append(("mesh noise", f"{r['noise']:.4g} ({r['noise_rel']:.2e} of the diagonal; "
-                                   "a tighter fit would follow it)"))
+    if stopped_at_noise(r):  # core.parameterize.local_noise
+        rows.append(("noise", f"{r['noise']:.4g} ({r['noise_rel']:.2e} of the diagonal; "
+                              "a tighter fit would follow it)"))
     if "rms_area" in r:  # a cloud: the RMS over its area (uneven density)
         rows.append(("RMS over area", f"{r['rms_area']:.4g} ({r['rms_area_rel']:.2e} of the diagonal)"))
     swings = r.get("swings") or {}

@@ -521,10 +521,11 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
         level = (f"{100 * rep.get(what.lower() + '_rel', 0):.3g}% of the diagonal"
                  if opts.relative else f"{rep.get(what.lower(), 0):.4g}")
         chosen = bool(rep.get("smoothness_selection"))  # by the engine, or Auto Smoothness
-        # a mesh's noise (core.parameterize.local_noise), when it has some
-        noise = (f"; the mesh's vertices scatter {rep['noise']:.4g} "
-                 f"({100 * rep['noise_rel']:.3g}% of the diagonal) across a smooth surface"
-                 if rep.get("noise", 0.0) > 0 else "")
+        # the data's noise (core.parameterize.local_noise), when the error stopped at it
+        mesh = getattr(surf.parameterization, "faces", None) is not None
+        noise = (f"; the {'vertices' if mesh else 'points'} scatter "
+                 f"{rep['noise']:.4g} ({100 * rep['noise_rel']:.3g}% of the diagonal) across a "
+                 "smooth surface" if _core().surface.stopped_at_noise(rep) else "")
         op.report({"WARNING"}, f"{text}; the tolerance was not reached: {reason} with more "
                   f"control points (noise in the data, or detail the knots cannot resolve: more "
                   f"control points would fit the noise): set the tolerance above the {what} "

@@ -128,7 +128,7 @@ def test_a_surface_folding_over_its_mesh_is_a_warning_line_and_a_row(tmp_path, c
                          str(tmp_path / "f.obj"), "--tolerance", "1e-2", "--quiet"]) == 0
     out, err = capsys.readouterr()
     assert "folded over" not in out and not any("folds over" in str(w.message) for w in caught)
-    assert "mesh noise" not in out  # (the tolerance reached: next test)
+    assert "\nnoise " not in out  # (the tolerance reached: next test)
 
 
 def test_a_noisy_mesh_whose_error_stopped_falling_has_its_noise_in_the_table(tmp_path, capsys):
@@ -145,7 +145,7 @@ def test_a_noisy_mesh_whose_error_stopped_falling_has_its_noise_in_the_table(tmp
         assert cli.main(["fit", str(mesh), "-o", str(tmp_path / "s.obj"), "--quiet"]) == 0
     out, _ = capsys.readouterr()
     assert "(the error stopped falling)" in out, out
-    row = re.search(r"^mesh noise\s+(\S+) \((\S+) of the diagonal; a tighter fit would follow "
+    row = re.search(r"^noise\s+(\S+) \((\S+) of the diagonal; a tighter fit would follow "
                     r"it\)$", out, re.M)
     assert row, out
     diagonal = np.linalg.norm(np.ptp(read_geometry(mesh)[0], axis=0))
@@ -371,6 +371,9 @@ def test_a_stalled_fit_says_which_iteration_and_why_the_smoothness_was_chosen(tm
     assert "(the error stopped falling)" in r.stdout, r.stdout
     assert re.search(r"the surface is iteration \d+'s, of lowest estimated error", r.stdout)
     assert "(cross-validated: the error stopped falling)" in r.stdout, r.stdout
+    # the error stopped at the points' noise (0.01 on the heights: 0.0094 across the surface)
+    row = re.search(r"^noise\s+(\S+) \(", r.stdout, re.M)
+    assert row and 0.008 < float(row.group(1)) < 0.011, r.stdout
 
 
 def test_an_output_that_is_the_input_or_another_output_is_refused(tmp_path):

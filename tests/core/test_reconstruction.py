@@ -183,6 +183,8 @@ def test_a_tolerance_below_the_noise_stops_when_the_error_stops_falling():
     assert r["stop_reason"] == "the error stopped falling"
     assert r["control_points"] < 1000 and len(r["history"]) <= 6
     assert 0.008 < r["rms"] < 0.0105  # the noise level
+    # ... which the points' scatter across a smooth surface measures (local_noise)
+    assert 0.8 * r["rms"] < r["noise"] < 1.05 * r["rms"] and core.surface.stopped_at_noise(r)
     clean = fit_surface(np.c_[xy, shape(*xy.T)], tolerance=1e-5, max_control_points=600).report
     assert clean["stop_reason"] == "control-point budget reached"
     # a clean CAD mesh whose RMS is not monotone from fit to fit (4.93, 4.98, 4.63, 4.80 e-4):
@@ -287,6 +289,8 @@ def test_a_stalled_run_on_clean_data_cross_validates_its_default_smoothness():
     uv = surf.parameterization.project(truth)
     ok = surf.covers(uv)
     assert np.sqrt(np.mean((surf(uv[ok])[:, 2] - truth[ok, 2]) ** 2)) < 0.01
+    # not noise (core.parameterize.local_noise: 0): the CLI and Blender do not call it so
+    assert r["noise"] < 0.1 * r["rms"] and not core.surface.stopped_at_noise(r)
 
 
 @pytest.mark.parametrize("n, error, previous, expected", [
