@@ -521,17 +521,20 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
         level = (f"{100 * rep.get(what.lower() + '_rel', 0):.3g}% of the diagonal"
                  if opts.relative else f"{rep.get(what.lower(), 0):.4g}")
         chosen = bool(rep.get("smoothness_selection"))  # by the engine, or Auto Smoothness
-        # the data's noise (core.parameterize.local_noise), when the error stopped at it
-        mesh = getattr(surf.parameterization, "faces", None) is not None
-        noise = (f"; the {'vertices' if mesh else 'points'} scatter "
-                 f"{rep['noise']:.4g} ({100 * rep['noise_rel']:.3g}% of the diagonal) across a "
-                 "smooth surface" if _core().surface.stopped_at_noise(rep) else "")
-        op.report({"WARNING"}, f"{text}; the tolerance was not reached: {reason} with more "
-                  f"control points (noise in the data, or detail the knots cannot resolve: more "
-                  f"control points would fit the noise): set the tolerance above the {what} "
-                  f"reached ({level})" + (" (the smoothness was cross-validated)"
-                                          if chosen else ", or turn on Auto Smoothness")
-                  + noise)
+        # the data's noise (core.parameterize.local_noise), when the error stopped at it;
+        # else the cause is open
+        if _core().surface.stopped_at_noise(rep):
+            mesh = getattr(surf.parameterization, "faces", None) is not None
+            why = (f"at the data's noise: the {'vertices' if mesh else 'points'} scatter "
+                   f"{rep['noise']:.4g} ({100 * rep['noise_rel']:.3g}% of the diagonal) across "
+                   "a smooth surface, and more control points would fit the noise")
+        else:
+            why = ("with more control points (noise in the data, or detail the knots cannot "
+                   "resolve: more control points would fit the noise)")
+        op.report({"WARNING"}, f"{text}; the tolerance was not reached: {reason} {why}: set "
+                  f"the tolerance above the {what} reached ({level})"
+                  + (" (the smoothness was cross-validated)" if chosen
+                     else ", or turn on Auto Smoothness"))
     else:
         advice = {"control-point budget reached": "raise Max Control Points",
                   "iteration limit": "raise Max Iterations",
