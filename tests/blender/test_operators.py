@@ -468,11 +468,13 @@ def test_a_surface_that_swings_off_the_data_is_a_warning(clean_scene, capfd, mon
     assert "Smoothness (default swung)" in labels, labels
 
 
-def test_a_surface_that_folds_over_its_mesh_is_a_warning_and_a_panel_row(clean_scene, capfd):
+def test_a_surface_that_folds_over_its_mesh_is_a_warning_and_a_panel_row(clean_scene, capfd,
+                                                                         tmp_path):
     """A noisy scan-like grid mesh (noise of 1% of its diagonal) fitted to 1e-2: the surface
     folds over between the vertices (core.surface.mesh_folds). The summary is a WARNING that
     says so, and the panel keeps the share after the report is gone (user test: nothing
-    showed it once the report had scrolled away); a clean mesh has neither."""
+    showed it once the report had scrolled away), also in the saved .blend opened again; a
+    clean mesh has neither."""
     from meshes import noisy_grid
 
     bpy = clean_scene
@@ -489,6 +491,13 @@ def test_a_surface_that_folds_over_its_mesh_is_a_warning_and_a_panel_row(clean_s
     labels = [e[1] for e in log if e[0] == "label"]
     assert "Folded Over" in labels
     assert labels[labels.index("Folded Over") + 1] == f"{100 * folded:.2g} %"
+    path, name = tmp_path / "folded.blend", surface.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    surface = bpy.data.objects[name]
+    assert surface.tcb.folded == pytest.approx(folded)
+    labels = [e[1] for e in draw_panels(bpy, [surface]) if e[0] == "label"]
+    assert labels[labels.index("Folded Over") + 1] == f"{100 * folded:.2g} %", labels
     clean, faces = grid(24)
     obj = add_mesh(bpy, "Clean", clean, faces)
     capfd.readouterr()
