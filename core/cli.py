@@ -23,7 +23,8 @@ from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 from .parameterize import fill_value_rows, fill_value_words, projection_direction
 from .refine import STALLED, SWINGS_LEFT, mostly_taken_back, replaced_default_reason
-from .surface import FOLDED_SHARE, MAX_RESOLUTION, default_swung, grid_frame, stopped_at_noise
+from .surface import (FOLDED_SHARE, MAX_RESOLUTION, default_swung, grid_frame,
+                      noise_near_tolerance, stopped_at_noise)
 
 __all__ = ["main"]
 
@@ -383,7 +384,9 @@ def _fit(args) -> int:
     if "faces_max" in r:  # a mesh: between its vertices too
         rows.append(("on the faces", f"RMS {r['faces_rms']:.4g}, max {r['faces_max']:.4g} "
                                      f"({r['faces_max_rel']:.2e} of the diagonal)"))
-    if stopped_at_noise(r):  # core.parameterize.local_noise
+    near = args.tolerance > 0 and noise_near_tolerance(r, args.tolerance, args.relative,
+                                                        args.criterion)
+    if stopped_at_noise(r) or near:  # core.parameterize.local_noise
         rows.append(("noise", f"{r['noise']:.4g} ({r['noise_rel']:.2e} of the diagonal; "
                               "a tighter fit would follow it)"))
     if "rms_area" in r:  # a cloud: the RMS over its area (uneven density)
@@ -413,8 +416,16 @@ def _fit(args) -> int:
         SWINGS_LEFT if mostly_taken_back(r) else r["stop_reason"])
     if advice and args.tolerance > 0:  # the table says why it stopped, not what to change
         unit = " (a fraction of the bounding-box diagonal)" if args.relative else ""
-        print(f"note: the tolerance {args.tolerance:g}{unit} was not reached: {advice}, or "
-              "loosen --tolerance", file=sys.stderr)
+        if near and not mostly_taken_back(r):  # the data's noise is near the tolerance
+            advice = (f"the data's noise ({r['noise']:.4g}, the row 'noise') is near it, and "
+                      f"more control points would mostly fit the noise: loosen --tolerance to "
+                      f"about the RMS reached ({r['rms_rel' if args.relative else 'rms']:.3g}), "
+                      f"or {advice}")
+            print(f"note: the tolerance {args.tolerance:g}{unit} was not reached: {advice}",
+                  file=sys.stderr)
+        else:
+            print(f"note: the tolerance {args.tolerance:g}{unit} was not reached: {advice}, or "
+                  "loosen --tolerance", file=sys.stderr)
     return 0
 
 

@@ -595,14 +595,15 @@ def local_noise(points: np.ndarray, sample: int = _NOISE_SAMPLE, seed: int = 0) 
     ``beta r^6`` with ``r^2 ~ k`` the neighbourhood's squared radius. Of the medians
     ``v_k = median(s_k^2) / m_nu`` (``m_nu = (1 - 2 / (9 nu))^3``, the Wilson-Hilferty median
     of ``chi^2_nu / nu``), ``sigma^2 = v_12 - (v_40 - v_12) / (R - 1)`` with ``R = (41/13)^3``.
-    The medians ignore the neighbourhoods across a crease or a border.
+    The medians pass over the neighbourhoods across a crease or along a border while they are
+    fewer than half.
 
     Measured (/tmp/s30/noiseest3.py of the thirtieth session): grid meshes of 41 x 41 to 317 x
     317 vertices with Gaussian noise of 0.0002-0.005 of the diagonal on every coordinate,
     0.88-0.99x the noise (the least where the noise is 0.4 of the spacing); the clean meshes of
     benchmarks/mesh_maps.py (caps, a half cylinder, coarse grids, combs, patch-01, three_peaks)
     0, where planes fitted to the same neighbourhoods leave up to 9e-3 of their diagonal
-    (curvature, and patch-01's crease); the scanned face
+    (curvature, and patch-01's crease); a 16 x 16 grid of a quadric 3.9e-5; the scanned face
     of 299 vertices 3.5e-3 (its neighbourhoods of 41 span an eighth of it). 0.13 s for 1e5
     points. 0 for fewer than 41 points."""
     p = np.asarray(points, dtype=np.float64)

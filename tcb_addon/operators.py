@@ -544,8 +544,24 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
                   "the surface swing between the points (a sharp step?): add points there"
                   }.get(_core().refine.SWINGS_LEFT if _core().refine.mostly_taken_back(rep)
                         else reason, "")
-        op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason})"
-                  + (f": {advice} or loosen the tolerance" if advice else ""))
+        opts = surf.options
+        if advice and not _core().refine.mostly_taken_back(rep) and (
+                _core().surface.noise_near_tolerance(rep, opts.tolerance, opts.relative,
+                                                     opts.criterion)):
+            # the data's noise (core.parameterize.local_noise) is near the tolerance: more
+            # control points would mostly fit it
+            mesh = getattr(surf.parameterization, "faces", None) is not None
+            rms = (f"{100 * rep['rms_rel']:.3g}% of the diagonal" if opts.relative
+                   else f"{rep['rms']:.4g}")
+            advice = (f"the {'vertices' if mesh else 'points'} scatter {rep['noise']:.4g} "
+                      f"({100 * rep['noise_rel']:.3g}% of the diagonal) across a smooth "
+                      "surface, near the tolerance, and more control points would mostly fit "
+                      f"that noise: loosen the tolerance to about the RMS reached ({rms}), or "
+                      f"{advice}")
+            op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason}): {advice}")
+        else:
+            op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason})"
+                      + (f": {advice} or loosen the tolerance" if advice else ""))
 
 
 # --- the worker-thread job and the modal/execute skeleton --------------------------------------

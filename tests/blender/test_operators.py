@@ -324,6 +324,14 @@ def test_a_noisy_mesh_whose_error_stopped_falling_is_told_its_noise(clean_scene,
     assert float(said.group(1)) == pytest.approx(report["noise"], rel=1e-3)
     assert float(said.group(2)) == pytest.approx(100 * report["noise_rel"], rel=2e-3)
     assert report["control_points"] < 300
+    # a budget that stops it first: not only "raise Max Control Points"
+    assert fit(bpy, scan, tolerance=1e-3, max_control_points=100) == {"FINISHED"}
+    text = capfd.readouterr().out
+    assert re.search(r"the tolerance was not reached \(control-point budget reached\): the "
+                     r"vertices scatter \S+ \(\S+% of the diagonal\) across a smooth surface, near "
+                     r"the tolerance, and more control points would mostly fit that noise: "
+                     r"loosen the tolerance to about the RMS reached \(\S+% of the diagonal\), "
+                     r"or raise Max Control Points", text), text
 
 
 def test_an_error_stopped_far_above_the_noise_is_not_called_noise(clean_scene, capfd):

@@ -151,6 +151,16 @@ def test_a_noisy_mesh_whose_error_stopped_falling_has_its_noise_in_the_table(tmp
     diagonal = np.linalg.norm(np.ptp(read_geometry(mesh)[0], axis=0))
     assert float(row.group(1)) == pytest.approx(float(row.group(2)) * diagonal, rel=5e-3)
     assert 0.85 * 0.002 < float(row.group(2)) < 1.05 * 0.002
+    # a budget that stops it first: the note does not only say "raise --max-control-points"
+    # (more control points would mostly fit the noise: core.surface.noise_near_tolerance)
+    r = run("fit", mesh, "-o", tmp_path / "b.obj", "--quiet", "--max-control-points", "100")
+    assert r.returncode == 0, r.stderr
+    assert re.search(r"note: the tolerance 0.001 \(a fraction of the bounding-box diagonal\) "
+                     r"was not reached: the data's noise \(\S+, the row 'noise'\) is near it, "
+                     r"and more control points would mostly fit the noise: loosen --tolerance "
+                     r"to about the RMS reached \(\S+\), or raise --max-control-points",
+                     r.stderr), r.stderr
+    assert re.search(r"^noise\s+\S+ \(", r.stdout, re.M), r.stdout
 
 
 def test_progress_of_an_uneven_cloud_and_the_automatic_resolution(tmp_path):

@@ -242,6 +242,26 @@ def test_a_noisy_mesh_counts_its_vertices_and_stops_when_its_error_stops_falling
     assert r["noise"] == 0.0 and r["stop_reason"] == "tolerance reached"
 
 
+def test_the_noise_is_near_a_missed_tolerance_only_when_the_fit_has_not_gone_below_it():
+    """``noise_near_tolerance``: the noise at least half an RMS tolerance (a sixth of a max
+    one, whose noise reaches about 3 times as far) and between half the RMS reached and that
+    RMS. A coarse mesh whose curvature scores as noise above the RMS a fit reached (the
+    scanned face: 3.5e-3 of the diagonal, fitted to 4.3e-4) is not held off by noise, nor is
+    a fit whose RMS is mostly not noise (a clean 16 x 16 grid of a quadric: 3.9e-5 against
+    2.1e-4 at a tolerance of 1e-9). Tolerances as given: relative to the diagonal, or
+    absolute."""
+    near = core.surface.noise_near_tolerance
+    report = {"noise": 0.02, "rms": 0.03, "diagonal": 10.0}
+    assert near(report, 4e-3, True, "rms") and not near(report, 5e-3, True, "rms")
+    assert near(report, 0.04, False, "rms") and not near(report, 0.05, False, "rms")
+    assert near(report, 0.1, False, "max") and not near(report, 0.15, False, "max")
+    assert not near({**report, "rms": 0.019}, 4e-3, True, "rms")
+    assert near({**report, "rms": 0.04}, 4e-3, True, "rms")
+    assert not near({**report, "rms": 0.041}, 1e-9, True, "rms")
+    assert not near({**report, "noise": 0.0}, 0.0, True, "rms")
+    assert not near({"rms": 0.03, "diagonal": 10.0}, 4e-3, True, "rms")
+
+
 def test_few_noisy_points_per_control_point_stop_on_the_error_at_new_points():
     """4000 points with noise 0.01, a tolerance far below it. With 2-6 points per control point
     the training RMS keeps falling as the net fits the noise (knots^-0.13 to -0.38: the run
