@@ -1752,6 +1752,26 @@ def test_local_noise_measures_a_mesh_s_noise_and_not_its_curvature(n: int, noise
     assert pz.local_noise(pts[:40]) == 0.0
 
 
+def test_local_noise_is_0_where_the_residual_grows_faster_than_noise_does() -> None:
+    """Where a neighbourhood's residual about its quadric grows from 13 to 41 points by over 3
+    times (noise: 1.0-2.5 times), the curvature that the extrapolation cannot take out
+    dominates, and no noise is measured (review): a clean staircase of 8 steps with vertical
+    risers scored 1.8e-3 of its diagonal, a coarse 16 x 16 grid of a quadric 3.9e-5; both are
+    0, and a noisy grid keeps its noise."""
+    xs, zs = [], []
+    for k in range(8):  # treads of 6 vertices, risers of 3
+        xs += list(np.linspace(k, k + 1, 7)[:-1] / 8) + [(k + 1) / 8] * 3
+        zs += [k / 8] * 6 + list(np.linspace(k, k + 1, 4)[:-1] / 8)
+    ys = np.linspace(0, 1, 41)
+    stairs = np.array([[x, y, z] for y in ys for x, z in zip(xs + [1.0], zs + [1.0])])
+    g = np.linspace(-1, 1, 16)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    quadric = np.c_[x, y, 0.3 * (x * x - 0.5 * y * y)]
+    assert pz.local_noise(stairs) == 0.0 and pz.local_noise(quadric) == 0.0
+    noisy, _ = noisy_grid(21, 0.001)
+    assert 0.9e-3 < pz.local_noise(noisy) / np.linalg.norm(np.ptp(noisy, axis=0)) < 1.05e-3
+
+
 def test_a_surface_that_folds_over_its_mesh_is_warned_of() -> None:
     """A grid mesh with noise of 1% of its diagonal (tests/meshes.py), fitted to 1e-2: the
     knots chase the noise and between the vertices the surface turns over (its normal against
