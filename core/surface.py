@@ -1786,10 +1786,10 @@ NOISE_COUNTS = 0.3
 
 # a run whose error stopped falling (core.refine.STALLED) with the data's noise
 # (report["noise"], core.parameterize.local_noise) at least this share of the RMS reached, and
-# at most that RMS over this share, stopped at the noise: the CLI and Blender say so and give it (the noisy meshes of
-# benchmarks/noisy_meshes.py: 0.70-1.05; clouds of 4000 and 10 000 points with noise 0.01 on
-# their heights: 0.93 and 0.88; a clean cosine peak, whose cone point the knots cannot resolve,
-# on 3000 points: 0)
+# at most that RMS over this share, stopped at the noise: the CLI and Blender say so and give
+# it (the noisy meshes of benchmarks/noisy_meshes.py: 0.70-1.05; clouds of 4000 and 10 000
+# points with noise 0.01 on their heights: 0.93 and 0.88; a clean cosine peak, whose cone point
+# the knots cannot resolve, on 3000 points: 0)
 NOISE_OF_STALL = 0.5
 
 
@@ -1806,30 +1806,39 @@ def stopped_at_noise(report: dict) -> bool:
 # limit) with the data's noise at least this share of the tolerance (a third of a max one) and
 # of the RMS reached, and no more than that RMS, was held off by the noise: the CLI and Blender
 # say so, and that more control points would mostly fit it. (Against the RMS too: a clean
-# 16 x 16 grid mesh of a quadric measures 3.9e-5 of its diagonal, above half a tolerance of
-# 1e-9, where its budget of 60 left an RMS of 2.1e-4.) A noisy grid mesh of 317 x 317 vertices (noise 0.1%
-# of the diagonal) at 1e-3 took the budget to RMS 1.43e-3 with the advice "raise Max Control
-# Points"; a budget of 5000 stopped at 4292 and 1.31e-3, the error no longer falling (its
-# tangential noise, which the map of so noisy a mesh does not follow, is in the errors at the
-# vertices; the surface is 1.5e-4 off the mesh without noise)
+# 16 x 16 grid mesh of a quadric measured 3.9e-5 of its diagonal before local_noise's rule on
+# the growth, above half a tolerance of 1e-9, where its budget of 60 left an RMS of 2.1e-4.) A
+# noisy grid mesh of 317 x 317 vertices (noise 0.1% of the diagonal) at 1e-3 took the budget
+# to RMS 1.43e-3 with the advice "raise Max Control Points"; a budget of 5000 stopped at 4292
+# and 1.31e-3, the error no longer falling (its tangential noise, which the map of so noisy a
+# mesh does not follow, is in the errors at the vertices; the surface is 1.5e-4 off the mesh
+# without noise)
 NOISE_NEAR = 0.5
+
+
+def _noise_tolerance(tolerance: float, relative: bool, criterion: str, diagonal: float,
+                     unit: float = 1.0) -> float:
+    """A tolerance as given (relative to the ``diagonal``, or absolute in units ``unit``
+    times those of the diagonal) as an RMS to weigh a noise against: a third of a max
+    tolerance (the largest of many errors of noise is about 3 times their RMS)."""
+    tol = tolerance * (diagonal if relative else 1.0 / unit)
+    return tol if str(criterion).lower() == "rms" else tol / 3.0
 
 
 def noise_near_tolerance(report: dict, tolerance: float, relative: bool, criterion: str) -> bool:
     """Whether the data's noise (``report["noise"]``) kept the fit of ``report`` from a
     tolerance it missed (:data:`NOISE_NEAR`); ``tolerance`` as given to the fit."""
     noise, rms = report.get("noise", 0.0), report.get("rms", 0.0)
-    tol = tolerance * (report["diagonal"] if relative else 1.0)
-    share = NOISE_NEAR if str(criterion).lower() == "rms" else NOISE_NEAR / 3.0
-    return 0 < NOISE_NEAR * rms <= noise <= rms and noise >= share * tol > 0
+    tol = _noise_tolerance(tolerance, relative, criterion, report["diagonal"])
+    return 0 < NOISE_NEAR * rms <= noise <= rms and noise >= NOISE_NEAR * tol > 0
 
 
 def mesh_noise_counts(noise: float, options, diagonal: float, unit: float) -> bool:
     """Whether a mesh's ``noise`` (normalized units: ``diagonal`` the bounding box's there,
     ``unit`` the user's per normalized one) is at least :data:`NOISE_COUNTS` of the tolerance
     of ``options`` (RMS; a third of a max tolerance)."""
-    tol = options.tolerance * (diagonal if options.relative else 1.0 / unit)
-    return noise >= NOISE_COUNTS * (tol if str(options.criterion).lower() == "rms" else tol / 3.0)
+    return noise >= NOISE_COUNTS * _noise_tolerance(options.tolerance, options.relative,
+                                                     options.criterion, diagonal, unit)
 
 
 # a mesh's fit is warned of when on its faces the largest error is over this many times the

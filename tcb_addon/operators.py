@@ -494,6 +494,14 @@ def _summary(surf, seconds: float | None = None) -> str:
     )
 
 
+def _scatter(surf) -> str:
+    """Words for the data's noise in the report of ``surf`` (core.parameterize.local_noise)."""
+    rep = surf.report
+    mesh = getattr(surf.parameterization, "faces", None) is not None
+    return (f"the {'vertices' if mesh else 'points'} scatter {rep['noise']:.4g} "
+            f"({100 * rep['noise_rel']:.3g}% of the diagonal) across a smooth surface")
+
+
 def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None) -> None:
     """The summary of a fit or refine: INFO, or WARNING when the tolerance was not reached
     (the budget or the iteration limit stopped the loop first), with what to change, or when
@@ -524,10 +532,8 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
         # the data's noise (core.parameterize.local_noise), when the error stopped at it;
         # else the cause is open
         if _core().surface.stopped_at_noise(rep):
-            mesh = getattr(surf.parameterization, "faces", None) is not None
-            why = (f"at the data's noise: the {'vertices' if mesh else 'points'} scatter "
-                   f"{rep['noise']:.4g} ({100 * rep['noise_rel']:.3g}% of the diagonal) across "
-                   "a smooth surface, and more control points would fit the noise")
+            why = (f"at the data's noise: {_scatter(surf)}, and more control points would fit "
+                   "the noise")
         else:
             why = ("with more control points (noise in the data, or detail the knots cannot "
                    "resolve: more control points would fit the noise)")
@@ -550,14 +556,11 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
                                                      opts.criterion)):
             # the data's noise (core.parameterize.local_noise) is near the tolerance: more
             # control points would mostly fit it
-            mesh = getattr(surf.parameterization, "faces", None) is not None
             rms = (f"{100 * rep['rms_rel']:.3g}% of the diagonal" if opts.relative
                    else f"{rep['rms']:.4g}")
-            advice = (f"the {'vertices' if mesh else 'points'} scatter {rep['noise']:.4g} "
-                      f"({100 * rep['noise_rel']:.3g}% of the diagonal) across a smooth "
-                      "surface, near the tolerance, and more control points would mostly fit "
-                      f"that noise: loosen the tolerance to about the RMS reached ({rms}), or "
-                      f"{advice}")
+            advice = (f"{_scatter(surf)}, near the tolerance, and more control points would "
+                      f"mostly fit that noise: loosen the tolerance to about the RMS reached "
+                      f"({rms}), or {advice}")
             op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason}): {advice}")
         else:
             op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason})"
