@@ -417,10 +417,11 @@ def _fit(args) -> int:
     if advice and args.tolerance > 0:  # the table says why it stopped, not what to change
         unit = " (a fraction of the bounding-box diagonal)" if args.relative else ""
         if near and not mostly_taken_back(r):  # the data's noise is near the tolerance
-            advice = (f"the data's noise ({r['noise']:.4g}, the row 'noise') is near it, and "
+            what = "max" if args.criterion == "max" else "rms"
+            advice = (f"the data's noise ({r['noise']:.4g}, the row 'noise') held it off, and "
                       f"more control points would mostly fit the noise: loosen --tolerance to "
-                      f"about the RMS reached ({r['rms_rel' if args.relative else 'rms']:.3g}), "
-                      f"or {advice}")
+                      f"about the {what.upper() if what == 'rms' else what} reached "
+                      f"({r[what + '_rel' if args.relative else what]:.3g}), or {advice}")
             print(f"note: the tolerance {args.tolerance:g}{unit} was not reached: {advice}",
                   file=sys.stderr)
         else:

@@ -93,6 +93,8 @@ class FitResult:
     # the evaluated basis, CSR chunks of CHUNK rows (None if it was too large to keep): a later
     # fit of the same space at the same parameters can take it (``basis=``)
     basis: list | None = field(default=None, repr=False, compare=False)
+    # with ``normals``: |(S(x_j) - p_j) . n_j| at the first len(normals) points (None without)
+    across: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 def fairing_quadrature(space) -> tuple[np.ndarray, np.ndarray]:
@@ -134,6 +136,7 @@ def fit_control_points(
     scored: int | None = None,
     basis: list | None = None,
     sparse: bool | None = None,
+    normals: np.ndarray | None = None,
 ) -> FitResult:
     """Fit the control points of ``space`` to ``points`` (N, 3) at parameters ``uv`` (N, 2).
 
@@ -162,6 +165,10 @@ def fit_control_points(
         :data:`SPARSE_SMOOTHNESS` too), as the caller decided it (:func:`core.refine.adaptive_fit`
         counts control points); None: fewer than :data:`SPARSE_POINTS_PER_CONTROL` fitted points
         per function that sees data.
+    normals : (M, 3) float64, optional
+        Unit normals at the first M points: ``FitResult.across`` gets the errors' components
+        along them, ``|(S(x_j) - p_j) . n_j|`` (a noisy mesh's stall test:
+        :func:`core.refine.adaptive_fit`).
 
     Raises
     ------
@@ -264,9 +271,14 @@ def fit_control_points(
 
     t3 = time.perf_counter()
     errors = np.empty(N)
+    across = None if normals is None else np.empty(len(normals))
     for i, s in enumerate(range(0, N, CHUNK)):
         A = chunks[i] if i < len(chunks) else space.evaluate(uv[s : s + CHUNK])
-        errors[s : s + CHUNK] = np.linalg.norm(A @ C - points[s : s + CHUNK], axis=1)
+        r = A @ C - points[s : s + CHUNK]
+        errors[s : s + CHUNK] = np.linalg.norm(r, axis=1)
+        if across is not None and s < len(across):
+            m = min(CHUNK, len(across) - s)
+            across[s : s + m] = np.abs(np.einsum("ij,ij->i", r[:m], normals[s : s + m]))
     t_err = time.perf_counter() - t3
     timings = {
         "basis": t_eval,
@@ -286,6 +298,7 @@ def fit_control_points(
         smoothness=float(smoothness),
         validation=validation,
         basis=chunks if keep else None,
+        across=across,
     )
 
 

@@ -39,7 +39,7 @@ from .fit import (AUTO_SMOOTHNESS, DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL
 from .geometry import column_bounds, float32_rounding
 from .parallel import background
 from .parameterize import (
-    Parameterization, _as_points, _check_finite, box_normalization, corner_angles,
+    Parameterization, _as_points, _check_finite, _local_planes, box_normalization, corner_angles,
     fill_value_rows, fill_value_words, local_noise, local_scatter, normalize, parameterize,
     spike_points,
 )
@@ -1562,15 +1562,17 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     # (mesh_noise_counts)
     noise = (local_noise(q, seed=options.seed)
              if param.faces is not None and options.tolerance > 0 else None)
+    counts = (noise is not None and not subsampled
+              and mesh_noise_counts(noise, options, diag_norm, norm.scale))
     if not subsampled:  # the swing check's triangles, made while the loop runs
         prefetch_swing_triangles(uv, options.seed)
     best, hist, reason = adaptive_fit(
         fit_uv, fit_q, options, diagonal=diag_norm, start_knots=start, ring_knots=rings,
         callback=callback, history_offset=len(history), unit=norm.scale,
         n_measured=None if subsampled else len(uv), domain=domain,
-        balance=param.faces is None, start_degree=start_degree,
-        measured_only=noise is not None and mesh_noise_counts(noise, options, diag_norm,
-                                                              norm.scale),
+        balance=param.faces is None, start_degree=start_degree, measured_only=counts,
+        # the vertices' normals, smooth over the noise: the errors across the surface
+        normals=_local_planes(q, NOISE_NORMAL_NEIGHBOURS)[0] if counts else None,
     )
 
     def data_checks(fit_state, errs):
@@ -1774,7 +1776,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
 # samples, a grid mesh of 41 x 41 vertices with noise of 0.2-0.5% of its diagonal took the
 # budget of 2000 control points at the default tolerance, more than it has vertices, to follow
 # its noise (0.5% of the diagonal at 81 x 81: 1.3% of its area folded over); with the vertices
-# 148-152 (563-734 at 81 x 81), as its vertices alone fitted as a cloud (143-150). Clean meshes
+# (and NOISE_NORMAL_NEIGHBOURS) 148-152 (140-150 at 81 x 81), as its vertices alone fitted as a
+# cloud (143-150). Clean meshes
 # mostly score 0 and keep the samples' count: a fit that counted its vertices stopped early as
 # if stalled at a tight tolerance (a half cylinder of 961 vertices at 1e-4: 160 control points
 # and 3.0e-4 instead of 1891 and 1.0e-4; /tmp/s30/cmp.py of the thirtieth session). Not all:
@@ -1782,15 +1785,21 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
 # diagonal and at 1e-4 stops at 940 control points and 2.1e-4, where counting the samples took
 # 1765 and 1.3e-4 (both missing it; a review).
 NOISE_COUNTS = 0.3
+# ... and there the loop weighs the errors' components along the vertices' normals, of the
+# planes fitted to each and this many nearest (core.parameterize._local_planes)
+NOISE_NORMAL_NEIGHBOURS = 24
 
 
 # a run whose error stopped falling (core.refine.STALLED) with the data's noise
 # (report["noise"], core.parameterize.local_noise) at least this share of the RMS reached, and
 # at most that RMS over this share, stopped at the noise: the CLI and Blender say so and give
-# it (the noisy meshes of benchmarks/noisy_meshes.py: 0.70-1.05; clouds of 4000 and 10 000
-# points with noise 0.01 on their heights: 0.93 and 0.88; a clean cosine peak, whose cone point
-# the knots cannot resolve, on 3000 points: 0)
-NOISE_OF_STALL = 0.5
+# it. Noise the same in all three directions, none of it followed by a mesh's map, leaves
+# sqrt(3) times itself at the vertices (noisy grid meshes of 81 x 81 and 120 x 120 vertices
+# with noise 0.5% and 0.3% of the diagonal: 0.59 and 0.53; the noisy meshes of
+# benchmarks/noisy_meshes.py 0.7-1.05; clouds of 4000 and 10 000 points with noise 0.01 on
+# their heights: 0.93 and 0.88; a clean cosine peak, whose cone point the knots cannot resolve,
+# on 3000 points: 0)
+NOISE_OF_STALL = 0.4
 
 
 def stopped_at_noise(report: dict) -> bool:
@@ -1803,8 +1812,8 @@ def stopped_at_noise(report: dict) -> bool:
 
 
 # a fit that stopped short of its tolerance for another reason (the budget, the iteration
-# limit) with the data's noise at least this share of the tolerance (a third of a max one) and
-# of the RMS reached, and no more than that RMS, was held off by the noise: the CLI and Blender
+# limit) with the data's noise at least this share of the tolerance (a third of a max one),
+# at least NOISE_OF_STALL of the RMS reached and no more than it, was held off by the noise: the CLI and Blender
 # say so, and that more control points would mostly fit it. (Against the RMS too: a clean
 # 16 x 16 grid mesh of a quadric measured 3.9e-5 of its diagonal before local_noise's rule on
 # the growth, above half a tolerance of 1e-9, where its budget of 60 left an RMS of 2.1e-4.) A
@@ -1830,7 +1839,7 @@ def noise_near_tolerance(report: dict, tolerance: float, relative: bool, criteri
     tolerance it missed (:data:`NOISE_NEAR`); ``tolerance`` as given to the fit."""
     noise, rms = report.get("noise", 0.0), report.get("rms", 0.0)
     tol = _noise_tolerance(tolerance, relative, criterion, report["diagonal"])
-    return 0 < NOISE_NEAR * rms <= noise <= rms and noise >= NOISE_NEAR * tol > 0
+    return 0 < NOISE_OF_STALL * rms <= noise <= rms and noise >= NOISE_NEAR * tol > 0
 
 
 def mesh_noise_counts(noise: float, options, diagonal: float, unit: float) -> bool:

@@ -556,11 +556,11 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
                                                      opts.criterion)):
             # the data's noise (core.parameterize.local_noise) is near the tolerance: more
             # control points would mostly fit it
-            rms = (f"{100 * rep['rms_rel']:.3g}% of the diagonal" if opts.relative
-                   else f"{rep['rms']:.4g}")
-            advice = (f"{_scatter(surf)}, near the tolerance, and more control points would "
-                      f"mostly fit that noise: loosen the tolerance to about the RMS reached "
-                      f"({rms}), or {advice}")
+            what = "max" if str(opts.criterion).lower() == "max" else "RMS"
+            level = (f"{100 * rep[what.lower() + '_rel']:.3g}% of the diagonal" if opts.relative
+                     else f"{rep[what.lower()]:.4g}")
+            advice = (f"{_scatter(surf)}, and more control points would mostly fit that noise: "
+                      f"loosen the tolerance to about the {what} reached ({level}), or {advice}")
             op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason}): {advice}")
         else:
             op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason})"

@@ -156,11 +156,19 @@ def test_a_noisy_mesh_whose_error_stopped_falling_has_its_noise_in_the_table(tmp
     r = run("fit", mesh, "-o", tmp_path / "b.obj", "--quiet", "--max-control-points", "100")
     assert r.returncode == 0, r.stderr
     assert re.search(r"note: the tolerance 0.001 \(a fraction of the bounding-box diagonal\) "
-                     r"was not reached: the data's noise \(\S+, the row 'noise'\) is near it, "
+                     r"was not reached: the data's noise \(\S+, the row 'noise'\) held it off, "
                      r"and more control points would mostly fit the noise: loosen --tolerance "
                      r"to about the RMS reached \(\S+\), or raise --max-control-points",
                      r.stderr), r.stderr
     assert re.search(r"^noise\s+\S+ \(", r.stdout, re.M), r.stdout
+    # with a max tolerance, the max reached (review: it quoted the RMS, below a max tolerance
+    # it told to loosen)
+    r = run("fit", mesh, "-o", tmp_path / "m.obj", "--quiet", "--max-control-points", "100",
+            "--criterion", "max", "--tolerance", "5e-3")
+    assert r.returncode == 0, r.stderr
+    said = re.search(r"loosen --tolerance to about the max reached \((\S+)\), or raise "
+                     r"--max-control-points", r.stderr)
+    assert said and float(said.group(1)) > 5e-3, r.stderr
 
 
 def test_progress_of_an_uneven_cloud_and_the_automatic_resolution(tmp_path):

@@ -242,10 +242,30 @@ def test_a_noisy_mesh_counts_its_vertices_and_stops_when_its_error_stops_falling
     assert r["noise"] == 0.0 and r["stop_reason"] == "tolerance reached"
 
 
+def test_a_finely_meshed_noisy_scan_stops_on_its_errors_across_the_surface():
+    """A grid mesh of 81 x 81 vertices with noise of 0.5% of its diagonal (0.6 times its
+    spacing): its map does not follow the noise along the surface, which stays in the errors
+    at the vertices (RMS 1.7 times the noise) and fell slowly as the net grew, so the run went
+    on to 734 control points, 1.6e-3 of the diagonal off the noise-free surface. The stall test
+    now takes the errors along the vertices' normals (``FitResult.across``): about 140 control
+    points, 8.9e-4 off; the summary calls it noise (core.surface.stopped_at_noise)."""
+    from meshes import noisy_grid
+
+    noisy, faces = noisy_grid(81, 0.005)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # (the fold check: the mesh's noise)
+        surf = fit_surface(noisy, faces)
+    r = surf.report
+    assert r["stop_reason"] == refine.STALLED and r["control_points"] < 300
+    assert r["rms"] > 1.5 * r["noise"] and core.surface.stopped_at_noise(r)
+    assert off_wavy(surf, faces) < 1.2e-3
+
+
 def test_the_noise_is_near_a_missed_tolerance_only_when_the_fit_has_not_gone_below_it():
     """``noise_near_tolerance``: the noise at least half an RMS tolerance (a sixth of a max
-    one, whose noise reaches about 3 times as far) and between half the RMS reached and that
-    RMS. A coarse mesh whose curvature scores as noise above the RMS a fit reached (the
+    one, whose noise reaches about 3 times as far) and between 0.4 times the RMS reached and
+    that RMS (noise in three directions leaves up to sqrt(3) times itself at a mesh's
+    vertices). A coarse mesh whose curvature scores as noise above the RMS a fit reached (the
     scanned face: 3.5e-3 of the diagonal, fitted to 4.3e-4) is not held off by noise, nor is
     a fit whose RMS is mostly not noise (a clean 16 x 16 grid of a quadric: 3.9e-5 against
     2.1e-4 at a tolerance of 1e-9). Tolerances as given: relative to the diagonal, or
@@ -256,8 +276,8 @@ def test_the_noise_is_near_a_missed_tolerance_only_when_the_fit_has_not_gone_bel
     assert near(report, 0.04, False, "rms") and not near(report, 0.05, False, "rms")
     assert near(report, 0.1, False, "max") and not near(report, 0.15, False, "max")
     assert not near({**report, "rms": 0.019}, 4e-3, True, "rms")
-    assert near({**report, "rms": 0.04}, 4e-3, True, "rms")
-    assert not near({**report, "rms": 0.041}, 1e-9, True, "rms")
+    assert near({**report, "rms": 0.049}, 4e-3, True, "rms")
+    assert not near({**report, "rms": 0.051}, 1e-9, True, "rms")
     assert not near({**report, "noise": 0.0}, 0.0, True, "rms")
     assert not near({"rms": 0.03, "diagonal": 10.0}, 4e-3, True, "rms")
 
