@@ -489,7 +489,8 @@ def test_a_surface_that_folds_over_its_mesh_is_a_warning_and_a_panel_row(clean_s
     verts, faces = noisy_grid()
     scan = add_mesh(bpy, "Scan", verts, faces)
     capfd.readouterr()
-    assert fit(bpy, scan, tolerance=1e-2) == {"FINISHED"}
+    # (the engine's default budget: with this file's 400 the run stops at the noise, unfolded)
+    assert fit(bpy, scan, tolerance=1e-2, max_control_points=2000) == {"FINISHED"}
     text = capfd.readouterr().out
     assert "Warning: TCB:" in text and "the surface folds over itself on 1." in text, text
     surface = bpy.context.view_layer.objects.active

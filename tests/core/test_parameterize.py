@@ -1775,12 +1775,13 @@ def test_local_noise_is_0_where_the_residual_grows_faster_than_noise_does() -> N
 def test_a_surface_that_folds_over_its_mesh_is_warned_of() -> None:
     """A grid mesh with noise of 1% of its diagonal (tests/meshes.py), fitted to 1e-2: the
     knots chase the noise and between the vertices the surface turns over (its normal against
-    the mesh's) on 1.6% of the area, which was returned without a word (user test: noisy
-    scans). The report's share (``core.surface.mesh_folds``: 10 000 random points, against
-    both the face's normal and the mesh's normal interpolated from its vertices') agrees
-    within 2x with the share that faces against the noise-free grid (:func:`against_faces`:
-    2.1%; against the noisy faces themselves 12.7%: their own wrinkles); and a RuntimeWarning
-    says so and what to do. The noise-free grid reports 0 and no warning."""
+    the mesh's) on about 2% of the area, which was returned without a word (user test: noisy
+    scans). The report's share (``core.surface.mesh_folds``: 10 000 random points; a noisy
+    mesh's, against the normals of planes fitted to 25 vertices) agrees within 1.25x with the
+    share that faces against the noise-free grid (:func:`against_faces`: 2.1%; against the
+    noisy faces themselves 12.7%: their own wrinkles; against both the faces' and the
+    vertices' normals 1.6%); and a RuntimeWarning says so and what to do. The noise-free grid
+    reports 0 and no warning."""
     from core import fit_surface
 
     noisy, faces = noisy_grid()
@@ -1794,7 +1795,7 @@ def test_a_surface_that_folds_over_its_mesh_is_warned_of() -> None:
     share = surf.report["folded"]
     assert 5e-3 < share < 5e-2
     measured = against_faces(surf, clean)
-    assert measured / 2 < share < 2 * measured
+    assert measured / 1.25 < share < 1.25 * measured
 
 
     with warnings.catch_warnings():
