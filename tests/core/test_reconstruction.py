@@ -211,6 +211,17 @@ def off_wavy(surf, faces) -> float:
     return float(np.sqrt(np.mean(off[inside] ** 2)) / surf.report["diagonal"])
 
 
+def stalled_without_warnings(points, faces):
+    """``fit_surface`` of a noisy mesh at the default tolerance, which must stop because the
+    error stopped falling, with under 300 control points and no warning."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        surf = fit_surface(points, faces)
+    assert surf.report["stop_reason"] == refine.STALLED, surf.report["stop_reason"]
+    assert surf.report["control_points"] < 300
+    return surf
+
+
 def test_a_noisy_mesh_counts_its_vertices_and_stops_when_its_error_stops_falling(monkeypatch):
     """A grid mesh of 41 x 41 vertices with noise of 0.2% of its diagonal, at the default
     tolerance (0.1%, below the noise). A mesh is fitted to its vertices and to points sampled
@@ -224,11 +235,8 @@ def test_a_noisy_mesh_counts_its_vertices_and_stops_when_its_error_stops_falling
     from meshes import noisy_grid
 
     noisy, faces = noisy_grid(41, 0.002)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", RuntimeWarning)
-        surf = fit_surface(noisy, faces)
+    surf = stalled_without_warnings(noisy, faces)
     r = surf.report
-    assert r["stop_reason"] == refine.STALLED and r["control_points"] < 300
     assert 0.85 * 0.002 < r["noise_rel"] < 1.05 * 0.002
     assert r["noise"] == pytest.approx(r["noise_rel"] * r["diagonal"], rel=1e-12)
     off = off_wavy(surf, faces)
@@ -254,11 +262,8 @@ def test_a_finely_meshed_noisy_scan_stops_on_its_errors_across_the_surface():
     from meshes import noisy_grid
 
     noisy, faces = noisy_grid(81, 0.005)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", RuntimeWarning)
-        surf = fit_surface(noisy, faces)
+    surf = stalled_without_warnings(noisy, faces)
     r = surf.report
-    assert r["stop_reason"] == refine.STALLED and r["control_points"] < 300
     assert r["rms"] > 1.5 * r["noise"] and core.surface.stopped_at_noise(r)
     assert off_wavy(surf, faces) < 1.2e-3
     assert r["folded"] == 0.0
