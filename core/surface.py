@@ -1495,9 +1495,7 @@ def mesh_folds(space, control_points, points, uv, faces, seed: int = 0,
     face, bary = _area_samples(points, faces, count, seed + 1)
     if not len(face):
         return 0.0
-    corner, normal = _vertex_normals(points, faces)
     tri = faces[face]
-    n = np.einsum("nk,nkj->nj", bary, normal[tri])
     su, sv = space.combine(np.einsum("nk,nkj->nj", bary, uv[tri]), control_points,
                            derivatives=((1, 0), (0, 1)))
     surface_normal = np.cross(su, sv)
@@ -1505,6 +1503,8 @@ def mesh_folds(space, control_points, points, uv, faces, seed: int = 0,
         against = np.einsum("ij,ij->i", surface_normal,
                             np.einsum("nk,nkj->nj", bary, smooth[tri])) < 0.0
         return float(np.mean(against))
+    corner, normal = _vertex_normals(points, faces)
+    n = np.einsum("nk,nkj->nj", bary, normal[tri])
     against = ((np.einsum("ij,ij->i", surface_normal, n) < 0.0)
                & (np.einsum("ij,ij->i", surface_normal, corner[face]) < 0.0))
     return float(np.mean(against))
@@ -1613,12 +1613,11 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         where the surface folds over: :func:`mesh_folds`). Made on another thread while the
         swing check runs: they read the fit's control points and errors only."""
         if param.faces is not None:  # (a mesh's faces hold one layer)
-            faces = np.asarray(param.faces)
+            at, faces = norm.apply(points), np.asarray(param.faces)
             return None, None, mesh_folds(
-                fit_state.space, fit_state.fit.control_points, norm.apply(points),
-                np.asarray(param.uv), faces, options.seed,
-                smooth=None if planes is None else smooth_normals(norm.apply(points), faces,
-                                                                   used, planes))
+                fit_state.space, fit_state.fit.control_points, at, np.asarray(param.uv), faces,
+                options.seed,
+                smooth=None if planes is None else smooth_normals(at, faces, used, planes))
         if param.axes is None:
             return None, None, None
         C = norm.undo(fit_state.fit.control_points)
