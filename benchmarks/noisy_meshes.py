@@ -1,7 +1,8 @@
 """Noisy meshes: how many control points a scan's noise costs, and how far from the noise-free
 shape the fit ends, with the mesh's vertices counted alone against the net (the default where
-the mesh's noise is at least ``core.surface.NOISE_COUNTS`` of the tolerance) or its points
-sampled on the faces counted too (``samples``: NOISE_COUNTS set to infinity), in the same run.
+the mesh's noise is at least ``core.surface.NOISE_COUNTS`` of the tolerance, with its errors
+taken across the surface and its folds weighed against normals smooth over the noise) or as
+before (``samples``: NOISE_COUNTS set to infinity, which turns all three off), in the same run.
 
     .venv/bin/python benchmarks/noisy_meshes.py [--quick] [--tolerances 1e-3 1e-4]
 

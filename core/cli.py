@@ -417,11 +417,11 @@ def _fit(args) -> int:
     if advice and args.tolerance > 0:  # the table says why it stopped, not what to change
         unit = " (a fraction of the bounding-box diagonal)" if args.relative else ""
         if near and not mostly_taken_back(r):  # the data's noise is near the tolerance
-            what = "max" if args.criterion == "max" else "rms"
+            key = "max" if args.criterion == "max" else "rms"  # the report's error, and its name
             advice = (f"the data's noise ({r['noise']:.4g}, the row 'noise') held it off, and "
                       f"more control points would mostly fit the noise: loosen --tolerance to "
-                      f"about the {what.upper() if what == 'rms' else what} reached "
-                      f"({r[what + '_rel' if args.relative else what]:.3g}), or {advice}")
+                      f"about the {'max' if key == 'max' else 'RMS'} reached "
+                      f"({r[key + '_rel' if args.relative else key]:.3g}), or {advice}")
             print(f"note: the tolerance {args.tolerance:g}{unit} was not reached: {advice}",
                   file=sys.stderr)
         else:
