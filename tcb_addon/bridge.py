@@ -158,13 +158,18 @@ def read_triangles(mesh) -> np.ndarray:
 
 def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
     """Blender triangulates each n-gon on its own: two bent n-gons that share a chain through a
-    vertex of no other face (Limited Dissolve leaves these) can both cut the diagonal across
-    that vertex, which then has four triangles, and a disk read as non-manifold. Those n-gons
-    are triangulated again as fans from a corner whose diagonals no other face uses and whose
-    triangles all face the polygon's way (a fan from a corner of a concave n-gon can leave it:
-    overlapping triangles); an n-gon without such a corner keeps Blender's triangles (a loop
-    over the few n-gons concerned). Edges of the mesh itself in more than two faces, and
-    crowded diagonals that no fan resolves, are left for the engine to name."""
+    vertex of no other face (Limited Dissolve leaves these; so does Suzanne) can both cut the
+    diagonal across that vertex, which then has four triangles, and a disk read as
+    non-manifold. Those n-gons are triangulated again as fans from a corner whose diagonals no
+    other face uses and whose triangles all face the polygon's way (a fan from a corner of a
+    concave n-gon can leave it: overlapping triangles). An n-gon so bent that no such corner
+    faces its way (noise larger than the spacing: Suzanne with noise of 1% of its size was
+    refused as "non-manifold", user test) is cut by ear clipping (:func:`_clip_ears`), and
+    where that gets stuck, as the fan from the free corner whose worst triangle turns least: a
+    disk's parameterization needs its topology, not flat n-gons. An n-gon without a free corner
+    keeps Blender's triangles (a loop over the few n-gons concerned). Edges of the mesh itself
+    in more than two faces, and crowded diagonals that no fan resolves, are left for the
+    engine to name."""
     n = len(mesh.vertices)
     if len(tris) == len(mesh.polygons):  # all triangles: no diagonals (most scans; no sort)
         return tris
@@ -196,21 +201,76 @@ def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
         corners = pos[vs]
         # the polygon's normal (Newell): the way every triangle of a valid fan faces
         normal = np.cross(corners, np.roll(corners, -1, axis=0)).sum(axis=0)
+        best = None  # (the worst triangle's cosine to the normal, its diagonals, the fan)
         for i in range(m):
             j = (i + np.arange(1, m - 1)) % m
-            fan = np.c_[np.full(m - 2, vs[i]), vs[j], vs[(j + 1) % m]]
             cut = set((np.minimum(vs[i], vs[j[1:]]) * n + np.maximum(vs[i], vs[j[1:]])).tolist())
+            if cut & used:
+                continue
+            fan = np.c_[np.full(m - 2, vs[i]), vs[j], vs[(j + 1) % m]]
             a, b, c = pos[fan[:, 0]], pos[fan[:, 1]], pos[fan[:, 2]]
             facing = np.cross(b - a, c - a)
-            # every triangle faces the polygon's way, none flat (three corners in a row)
-            if not cut & used and (facing @ normal > 1e-3 * np.linalg.norm(facing, axis=1)
-                                   * np.linalg.norm(normal)).all():
-                used |= cut
-                out.append(fan.astype(np.int32))
+            size = np.linalg.norm(facing, axis=1) * np.linalg.norm(normal)
+            # a flat triangle (three corners in a row) ranks below one turned over
+            cos = np.where(size > 0, facing @ normal / np.where(size > 0, size, 1.0), -2.0)
+            if best is None or cos.min() > best[0]:
+                best = (float(cos.min()), cut, fan)
+            if best[0] > 1e-3:  # every triangle faces the polygon's way, none flat
                 break
-        else:  # no corner works: Blender's triangles stay (the engine names the edge)
+        if best is not None and best[0] <= 1e-3:  # no fan faces its way: ears may
+            ears = _clip_ears(vs, corners, normal, used, n)
+            if ears is not None:
+                best = (1.0, *ears)
+        if best is None:  # no free corner: Blender's triangles stay (the engine names the edge)
             out.append(tris[poly == p])
+        else:
+            used |= best[1]
+            out.append(best[2].astype(np.int32))
     return np.vstack(out)
+
+
+def _clip_ears(vs, corners, normal, used, n):
+    """(diagonal keys, triangles) of the n-gon with vertices ``vs`` at ``corners`` cut by ear
+    clipping in the plane across its Newell ``normal``: each triangle cut off turns the
+    polygon's way (by more than 1e-3 of its edges' product), holds none of the other corners,
+    and adds a diagonal that is not in ``used``; None when it gets stuck (a concave n-gon whose
+    every fan leaves it can still have such a triangulation: :func:`_untangle_diagonals`)."""
+    axis = normal / np.linalg.norm(normal)
+    u = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    xy = np.c_[corners @ u, corners @ np.cross(axis, u)]  # counter-clockwise seen from axis
+    left = list(range(len(vs)))
+    cuts, out = set(), []
+
+    def cross(a, b, c):
+        return (xy[b, 0] - xy[a, 0]) * (xy[c, 1] - xy[a, 1]) \
+            - (xy[b, 1] - xy[a, 1]) * (xy[c, 0] - xy[a, 0])
+
+    def turns(a, b, c):  # not reflex, and not three corners in a row
+        return cross(a, b, c) > 1e-3 * np.linalg.norm(xy[b] - xy[a]) * np.linalg.norm(xy[c] - xy[b])
+
+    while len(left) > 3:
+        for k in range(len(left)):
+            a, b, c = left[k - 1], left[k], left[(k + 1) % len(left)]
+            if not turns(a, b, c):
+                continue
+            key = min(vs[a], vs[c]) * n + max(vs[a], vs[c])
+            if key in used:
+                continue
+            others = [o for o in left if o not in (a, b, c)]
+            # no other corner inside the ear or on its sides
+            if any(min(cross(a, b, o), cross(b, c, o), cross(c, a, o)) >= 0 for o in others):
+                continue
+            cuts.add(int(key))
+            out.append((vs[a], vs[b], vs[c]))
+            del left[k]
+            break
+        else:
+            return None
+    if not turns(*left):
+        return None
+    out.append(tuple(vs[left]))
+    return cuts, np.array(out)
 
 
 def _world_checked(obj, pts: np.ndarray, matrix) -> np.ndarray:
