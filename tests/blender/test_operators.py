@@ -332,6 +332,19 @@ def test_a_noisy_mesh_whose_error_stopped_falling_is_told_its_noise(clean_scene,
                      r"more control points would mostly fit that noise: "
                      r"loosen the tolerance to about the RMS reached \(\S+% of the diagonal\), "
                      r"or raise Max Control Points", text), text
+    # Refine of a fit that met a looser tolerance (73 control points, RMS 2.2e-3 against noise
+    # of 2.0e-3) to half its RMS: the budget stops it with the RMS just below the noise, a fit
+    # beginning to follow it, which had been told only to raise Max Control Points (user test)
+    assert fit(bpy, scan, tolerance=2.5e-3) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.refine(max_control_points=170) == {"FINISHED"}
+    text = capfd.readouterr().out
+    report = spline_of(surface).report
+    assert report["stop_reason"] == "control-point budget reached"
+    assert report["rms"] < report["noise"], report
+    assert "more control points would mostly fit that noise" in text, text
 
 
 def test_an_error_stopped_far_above_the_noise_is_not_called_noise(clean_scene, capfd):

@@ -269,12 +269,14 @@ def test_a_finely_meshed_noisy_scan_stops_on_its_errors_across_the_surface():
     assert r["folded"] == 0.0
 
 
-def test_the_noise_is_near_a_missed_tolerance_only_when_the_fit_has_not_gone_below_it():
+def test_the_noise_is_near_a_missed_tolerance_only_when_the_fit_has_not_gone_far_below_it():
     """``noise_near_tolerance``: the noise at least half an RMS tolerance (a sixth of a max
     one, whose noise reaches about 3 times as far) and between 0.4 times the RMS reached and
-    that RMS (noise in three directions leaves up to sqrt(3) times itself at a mesh's
-    vertices). A coarse mesh whose curvature scores as noise above the RMS a fit reached (the
-    scanned face: 3.5e-3 of the diagonal, fitted to 4.3e-4) is not held off by noise, nor is
+    2.5 times it (noise in three directions leaves up to sqrt(3) times itself at a mesh's
+    vertices; a fit whose RMS fell somewhat below the noise has begun to follow it: a noisy
+    cap that Refine took to its budget was told to raise it, user test). A coarse mesh whose
+    curvature scores as noise far above the RMS a fit reached (the scanned face: 3.5e-3 of the
+    diagonal, fitted to 4.3e-4) is not held off by noise, nor is
     a fit whose RMS is mostly not noise (a clean 16 x 16 grid of a quadric: 3.9e-5 against
     2.1e-4 at a tolerance of 1e-9). Tolerances as given: relative to the diagonal, or
     absolute."""
@@ -283,7 +285,8 @@ def test_the_noise_is_near_a_missed_tolerance_only_when_the_fit_has_not_gone_bel
     assert near(report, 4e-3, True, "rms") and not near(report, 5e-3, True, "rms")
     assert near(report, 0.04, False, "rms") and not near(report, 0.05, False, "rms")
     assert near(report, 0.1, False, "max") and not near(report, 0.15, False, "max")
-    assert not near({**report, "rms": 0.019}, 4e-3, True, "rms")
+    assert near({**report, "rms": 0.0081}, 4e-3, True, "rms")
+    assert not near({**report, "rms": 0.0079}, 4e-3, True, "rms")
     assert near({**report, "rms": 0.049}, 4e-3, True, "rms")
     assert not near({**report, "rms": 0.051}, 1e-9, True, "rms")
     assert not near({**report, "noise": 0.0}, 0.0, True, "rms")
