@@ -369,7 +369,7 @@ def store_stats(tcb, surf, settings: dict) -> None:
     tcb.holes_filled = int(rep.get("holes_filled", 0))
     tcb.folded = float(rep.get("folded", 0.0))
     tcb.stop_reason = str(rep.get("stop_reason", ""))
-    for key in ("rms", "max", "rms_rel", "max_rel", "rms_area", "seconds"):
+    for key in ("rms", "max", "rms_rel", "max_rel", "rms_area", "noise", "noise_rel", "seconds"):
         setattr(tcb, key, float(rep.get(key, 0.0)))
     for key, value in settings.items():
         if hasattr(tcb, key):

@@ -216,6 +216,10 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     holes_filled: IntProperty(name="Holes Spanned")  # a mesh's holes the surface spans
     # the share of a mesh's area where the surface folds over it (core.surface.mesh_folds)
     folded: FloatProperty(name="Folded Over", precision=6)
+    # the data's scatter across a smooth surface (core.parameterize.local_noise; 0: not
+    # measured, as for a cloud that met its tolerance), and over the diagonal
+    noise: FloatProperty(name="Noise", precision=6)
+    noise_rel: FloatProperty(name="Noise (relative)", precision=6)
     # settings of the last fit / refine
     tolerance: FloatProperty(precision=6)
     relative: BoolProperty()

@@ -78,6 +78,10 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
              f"{st.smoothness:.3g}"),
             *((("Holes Spanned", f"{st.holes_filled}"),) if st.holes_filled else ()),
             *((("Folded Over", f"{100 * st.folded:.2g} %"),) if folded_over(st) else ()),
+            # the scan's noise, measured, which a tolerance below it would have the net follow
+            # (user test: the summary said it, the panel did not)
+            *((("Noise (of diagonal)", f"{100 * st.noise_rel:.3g} %"),) if st.noise > 0
+              else ()),
             ("Seconds", f"{st.seconds:.2f}"),
         ):
             grid.label(text=label)

@@ -301,6 +301,9 @@ def test_a_clean_cloud_whose_error_stopped_falling_is_not_said_to_be_noisy(clean
     assert "the error stopped falling with more control points (noise in the data, or detail " \
            "the knots cannot resolve" in text, text
     assert "scatter" not in text and "at the data's noise" not in text
+    labels = [e[1] for e in draw_panels(bpy, [bpy.context.view_layer.objects.active])
+              if e[0] == "label"]
+    assert "RMS" in labels and "Noise (of diagonal)" not in labels  # (none measured)
 
 
 def test_a_noisy_mesh_whose_error_stopped_falling_is_told_its_noise(clean_scene, capfd):
@@ -324,6 +327,10 @@ def test_a_noisy_mesh_whose_error_stopped_falling_is_told_its_noise(clean_scene,
     assert float(said.group(1)) == pytest.approx(report["noise"], rel=1e-3)
     assert float(said.group(2)) == pytest.approx(100 * report["noise_rel"], rel=2e-3)
     assert report["control_points"] < 300
+    # ... and so does the panel (user test: only the summary had said it)
+    labels = [e[1] for e in draw_panels(bpy, [bpy.context.view_layer.objects.active])
+              if e[0] == "label"]
+    assert labels[labels.index("Noise (of diagonal)") + 1] == f"{100 * report['noise_rel']:.3g} %"
     # a budget that stops it first: not only "raise Max Control Points"
     assert fit(bpy, scan, tolerance=1e-3, max_control_points=100) == {"FINISHED"}
     text = capfd.readouterr().out
