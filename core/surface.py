@@ -1917,11 +1917,16 @@ def coarse_mesh_warning(report: dict) -> str:
 
 def folds_warning(report: dict) -> str:
     """The words for ``report["folded"]`` (:func:`mesh_folds`), with what to do: first what
-    most likely helps, by how the fit stopped (at the tolerance: a coarse fit over steep
+    most likely helps. Where the mesh's noise was measured (``report["noise"]``,
+    :func:`core.parameterize.local_noise`), it tells: noise at least NOISE_OF_STALL of the RMS
+    reached is what the knots chase (a crushed map second), and none is no cause (the three
+    causes in a message of up to 1150 characters, which Blender's console cut at about 1000:
+    user test). Without it, by how the fit stopped (at the tolerance: a coarse fit over steep
     slopes; short of it: noise). The map's distortion does not tell a crushed map from a
     noisy mesh (a ragged patch with noise of 1% of its diagonal kept the circle, with a
     distortion above 10, as a comb's on the circle, 83-96), so a crushed map is named
     second."""
+    noise = report.get("noise")
     causes = {
         "loose": "on a smooth mesh with steep slopes, a tolerance too loose for them, which "
                  "the surface cuts across (tighten it)",
@@ -1932,11 +1937,20 @@ def folds_warning(report: dict) -> str:
                  "finer), knots that chase the noise (loosen the tolerance or smooth the mesh "
                  "first; in Blender a Smooth or Corrective Smooth modifier)",
     }
-    order = (("loose", "crushed", "noise") if report.get("stop_reason") == "tolerance reached"
-             else ("noise", "crushed", "loose"))
+    met = report.get("stop_reason") == "tolerance reached"
+    if noise is None:
+        order = ("loose", "crushed", "noise") if met else ("noise", "crushed", "loose")
+    elif 0 < NOISE_OF_STALL * report.get("rms", np.inf) <= noise:
+        causes["noise"] = (f"the mesh's noise (its vertices scatter {report['noise_rel']:.2%} "
+                           "of the diagonal across a smooth surface), which the knots chase "
+                           "(loosen the tolerance or smooth the mesh first; in Blender a Smooth "
+                           "or Corrective Smooth modifier)")
+        order = ("noise", "crushed")
+    else:  # (measured: not noisy enough to chase)
+        order = ("loose", "crushed") if met else ("crushed", "loose")
     return (f"the surface folds over itself on {report['folded']:.1%} of the mesh's area (its "
             "normal turns against the mesh's there, which the errors at the vertices do not "
-            "show); the usual causes: " + "; ".join(causes[k] for k in order))
+            "show); the likely causes: " + "; ".join(causes[k] for k in order))
 
 
 def faces_warning(report: dict) -> str:

@@ -1787,11 +1787,14 @@ def test_a_surface_that_folds_over_its_mesh_is_warned_of() -> None:
     noisy, faces = noisy_grid()
     clean, _ = noisy_grid(noise=0.0)
     with pytest.warns(RuntimeWarning, match=r"the surface folds over itself on 1\.[0-9]% of "
-                      r"the mesh's area .*: on a smooth mesh with steep slopes, a tolerance "
-                      r"too loose .*cut the mesh into simpler pieces and fit each; in Blender "
-                      r"select one in Edit Mode, then Mesh > Separate > Selection\); on a noisy "
-                      r"mesh .*smooth the mesh first"):
+                      r"the mesh's area .*: the mesh's noise \(its vertices scatter 0\.8[0-9]% "
+                      r"of the diagonal across a smooth surface\), which the knots chase "
+                      r"\(loosen the tolerance or smooth the mesh first.*; narrow fingers .*cut "
+                      r"the mesh into simpler pieces and fit each; in Blender select one in "
+                      r"Edit Mode, then Mesh > Separate > Selection\)$") as caught:
         surf = fit_surface(noisy, faces, tolerance=1e-2)
+    # the measured noise is the cause named: no steep slopes (the fit met the tolerance)
+    assert not any("steep slopes" in str(w.message) for w in caught)
     share = surf.report["folded"]
     assert 5e-3 < share < 5e-2
     measured = against_faces(surf, clean)

@@ -293,6 +293,29 @@ def test_the_noise_is_near_a_missed_tolerance_only_when_the_fit_has_not_gone_far
     assert not near({"rms": 0.03, "diagonal": 10.0}, 4e-3, True, "rms")
 
 
+def test_the_fold_warning_names_the_causes_the_measured_noise_leaves():
+    """``folds_warning``: a mesh's measured noise (``report["noise"]``) at least 0.4 times the
+    RMS reached is named first, with its size, and a crushed map second; a mesh measured
+    without noise is not told to smooth it; without a measurement (older reports) all three
+    causes, ordered by how the fit stopped. (The three causes and the stall's words made
+    messages of up to 1150 characters, which Blender's console cut at about 1000: user
+    test.)"""
+    warn = core.surface.folds_warning
+    base = {"folded": 0.02, "rms": 0.01, "stop_reason": "tolerance reached"}
+    noisy = warn({**base, "noise": 0.005, "noise_rel": 0.0025})
+    assert "the likely causes: the mesh's noise (its vertices scatter 0.25% of the diagonal" \
+        in noisy and "narrow fingers" in noisy and "steep slopes" not in noisy
+    for clean in (warn({**base, "noise": 0.0, "noise_rel": 0.0}),
+                  warn({**base, "noise": 0.003, "noise_rel": 0.0015})):  # below 0.4 x RMS
+        assert "noise" not in clean and clean.index("steep slopes") < clean.index("fingers")
+    stalled = warn({**base, "stop_reason": "the error stopped falling", "noise": 0.0,
+                    "noise_rel": 0.0})
+    assert "noise" not in stalled and stalled.index("fingers") < stalled.index("steep slopes")
+    older = warn(base)
+    assert older.index("steep slopes") < older.index("fingers") < older.index("noisy mesh")
+    assert len(noisy) < 600 and len(clean) < 600
+
+
 def test_few_noisy_points_per_control_point_stop_on_the_error_at_new_points():
     """4000 points with noise 0.01, a tolerance far below it. With 2-6 points per control point
     the training RMS keeps falling as the net fits the noise (knots^-0.13 to -0.38: the run
