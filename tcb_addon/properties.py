@@ -40,9 +40,11 @@ class FitSettings:
     tolerance: FloatProperty(
         name="Tolerance",
         description=(
-            "Largest allowed distance from the input points to the surface: relative to the "
-            "bounding-box diagonal of the input, or a distance in Blender units, the unit of "
-            "the objects' coordinates before the scene's Unit Scale (see Relative)"
+            "Allowed distance from the input points to the surface, as the Criterion measures "
+            "it (RMS, the default: their root-mean-square distance; Max: the largest): "
+            "relative to the bounding-box diagonal of the input, or a distance in Blender "
+            "units, the unit of the objects' coordinates before the scene's Unit Scale (see "
+            "Relative)"
         ),
         default=1e-3, min=1e-9, soft_min=1e-6, soft_max=0.1, precision=6, step=0.01,
     )  # fmt: skip
