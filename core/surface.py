@@ -1418,19 +1418,69 @@ def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return out
 
 
-def mesh_samples(points, uv, faces, count: int, seed: int = 0):
+def mesh_samples(points, uv, faces, count: int, seed: int = 0, curved: bool = True):
     """Points sampled on the triangles of a parameterized mesh, with their parameters.
 
     ``count`` samples, allotted to the faces in proportion to their 3D area; each at random
-    barycentric coordinates (seeded), where the mesh and its parameterization are both linear:
-    ``p = sum b_i p_i``, ``uv = sum b_i uv_i``. Fitting these as well as the vertices fits the
-    mesh as a surface instead of interpolating a few hundred vertices (method.md section 5).
+    barycentric coordinates ``b`` (seeded), where the parameterization is linear: ``uv = sum
+    b_i uv_i``. The point is on the curved triangle through the face's corners that
+    :func:`curved_points` makes (``curved``), or on the flat face, ``p = sum b_i p_i``.
+    Fitting these as well as the vertices fits the mesh as a surface instead of interpolating
+    a few hundred vertices (not in method.md: section 5 fits the data points as given). On
+    the flat faces a coarse mesh was fitted as its facets, creases between them and all: a cap
+    of a sphere of 55 vertices took 735 control points and ended 4.7e-3 of its diagonal (RMS)
+    from the sphere; on the curved triangles 151 control points, 1.0e-3
+    (benchmarks/coarse_meshes.py).
     """
     face, bary = _area_samples(points, faces, count, seed)
     tri = faces[face]
-    p = np.einsum("nk,nkj->nj", bary, points[tri])
     x = np.einsum("nk,nkj->nj", bary, uv[tri])
-    return p, x
+    if curved and len(face):
+        return curved_points(points, faces, face, bary), x
+    return np.einsum("nk,nkj->nj", bary, points[tri]), x
+
+
+# a corner of a face whose vertex normal turns more than this many degrees from the face's own
+# normal is a crease's (or a fold's): curved_points takes the face's normal there, so that the
+# facets meeting at a crease stay flat across it (90-degree creases turn the vertex normal
+# 45 degrees from both faces; the facets of a sphere cap of 55 vertices, 10 degrees)
+CREASE_ANGLE = 20.0
+
+
+def curved_points(points, faces, face, bary):
+    """Points at barycentric coordinates ``bary`` (n, 3) on the faces ``face`` (n,) of the
+    mesh ``(points, faces)``, on its curved point-normal triangles (PN triangles, Vlachos,
+    Peters, Boyd and Mitchell 2001): the cubic Bezier triangle through the face's corners
+    ``P_i`` that is tangent there to the planes across the vertex normals ``N_i`` (the
+    corner-angle weighted sums of :func:`_vertex_normals`, a face's own normal at a corner
+    beyond :data:`CREASE_ANGLE`): control points ``b_300 = P_1`` (and the other corners),
+    ``b_210 = (2 P_1 + P_2 - ((P_2 - P_1) . N_1) N_1) / 3`` (and the other five along the
+    edges), ``b_111 = E + (E - V) / 2`` with ``E`` the mean of the six and ``V`` of the
+    corners; the point is ``sum 3! / (i! j! k!) w^i u^j v^k b_ijk`` with ``(w, u, v)`` the
+    barycentric coordinates of ``P_1, P_2, P_3``. Flat faces (all their normals the face's)
+    stay flat; a face of no area, or a vertex whose normals cancel, has straight edges there.
+    Adjacent faces share each edge's curve where neither end is a crease corner."""
+    corner, normal = _vertex_normals(points, faces)
+    normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    own = corner[face] / np.maximum(np.linalg.norm(corner[face], axis=1, keepdims=True), 1e-300)
+    tri = faces[face]
+    P, N = points[tri], normal[tri]  # (n, 3 corners, 3)
+    crease = np.einsum("nkj,nj->nk", N, own) < np.cos(np.radians(CREASE_ANGLE))
+    N = np.where(crease[..., None], own[:, None, :], N)
+
+    def edge(i, j):  # b at 2/3 of P_i and 1/3 of P_j, pulled into P_i's tangent plane
+        d = np.einsum("nj,nj->n", P[:, j] - P[:, i], N[:, i])[:, None]
+        return (2.0 * P[:, i] + P[:, j] - d * N[:, i]) / 3.0
+
+    b210, b120, b021, b012, b102, b201 = edge(0, 1), edge(1, 0), edge(1, 2), edge(2, 1), \
+        edge(2, 0), edge(0, 2)
+    E = (b210 + b120 + b021 + b012 + b102 + b201) / 6.0
+    b111 = E + (E - P.mean(axis=1)) / 2.0
+    w, u, v = bary[:, 0:1], bary[:, 1:2], bary[:, 2:3]
+    return (P[:, 0] * w**3 + P[:, 1] * u**3 + P[:, 2] * v**3
+            + 3.0 * (b210 * w * w * u + b120 * w * u * u + b201 * w * w * v
+                     + b021 * u * u * v + b102 * w * v * v + b012 * u * v * v)
+            + 6.0 * b111 * w * u * v)
 
 
 def _area_samples(points, faces, count: int, seed: int = 0):
@@ -1579,20 +1629,21 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         )
         pick = np.sort(np.random.default_rng(options.seed).choice(len(uv), MAX_FIT_POINTS, replace=False))
         fit_uv, fit_q = uv[pick], q[pick]
-    if param.faces is not None:
-        # fit the mesh's surface: vertices plus points sampled on its faces
-        count = int(np.clip(20 * len(points), 5_000, 200_000))
-        sp_, su_ = mesh_samples(norm.apply(points), np.asarray(param.uv), param.faces, count,
-                                seed=options.seed)
-        fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
     domain = np.asarray(param.domain_polygon, dtype=np.float64)
     # a mesh's noise (its vertices' scatter across a smooth surface through them): where it is
     # not small against the tolerance, the loop counts the vertices alone against the net's size
     # (mesh_noise_counts)
     noise = (local_noise(q, seed=options.seed)
              if param.faces is not None and options.tolerance > 0 else None)
-    counts = (noise is not None and not subsampled
-              and mesh_noise_counts(noise, options, diag_norm, norm.scale))
+    noisy = noise is not None and mesh_noise_counts(noise, options, diag_norm, norm.scale)
+    counts = noisy and not subsampled
+    if param.faces is not None:
+        # fit the mesh's surface: vertices plus points sampled on its faces, curved through the
+        # vertices unless the vertices are noisy (their normals turn with the noise)
+        count = int(np.clip(20 * len(points), 5_000, 200_000))
+        sp_, su_ = mesh_samples(norm.apply(points), np.asarray(param.uv), param.faces, count,
+                                seed=options.seed, curved=not noisy)
+        fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
     # the vertices' normals, smooth over the noise: the errors across the surface, and the
     # fold check's
     planes = _local_planes(q, NOISE_NORMAL_NEIGHBOURS) if counts else None

@@ -112,3 +112,19 @@ def test_noisy_meshes_quick():
     for samples, now in zip(rows[::2], rows[1::2]):
         assert now[7] == "stalled" and 5 * int(now[6]) < int(samples[6]), (samples, now)
         assert 1.5 * float(now[9]) < float(samples[9]), (samples, now)
+
+
+def test_coarse_meshes_quick():
+    """``benchmarks/coarse_meshes.py --quick``: on each of its three coarse meshes of smooth
+    shapes the curved face samples end at least 2.5x closer to the true surface than the flat
+    ones, with at most as many control points."""
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "coarse_meshes.py"),
+                          "--quick"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = [[c.strip() for c in r.split("|")[1:-1]] for r in res.stdout.splitlines()
+            if r.startswith("| ") and not r.startswith("| mesh")]
+    assert [r[0] for r in rows] == ["sphere cap, 55 vertices", "sphere cap, 223 vertices",
+                                    "grid 11 x 11"]
+    for r in rows:
+        flat, curved = r[1:7], r[7:13]
+        assert int(curved[0]) <= int(flat[0]) and 2.5 * float(curved[3]) < float(flat[3]), r

@@ -991,12 +991,18 @@ def test_a_mesh_flaring_out_at_its_border_is_reported(smoothness, beyond, monkey
     test). The final check now also looks along the border and over the whole domain
     (core.refine._domain_checks); a smoothness given is kept, with the warning. The face's
     boundary on the circle is what made it flare: with its own shape flattened (the default
-    now) the surface stays within the scan's extent and nothing is reported."""
+    now) the surface stays within the scan's extent and nothing is reported. (So does it on
+    the circle since the face samples lie on curved triangles through the vertices,
+    core.surface.curved_points: the flare is made here with the flat faces' samples.)"""
     import core.parameterize as pz
+    import core.surface as surface_module
 
     points, faces = read_geometry(DATA / "nefertiti.off")
+    samples = surface_module.mesh_samples
     with monkeypatch.context() as m, pytest.warns(RuntimeWarning, match="swings away from"):
         m.setattr(pz, "FLAT_BOUNDARY", False)
+        m.setattr(surface_module, "mesh_samples",
+                  lambda *a, **k: samples(*a, **{**k, "curved": False}))
         surf = fit_surface(points, faces, smoothness=smoothness)
     sw = surf.report["swings"]
     assert sw["places"] > 0 and sw["largest_rel"] > beyond
@@ -2474,6 +2480,55 @@ def test_a_coarse_mesh_whose_net_outgrows_it_is_warned_of():
         fine = fit_surface(*grid_mesh(21))
     assert cloud.report["control_points"] < 16 * COARSE_MESH_RATIO
     assert fine.report["control_points"] < 441
+
+
+def _coarse_meshes():
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    try:
+        import coarse_meshes
+    finally:
+        sys.path.pop(0)
+    return coarse_meshes
+
+
+def test_curved_face_samples_keep_flat_faces_and_creases_flat_and_hug_a_sphere():
+    """core.surface.curved_points (PN triangles): at a face's corners the corners themselves;
+    on a flat mesh and across a 90-degree crease (its corners there take the faces' own
+    normals, CREASE_ANGLE) exactly the flat faces' points; on the facets of a sphere cap of
+    55 vertices 5x closer to the sphere than the flat faces' points (RMS 2.4e-3 against
+    1.2e-2; its border vertices' normals, of their inner faces only, are up to 9 degrees off
+    the sphere's)."""
+    from core.surface import curved_points, mesh_samples
+
+    bench = _coarse_meshes()
+    (v, f), _ = bench.grid(9, lambda x, y: 0.2 * x - 0.1 * y)
+    (c, cf), _ = bench.grid(21, bench.crease)
+    for pts, faces in ((v, f), (c, cf)):
+        uv = pts[:, :2]
+        flat = mesh_samples(pts, uv, faces, 4000, curved=False)
+        curved = mesh_samples(pts, uv, faces, 4000)
+        np.testing.assert_array_equal(curved[1], flat[1])  # the same parameters
+        np.testing.assert_allclose(curved[0], flat[0], atol=1e-12)
+    corners = np.repeat(np.eye(3), 4, axis=0)
+    face = np.tile(np.arange(4), 3)
+    np.testing.assert_allclose(curved_points(c, cf, face, corners),
+                               c[cf[face, np.repeat(np.arange(3), 4)]], atol=1e-12)
+    (s, sf), off = bench.sphere_cap(2)
+    flat = off(mesh_samples(s, s[:, :2], sf, 4000, curved=False)[0])
+    curved = off(mesh_samples(s, s[:, :2], sf, 4000)[0])
+    assert np.sqrt(np.mean(curved**2)) < 0.25 * np.sqrt(np.mean(flat**2))
+
+
+def test_a_coarse_mesh_of_a_smooth_shape_is_fitted_as_the_shape_not_its_facets():
+    """A cap of a unit sphere meshed with 55 vertices (an icosphere's faces above z = 0.3): on
+    the flat faces' samples the fit followed the facets, 750 control points and 4.7e-3 of the
+    diagonal (RMS) from the sphere; on curved triangles through the vertices 150 and 1.0e-3
+    (benchmarks/coarse_meshes.py)."""
+    (v, f), off = _coarse_meshes().sphere_cap(2)
+    s = fit_surface(v, f)
+    r = s.report
+    assert r["stop_reason"] == "tolerance reached" and r["control_points"] < 300
+    assert np.sqrt(np.mean(off(s.tessellate(64)[0]) ** 2)) < 2e-3 * r["diagonal"]
 
 
 def test_a_coarse_curved_mesh_is_not_taken_for_a_swing():
