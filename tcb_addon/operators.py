@@ -46,6 +46,35 @@ def _user_errors():
     return (bridge.SelectionError, core.TCBError, ValueError)
 
 
+def check_settings(op, automatic: bool = False) -> None:
+    """A :class:`bridge.SelectionError` naming each numeric setting of ``op`` (those it has of
+    Tolerance, Max Control Points, Max Iterations, Smoothness and Resolution) out of its range;
+    with ``automatic`` (Refine) a Tolerance or Max Control Points of 0 means automatic. The
+    properties have soft limits only (properties.py: hard ones clamped without a word)."""
+    words = []
+    tol = getattr(op, "tolerance", None)
+    if tol is not None and not (np.isfinite(tol) and tol < 1e30
+                                and (tol > 0 or (automatic and tol == 0))):
+        words.append(f"Tolerance must be a positive number{' or 0 (automatic)' * automatic}, "
+                     f"got {tol:g}")
+    budget = getattr(op, "max_control_points", None)
+    if budget is not None and budget < MIN_BUDGET and not (automatic and budget == 0):
+        words.append(f"Max Control Points must be {'0 (automatic) or ' * automatic}at least "
+                     f"{MIN_BUDGET}, got {budget}")
+    iterations = getattr(op, "max_iterations", None)
+    if iterations is not None and iterations < 1:
+        words.append(f"Max Iterations must be at least 1, got {iterations}")
+    smoothness = getattr(op, "smoothness", None)
+    if (smoothness is not None and not getattr(op, "auto_smoothness", False)
+            and not (np.isfinite(smoothness) and 0 <= smoothness < 1e30)):
+        words.append(f"Smoothness must be 0 or more, got {smoothness:g}")
+    resolution = getattr(op, "resolution", None)
+    if resolution is not None and not 2 <= resolution <= MAX_RESOLUTION:
+        words.append(f"Resolution must be between 2 and {MAX_RESOLUTION}, got {resolution}")
+    if words:
+        raise bridge.SelectionError("; ".join(words))
+
+
 # --- a small cache so that redo (Adjust Last Operation) does not refit what did not change ---
 
 _FIT_CACHE: dict = {}
@@ -797,6 +826,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
 
     def prepare(self, context):
         self._started = time.perf_counter()
+        check_settings(self)
         data = bridge.read_selection(context)
         self._data = data
         kwargs = self._fit_kwargs()
@@ -970,17 +1000,17 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         name="Tolerance",
         description="New tolerance (0: half of the current error, or of the previous tolerance "
         "if that is smaller)",
-        default=0.0, min=0.0, precision=6, step=0.01,
+        default=0.0, soft_min=0.0, precision=6, step=0.01,
     )  # fmt: skip
     relative: BoolProperty(name="Relative", default=True,
                            description="Tolerance is a fraction of the bounding-box diagonal")  # fmt: skip
     max_control_points: IntProperty(
-        name="Max Control Points", default=0, min=0,
+        name="Max Control Points", default=0, soft_min=0,
         description="New budget (0: the fit's budget, or twice the current number of control "
         "points if that is more)",
     )  # fmt: skip
     max_iterations: IntProperty(
-        name="Max Iterations", default=20, min=1,
+        name="Max Iterations", default=20, soft_min=1,
         description="Largest number of fits (the first one refits the current control net)",
     )  # fmt: skip
 
@@ -1011,10 +1041,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             current = max(current, float(rep[key.replace("rms", "rms_area")]))
         previous = st.tolerance if rel == st.relative else np.inf
         tol = self.tolerance or 0.5 * (min(previous, current) if current > 0 else st.tolerance)
-        if 0 < self.max_control_points < MIN_BUDGET:  # (the engine's words had been shown)
-            raise bridge.SelectionError(
-                f"Max Control Points must be 0 (automatic) or at least {MIN_BUDGET}, got "
-                f"{self.max_control_points}")
+        check_settings(self, automatic=True)  # (the engine's words had been shown)
         budget = self.max_control_points or max(st.max_control_points, 2 * st.control_points)
         self._settings = dict(tolerance=tol, relative=rel, max_control_points=budget,
                               max_iterations=self.max_iterations)  # fmt: skip
@@ -1102,8 +1129,7 @@ class TCB_OT_retessellate(bpy.types.Operator):
     bl_label = "Re-tessellate"
     bl_options = {"REGISTER", "UNDO"}
 
-    resolution: IntProperty(name="Resolution", default=64, min=2, soft_max=512,
-                            max=MAX_RESOLUTION)
+    resolution: IntProperty(name="Resolution", default=64, soft_min=2, soft_max=512)
 
     @classmethod
     def poll(cls, context):
@@ -1117,6 +1143,7 @@ class TCB_OT_retessellate(bpy.types.Operator):
 
     def execute(self, context):
         try:
+            check_settings(self)
             surface = editable_surface(context)
             surf = stored_surface(surface)
             moved = moved_note(surface)

@@ -32,6 +32,10 @@ DEFAULT_SMOOTHNESS = struct.unpack("f", struct.pack("f", 1e-4))[0]
 MAX_RESOLUTION = 2048
 # the smallest budget of control points (the engine's RefineOptions)
 MIN_BUDGET = 10
+# The numeric settings have soft limits only (the sliders' range): a hard limit made Blender
+# clamp a value beyond it without a word (a script's tolerance of -0.01 became 1e-9 and ran to
+# the budget; a Resolution of 100000 became 2048, a minute's tessellation; user test), and the
+# operators refuse such values instead (operators.check_settings).
 
 
 class FitSettings:
@@ -46,7 +50,7 @@ class FitSettings:
             "units, the unit of the objects' coordinates before the scene's Unit Scale (see "
             "Relative)"
         ),
-        default=1e-3, min=1e-9, soft_min=1e-6, soft_max=0.1, precision=6, step=0.01,
+        default=1e-3, soft_min=1e-6, soft_max=0.1, precision=6, step=0.01,
     )  # fmt: skip
     relative: BoolProperty(
         name="Relative",
@@ -63,13 +67,13 @@ class FitSettings:
     max_control_points: IntProperty(
         name="Max Control Points",
         description="Stop refining when the spline would have more control points than this",
-        default=2000, min=MIN_BUDGET, soft_max=20000,
+        default=2000, soft_min=MIN_BUDGET, soft_max=20000,
     )  # fmt: skip
     max_iterations: IntProperty(
         name="Max Iterations",
         description="Largest number of fits (the first ones of a fit with a tolerance size "
         "the control net to it)",
-        default=20, min=1, soft_max=100,
+        default=20, soft_min=1, soft_max=100,
     )  # fmt: skip
     degree: EnumProperty(
         name="Degree",
@@ -94,7 +98,7 @@ class FitSettings:
         "when Auto Smoothness is off. At its default (0.0001) on a sparse cloud (under 2 "
         "points per control point), or when the error stopped falling above the tolerance, "
         "it is chosen by cross-validation",
-        default=DEFAULT_SMOOTHNESS, min=0.0, soft_max=1.0, precision=6, step=0.001,
+        default=DEFAULT_SMOOTHNESS, soft_min=0.0, soft_max=1.0, precision=6, step=0.001,
     )  # fmt: skip
     auto_smoothness: BoolProperty(
         name="Auto Smoothness",
@@ -145,7 +149,7 @@ class FitSettings:
             "about 0.8 million vertices in 10-20 s, 2048 about 3 million in a minute"
         ),
         # (4096: 12 million vertices, about 4 minutes and 7 GiB with Blender waiting: user test)
-        default=64, min=2, soft_max=512, max=MAX_RESOLUTION,
+        default=64, soft_min=2, soft_max=512,
     )  # fmt: skip
 
 

@@ -1451,13 +1451,48 @@ def _expect_error(bpy, objs, pattern):
     )
 
 
-def test_the_resolution_offered_stops_at_2048(clean_scene):
-    """Resolution 4096 (Fit, Re-tessellate) made about 12 million vertices in about 4
-    minutes and 7 GiB while Blender waited (user test L8): 2048 is the most offered."""
+def test_settings_out_of_range_are_refused_not_clamped(clean_scene):
+    """Hard property limits made Blender clamp a script's values without a word: a Tolerance
+    of -0.01 became 1e-9 and ran to the budget, a Resolution of 100000 became 2048 (a minute's
+    tessellation), Max Control Points 5 became 10 and the engine then spoke of "the maximum of
+    10" (user test). The limits are soft (the sliders' range) and Fit, Refine and Re-tessellate
+    refuse a value out of range with its name, changing nothing. Resolution 4096 (about 12
+    million vertices in 4 minutes and 7 GiB, user test L8) is out of range: 2048 is the most."""
     bpy = clean_scene
     for op in (bpy.ops.tcb.fit_surface, bpy.ops.tcb.retessellate):
         prop = op.get_rna_type().properties["resolution"]
-        assert (prop.hard_max, prop.soft_max, prop.default) == (2048, 512, 64)
+        assert (prop.soft_max, prop.default) == (512, 64)
+    obj = add_mesh(bpy, "Grid", *grid(12))
+    before = snapshot(obj)
+    bad = [(dict(tolerance=-0.01), r"Tolerance must be a positive number, got -0.01"),
+           (dict(tolerance=float("inf")), r"Tolerance must be a positive number, got 3.40282e\+38"),
+           (dict(max_control_points=5), r"Max Control Points must be at least 10, got 5"),
+           (dict(max_iterations=0), r"Max Iterations must be at least 1, got 0"),
+           (dict(smoothness=-1.0), r"Smoothness must be 0 or more, got -1"),
+           (dict(resolution=0), r"Resolution must be between 2 and 2048, got 0"),
+           (dict(resolution=100000), r"Resolution must be between 2 and 2048, got 100000"),
+           (dict(tolerance=-1.0, resolution=1), r"Tolerance .*; Resolution must be")]
+    for props, words in bad:
+        n = len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.collections)
+        with pytest.raises(RuntimeError, match=words):
+            fit(bpy, obj, **props)
+        assert (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.collections)) == n
+    assert snapshot(obj) == before
+    # a smoothness below 0 is no matter with Auto Smoothness (the choice replaces it)
+    assert fit(bpy, obj, smoothness=-1.0, auto_smoothness=True) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    control_points = surface.tcb.control_points
+    with bpy.context.temp_override(**select(bpy, surface)):
+        for props, words in [
+                (dict(tolerance=-1.0), r"Tolerance must be a positive number or 0 \(automatic\)"),
+                (dict(max_control_points=5), r"Max Control Points must be 0 \(automatic\) or "
+                                             r"at least 10, got 5"),
+                (dict(max_iterations=0), r"Max Iterations must be at least 1")]:
+            with pytest.raises(RuntimeError, match=words):
+                bpy.ops.tcb.refine(**props)
+        with pytest.raises(RuntimeError, match=r"Resolution must be between 2 and 2048, got 4096"):
+            bpy.ops.tcb.retessellate(resolution=4096)
+    assert surface.tcb.control_points == control_points
 
 
 def test_error_nothing_selected(clean_scene):
