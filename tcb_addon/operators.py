@@ -53,10 +53,9 @@ def check_settings(op, automatic: bool = False) -> None:
     properties have soft limits only (properties.py: hard ones clamped without a word)."""
     words = []
     tol = getattr(op, "tolerance", None)
-    if tol is not None and not (np.isfinite(tol) and tol < 1e30
-                                and (tol > 0 or (automatic and tol == 0))):
-        words.append(f"Tolerance must be a positive number{' or 0 (automatic)' * automatic}, "
-                     f"got {tol:g}")
+    if tol is not None and not (np.isfinite(tol) and 0 <= tol < 1e30):
+        zero = "automatic" if automatic else "refine to Max Control Points"
+        words.append(f"Tolerance must be 0 or more (0: {zero}), got {tol:g}")
     budget = getattr(op, "max_control_points", None)
     if budget is not None and budget < MIN_BUDGET and not (automatic and budget == 0):
         words.append(f"Max Control Points must be {'0 (automatic) or ' * automatic}at least "
@@ -816,7 +815,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         if smoothness == DEFAULT_SMOOTHNESS:  # left at the default (float32 of 1e-4): the
             smoothness = _core().fit.DEFAULT_SMOOTHNESS  # core cross-validates it on sparse clouds
         return dict(
-            degree=int(self.degree), mode=self.mode.lower(), tolerance=self.tolerance,
+            # (0, as the property's old hard limit made it: a tolerance too small to reach)
+            degree=int(self.degree), mode=self.mode.lower(), tolerance=max(self.tolerance, 1e-9),
             relative=self.relative, max_control_points=self.max_control_points,
             max_iterations=self.max_iterations, smoothness=smoothness,
             criterion=self.criterion.lower(), drop_outliers=self.drop_outliers,

@@ -48,7 +48,7 @@ class FitSettings:
             "it (RMS, the default: their root-mean-square distance; Max: the largest): "
             "relative to the bounding-box diagonal of the input, or a distance in Blender "
             "units, the unit of the objects' coordinates before the scene's Unit Scale (see "
-            "Relative)"
+            "Relative); 0: refine until Max Control Points or Max Iterations"
         ),
         default=1e-3, soft_min=1e-6, soft_max=0.1, precision=6, step=0.01,
     )  # fmt: skip

@@ -1464,8 +1464,9 @@ def test_settings_out_of_range_are_refused_not_clamped(clean_scene):
         assert (prop.soft_max, prop.default) == (512, 64)
     obj = add_mesh(bpy, "Grid", *grid(12))
     before = snapshot(obj)
-    bad = [(dict(tolerance=-0.01), r"Tolerance must be a positive number, got -0.01"),
-           (dict(tolerance=float("inf")), r"Tolerance must be a positive number, got 3.40282e\+38"),
+    bad = [(dict(tolerance=-0.01), r"Tolerance must be 0 or more \(0: refine to Max Control "
+                                   r"Points\), got -0.01"),
+           (dict(tolerance=float("inf")), r"Tolerance must be 0 or more .*, got 3.40282e\+38"),
            (dict(max_control_points=5), r"Max Control Points must be at least 10, got 5"),
            (dict(max_iterations=0), r"Max Iterations must be at least 1, got 0"),
            (dict(smoothness=-1.0), r"Smoothness must be 0 or more, got -1"),
@@ -1484,7 +1485,7 @@ def test_settings_out_of_range_are_refused_not_clamped(clean_scene):
     control_points = surface.tcb.control_points
     with bpy.context.temp_override(**select(bpy, surface)):
         for props, words in [
-                (dict(tolerance=-1.0), r"Tolerance must be a positive number or 0 \(automatic\)"),
+                (dict(tolerance=-1.0), r"Tolerance must be 0 or more \(0: automatic\), got -1"),
                 (dict(max_control_points=5), r"Max Control Points must be 0 \(automatic\) or "
                                              r"at least 10, got 5"),
                 (dict(max_iterations=0), r"Max Iterations must be at least 1")]:

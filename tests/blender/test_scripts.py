@@ -168,8 +168,11 @@ def test_the_script_limits_are_the_fit_settings_limits(addon):
     spec.loader.exec_module(script)
     props = addon.tcb_addon.properties
     settings = props.FitSettings.__annotations__
-    assert script.MIN_BUDGET == props.MIN_BUDGET == settings["max_control_points"].keywords["min"]
-    assert script.MAX_RESOLUTION == props.MAX_RESOLUTION == settings["resolution"].keywords["max"]
+    # (soft limits: the operators refuse values beyond them, operators.check_settings)
+    assert (script.MIN_BUDGET == props.MIN_BUDGET
+            == settings["max_control_points"].keywords["soft_min"])
+    assert script.MAX_RESOLUTION == props.MAX_RESOLUTION
+    assert "max" not in settings["resolution"].keywords
 
 
 def test_outputs_over_the_input_or_where_they_cannot_be_written_are_refused_first(tmp_path):
