@@ -368,9 +368,35 @@ def drop_orphaned_weights() -> int:
     return gone
 
 
+def drop_deleted_results() -> int:
+    """Remove the surfaces, nets and deviation points deleted (X) together with every object
+    that uses them (``bpy.data.user_map``): a surface and its net deleted at once held each
+    other through their pointers and the live-net modifier, and both were saved in the .blend,
+    the spline too (10 objects after 5 fits deleted in a batch script; user test). A net
+    deleted alone still drives its surface and stays; so do one with a fake user and what
+    it uses. Run after
+    :func:`drop_orphaned_weights` (a deleted surface's weights use it). How many."""
+    gone = 0
+    while True:
+        ours = [ob for ob in bpy.data.objects
+                if ob.library is None and not ob.use_fake_user and deleted(ob)
+                and ob.tcb.role in ("SURFACE", "NET", "DEVIATION")]
+        if not ours:
+            return gone
+        users = bpy.data.user_map(subset=ours)
+        drop = [ob for ob in ours if all(isinstance(u, bpy.types.Object) and deleted(u)
+                                         and not u.use_fake_user for u in users[ob])]
+        if not drop:
+            return gone
+        for ob in drop:
+            _remove(ob)
+        gone += len(drop)
+
+
 def drop_deleted_links() -> int:
     """Clear the pointers that objects in use (in a collection) hold to deleted objects, and
-    remove the weights of deleted surfaces (:func:`drop_orphaned_weights`). X only unlinks an
+    remove the weights of deleted surfaces (:func:`drop_orphaned_weights`) and the results
+    deleted with all their users (:func:`drop_deleted_results`). X only unlinks an
     object that a pointer holds: a deleted scan stayed in the .blend, saved with it, through
     its surface's source pointer, and so did a deleted surface (its spline too) through its
     net's. Refine and the Deviation Map already refused a deleted source, so nothing is lost.
@@ -381,6 +407,7 @@ def drop_deleted_links() -> int:
         return obj is not None and deleted(obj) and not obj.use_fake_user
 
     cleared = drop_orphaned_weights()
+    cleared += drop_deleted_results()
     for ob in bpy.data.objects:
         if ob.library is not None or deleted(ob) or ob.tcb.role == "NONE":
             continue

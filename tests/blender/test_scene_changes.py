@@ -27,8 +27,8 @@ def fit(bpy, *objs, **props):
     return scenes.fit(bpy, *objs, **{"tolerance": 2e-2, "max_control_points": 300, **props})
 
 
-def run(bpy, op, obj, **props):
-    with bpy.context.temp_override(**select(bpy, obj)):
+def run(bpy, op, *objs, **props):
+    with bpy.context.temp_override(**select(bpy, *objs)):
         return op(**props)
 
 
@@ -280,6 +280,39 @@ def test_fit_after_deleting_a_surface_removes_its_hidden_weights(clean_scene, tm
     bpy.ops.wm.open_mainfile(filepath=str(path))
     roles = [o.tcb.role for o in bpy.data.objects if o.tcb.role == "WEIGHTS"]
     assert len(roles) == 2  # the other surface's and the new one's
+
+
+def test_results_deleted_with_their_nets_are_not_saved(clean_scene, tmp_path):
+    """A surface and its net deleted together (X; a batch script's bpy.ops.object.delete)
+    held each other through their pointers and the live-net modifier: both were saved in the
+    .blend, the spline too, and 5 such fits left 10 objects (user test). Saving removes them;
+    a net deleted alone still drives its surface, which stays as it is, and so does a result
+    kept with a fake user."""
+    bpy = clean_scene
+    names = []
+    for k in range(3):
+        assert fit(bpy, add_mesh(bpy, f"Scan{k}", *wave())) == {"FINISHED"}
+        surface = bpy.context.view_layer.objects.active
+        names.append((surface.name, surface.tcb.net.name, surface.data.name))
+    (gone, gone_net, gone_mesh), (alone, alone_net, _), (kept, kept_net, _) = names
+    assert run(bpy, bpy.ops.object.delete, bpy.data.objects[gone],
+               bpy.data.objects[gone_net]) == {"FINISHED"}
+    assert run(bpy, bpy.ops.object.delete, bpy.data.objects[alone_net]) == {"FINISHED"}
+    bpy.data.objects[kept].use_fake_user = True
+    assert run(bpy, bpy.ops.object.delete, bpy.data.objects[kept],
+               bpy.data.objects[kept_net]) == {"FINISHED"}
+    assert gone in bpy.data.objects and gone_net in bpy.data.objects  # (held by each other)
+    path = tmp_path / "deleted.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    assert gone not in bpy.data.objects and gone_net not in bpy.data.objects
+    assert gone_mesh not in bpy.data.meshes
+    assert not any(o.tcb.role != "NONE" and o.tcb.surface is not None
+                   and o.tcb.surface.name == gone for o in bpy.data.objects)
+    # the net deleted alone still drives its surface, in the scene
+    assert bpy.data.objects[alone].users_collection and alone_net in bpy.data.objects
+    assert bpy.data.objects[alone].tcb.net.name == alone_net
+    assert kept in bpy.data.objects and kept_net in bpy.data.objects
 
 
 def test_a_mirrored_source_fitted_before_its_faces_were_turned_can_be_refined(clean_scene, addon):
