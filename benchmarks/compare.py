@@ -61,7 +61,7 @@ from scipy.interpolate import LSQBivariateSpline, SmoothBivariateSpline  # noqa:
 import datasets as ds  # noqa: E402
 from core import fit_surface  # noqa: E402
 from core.baselines import fit_tensor  # noqa: E402
-from core.surface import mesh_samples  # noqa: E402
+from core.surface import mesh_sample_count, mesh_samples  # noqa: E402
 
 BIG_BUDGET = 100_000
 
@@ -135,7 +135,7 @@ def tensor_data(d, P, surf):
     param = surf.parameterization
     uv = np.asarray(param.uv)
     used = np.asarray(param.used, dtype=bool)
-    count = int(np.clip(20 * len(P), 5_000, 200_000))
+    count = mesh_sample_count(len(P), surf.options.max_control_points)  # (as the fit's)
     sp_, su_ = mesh_samples(P, uv, param.faces, count, seed=0)
     return np.vstack([uv[used], su_]), np.vstack([P[used], sp_]), uv[used], P[used]
 
