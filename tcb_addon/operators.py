@@ -1413,6 +1413,10 @@ class TCB_OT_toggle_net(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         surface, net = result_objects(getattr(context, "active_object", None))
+        if surface is None:
+            cls.poll_message_set("Select a TCB surface (or its control net)")
+        elif net is None:
+            cls.poll_message_set(f"'{surface.name}' has no control net")
         return surface is not None and net is not None
 
     def execute(self, context):
@@ -1447,7 +1451,12 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
 
     @classmethod
     def poll(cls, context):
-        return active_surface(context) is not None
+        # (in Edit Mode too; the others' words when nothing fits: review of a batch script,
+        # which got only "poll() failed, context is incorrect")
+        if active_surface(context) is None:
+            cls.poll_message_set("Select a TCB surface (or its control net)")
+            return False
+        return True
 
     def execute(self, context):
         try:

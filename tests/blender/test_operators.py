@@ -1946,6 +1946,19 @@ def test_a_curve_without_geometry_is_refused_with_what_to_do(clean_scene):
         fit(bpy, bad)
 
 
+def test_the_surface_operators_say_what_to_select(clean_scene):
+    """With a plain mesh active, every operator on a result says to select a TCB surface
+    (Export Spline and Show/Hide Net said only "poll() failed, context is incorrect": user
+    test of batch scripts)."""
+    bpy = clean_scene
+    plain = add_mesh(bpy, "Plain", *grid(8))
+    with bpy.context.temp_override(**select(bpy, plain)):
+        for op in (bpy.ops.tcb.refine, bpy.ops.tcb.retessellate, bpy.ops.tcb.deviation_map,
+                   bpy.ops.tcb.toggle_net, bpy.ops.tcb.export_spline):
+            with pytest.raises(RuntimeError, match=r"Select a TCB surface \(or its control net\)"):
+                op()
+
+
 def test_a_source_left_in_edit_mode_is_named(clean_scene):
     """A source in Edit Mode while its surface is active (Lock Object Modes off, a click in
     the Outliner): Deviation Map, Refine and Fit said "'Wave' has no vertices"; with the
