@@ -908,6 +908,12 @@ def test_a_mesh_whose_faces_share_no_vertices_is_told_to_merge_them() -> None:
     with pytest.raises(TopologyError, match=r"2 separate pieces, which meet along a seam .*"
                                             r"merged, they are 1; .*Merge by Distance"):
         parameterize(np.concatenate([pts, pts[column]]), split)
+    # two patches whose corners touch at one position: merged, they would meet at a vertex
+    # only (a non-manifold one, the next error after Merge by Distance: user test)
+    far, near = np.argmax(pts[:, 0] + pts[:, 1]), np.argmin(pts[:, 0] + pts[:, 1])
+    corner = pts + (pts[far] - pts[near])  # its near corner on the first one's far corner
+    with pytest.raises(TopologyError, match="keep the largest piece"):
+        parameterize(np.concatenate([pts, corner]), np.concatenate([faces, faces + len(pts)]))
 
 
 def test_bowtie_vertex_is_a_topology_error() -> None:
