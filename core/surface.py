@@ -1457,6 +1457,16 @@ def mesh_sample_count(vertices: int, max_control_points: int) -> int:
 # facets meeting at a crease stay flat across it (90-degree creases turn the vertex normal
 # 45 degrees from both faces; the facets of a sphere cap of 55 vertices, 10 degrees)
 CREASE_ANGLE = 20.0
+# ... and a face with a corner whose vertex normal turns less than this from each of the
+# vertex's faces is in a flat region (a CAD mesh's planes) and stays flat: a
+# long plane triangle of an STL file next to a tangent fillet of 4 facets sagged with the
+# tilted normals along the fillet's edge (5e-3 of the diagonal off the plane), and plates
+# creased by 20-40 degrees were rounded off (review of the curved samples). Faces of a coarse
+# mesh of a smooth shape turn at every corner (a sphere cap of 55 vertices: 3-10 degrees),
+# though one face around a vertex can share its normal (a grid of a saddle z = xy, by
+# symmetry: with that face deciding, the curved samples of a 7 x 7 grid were 2.5x farther from
+# the saddle).
+FLAT_ANGLE = 0.1
 
 
 def curved_points(points, faces, face, bary):
@@ -1465,7 +1475,9 @@ def curved_points(points, faces, face, bary):
     Peters, Boyd and Mitchell 2001): the cubic Bezier triangle through the face's corners
     ``P_i`` that is tangent there to the planes across the vertex normals ``N_i`` (the
     corner-angle weighted sums of :func:`_vertex_normals`, a face's own normal at a corner
-    beyond :data:`CREASE_ANGLE`): control points ``b_300 = P_1`` (and the other corners),
+    beyond :data:`CREASE_ANGLE`, and at every corner of a face with a corner whose faces are
+    all within :data:`FLAT_ANGLE` of its normal): control points ``b_300 = P_1`` (and the
+    other corners),
     ``b_210 = (2 P_1 + P_2 - ((P_2 - P_1) . N_1) N_1) / 3`` (and the other five along the
     edges), ``b_111 = E + (E - V) / 2`` with ``E`` the mean of the six and ``V`` of the
     corners; the point is ``sum 3! / (i! j! k!) w^i u^j v^k b_ijk`` with ``(w, u, v)`` the
@@ -1478,6 +1490,13 @@ def curved_points(points, faces, face, bary):
     tri = faces[face]
     P, N = points[tri], normal[tri]  # (n, 3 corners, 3)
     crease = np.einsum("nkj,nj->nk", N, own) < np.cos(np.radians(CREASE_ANGLE))
+    # a face with a corner inside a flat region (all of the vertex's faces within FLAT_ANGLE of
+    # its normal) stays flat
+    unit = corner / np.maximum(np.linalg.norm(corner, axis=1, keepdims=True), 1e-300)
+    least = np.ones(len(points))
+    np.minimum.at(least, faces.ravel(),
+                  np.einsum("fkj,fj->fk", normal[faces], unit).ravel())
+    crease |= (least[tri] > np.cos(np.radians(FLAT_ANGLE))).any(axis=1, keepdims=True)
     N = np.where(crease[..., None], own[:, None, :], N)
 
     def edge(i, j):  # b at 2/3 of P_i and 1/3 of P_j, pulled into P_i's tangent plane

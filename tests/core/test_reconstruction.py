@@ -2519,6 +2519,35 @@ def test_curved_face_samples_keep_flat_faces_and_creases_flat_and_hug_a_sphere()
     assert np.sqrt(np.mean(curved**2)) < 0.25 * np.sqrt(np.mean(flat**2))
 
 
+def test_curved_face_samples_keep_a_plane_flat_next_to_a_tangent_fillet():
+    """An STL-like profile: a plane 3 long in one row of long triangles, a fillet of radius 0.3
+    in 4 facets tangent to it, and a wall. The vertex normals along the tangent lines turn with
+    the fillet's facets (11 degrees: no crease), and with them the plane's long triangles
+    sagged, 5e-3 of the diagonal (a review); a face with a corner inside a flat region
+    (FLAT_ANGLE) stays flat, and the fillet's facets still bend towards the arc."""
+    from core.surface import mesh_samples
+
+    t = np.radians(np.linspace(0, 90, 5))
+    x = np.r_[-3.0, -1.5, 0.3 * np.sin(t), 0.3]
+    z = np.r_[0.0, 0.0, 0.3 - 0.3 * np.cos(t), 1.3]
+    v = np.array([(a, y, c) for y in (0.0, 1.0) for a, c in zip(x, z)])
+    n = len(x)
+    f = np.array([q for j in range(n - 1) for q in ([j, j + 1, n + j + 1], [j, n + j + 1, n + j])])
+    uv = v[:, [0, 1]]
+    points, _ = mesh_samples(v, uv, f, 20000)
+    flat, _ = mesh_samples(v, uv, f, 20000, curved=False)
+    on_plane = flat[:, 0] < -1e-9  # (the same random faces and coordinates for both)
+    on_wall = flat[:, 2] > 0.3 + 1e-9
+    assert np.abs(points[on_plane, 2]).max() < 1e-12
+    assert np.abs(points[on_wall, 0] - 0.3).max() < 1e-12
+    arc = ~on_plane & ~on_wall
+
+    def off(q):
+        return np.abs(np.hypot(q[:, 0], q[:, 2] - 0.3) - 0.3)
+
+    assert np.sqrt(np.mean(off(points[arc]) ** 2)) < 0.3 * np.sqrt(np.mean(off(flat[arc]) ** 2))
+
+
 def test_a_coarse_mesh_of_a_smooth_shape_is_fitted_as_the_shape_not_its_facets():
     """A cap of a unit sphere meshed with 55 vertices (an icosphere's faces above z = 0.3): on
     the flat faces' samples the fit followed the facets, 750 control points and 4.7e-3 of the
