@@ -1428,7 +1428,7 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0, curved: bool = Tr
     Fitting these as well as the vertices fits the mesh as a surface instead of interpolating
     a few hundred vertices (not in method.md: section 5 fits the data points as given). On
     the flat faces a coarse mesh was fitted as its facets, creases between them and all: a cap
-    of a sphere of 55 vertices took 735 control points and ended 4.7e-3 of its diagonal (RMS)
+    of a sphere of 55 vertices took 743 control points and ended 4.7e-3 of its diagonal (RMS)
     from the sphere; on the curved triangles 151 control points, 1.0e-3
     (benchmarks/coarse_meshes.py).
     """
@@ -1486,13 +1486,13 @@ def curved_points(points, faces, face, bary):
     Adjacent faces share each edge's curve where neither end is a crease corner."""
     corner, normal = _vertex_normals(points, faces)
     normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    own = corner[face] / np.maximum(np.linalg.norm(corner[face], axis=1, keepdims=True), 1e-300)
+    unit = corner / np.maximum(np.linalg.norm(corner, axis=1, keepdims=True), 1e-300)
+    own = unit[face]
     tri = faces[face]
     P, N = points[tri], normal[tri]  # (n, 3 corners, 3)
     crease = np.einsum("nkj,nj->nk", N, own) < np.cos(np.radians(CREASE_ANGLE))
     # a face with a corner inside a flat region (all of the vertex's faces within FLAT_ANGLE of
     # its normal) stays flat
-    unit = corner / np.maximum(np.linalg.norm(corner, axis=1, keepdims=True), 1e-300)
     least = np.ones(len(points))
     np.minimum.at(least, faces.ravel(),
                   np.einsum("fkj,fj->fk", normal[faces], unit).ravel())

@@ -373,9 +373,9 @@ def drop_deleted_results() -> int:
     that uses them (``bpy.data.user_map``): a surface and its net deleted at once held each
     other through their pointers and the live-net modifier, and both were saved in the .blend,
     the spline too (10 objects after 5 fits deleted in a batch script; user test). A net
-    deleted alone still drives its surface and stays; so do one with a fake user and what
-    it uses. Run after
-    :func:`drop_orphaned_weights` (a deleted surface's weights use it). How many."""
+    deleted alone still drives its surface and stays; so do a result with a fake user and
+    what it uses. Run after :func:`drop_orphaned_weights` (a deleted surface's weights use
+    it). How many."""
     gone = 0
     while True:
         ours = [ob for ob in bpy.data.objects

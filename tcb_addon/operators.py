@@ -1025,6 +1025,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         return super().invoke(context, event)
 
     def prepare(self, context):
+        check_settings(self, automatic=True)  # (the engine's words had been shown)
         surface = editable_surface(context, " to refine")
         st = surface.tcb
         self._surface = surface
@@ -1041,7 +1042,6 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             current = max(current, float(rep[key.replace("rms", "rms_area")]))
         previous = st.tolerance if rel == st.relative else np.inf
         tol = self.tolerance or 0.5 * (min(previous, current) if current > 0 else st.tolerance)
-        check_settings(self, automatic=True)  # (the engine's words had been shown)
         budget = self.max_control_points or max(st.max_control_points, 2 * st.control_points)
         self._settings = dict(tolerance=tol, relative=rel, max_control_points=budget,
                               max_iterations=self.max_iterations)  # fmt: skip
