@@ -114,9 +114,9 @@ def selection_problem(context) -> str | None:
     if all(_is_result(o) for o in selected):
         return _result_note(selected[0])
     selected = [o for o in selected if not _is_result(o)]
-    for obj in selected:
-        if obj.type not in GEOMETRY_TYPES:
-            return f"'{obj.name}' is {_kind(obj)}, not a mesh or point cloud"
+    # (cameras, lights... are left out when geometry is selected with them: read_selection)
+    if not any(o.type in GEOMETRY_TYPES for o in selected):
+        return f"'{selected[0].name}' is {_kind(selected[0])}, not a mesh or point cloud"
     return None
 
 
@@ -400,12 +400,15 @@ def read_selection(context, objects=None) -> InputData:
     objects = [o for o in objects if o is not None]
     if not objects:
         raise SelectionError("Nothing selected: select a mesh or point-cloud object to fit")
+    # objects that are no geometry (cameras, lights...) are left out, as the results are, when
+    # geometry is selected with them (Select All had refused the fit for the camera: user test)
+    if not any(o.type in GEOMETRY_TYPES for o in objects):
+        raise SelectionError(
+            f"'{objects[0].name}' is {_kind(objects[0])}, not a mesh or point cloud: "
+            "select the mesh or point-cloud object to fit"
+        )
+    objects = [o for o in objects if o.type in GEOMETRY_TYPES]
     for obj in objects:
-        if obj.type not in GEOMETRY_TYPES:
-            raise SelectionError(
-                f"'{obj.name}' is {_kind(obj)}, not a mesh or point cloud: "
-                "select the mesh or point-cloud object to fit"
-            )
         if obj.mode == "EDIT":  # (its mesh is in the edit mesh: "has no vertices": user test)
             raise SelectionError(
                 f"'{obj.name}' is in Edit Mode, where its mesh cannot be read: switch it to "
@@ -457,6 +460,8 @@ def read_selection(context, objects=None) -> InputData:
                              f"{show_advice(context, obj)} to read the modified shape)")
 
     points, faces, counts, modifiers = [], [], {}, {}
+    if any(parts.values()):  # an empty that makes no geometry is no input beside geometry
+        wanted = {k: o for k, o in wanted.items() if parts[k] or o.type != "EMPTY"}
     for key, obj in wanted.items():
         got = parts[key]
         n = sum(len(p) for p, _ in got)

@@ -1509,6 +1509,27 @@ def test_error_camera_or_light(clean_scene, kind):
     _expect_error(bpy, [obj], f"is a {kind.lower()}, not a mesh or point cloud")
 
 
+def test_select_all_leaves_out_cameras_lights_and_empties_beside_a_mesh(clean_scene, addon):
+    """Select All with a camera, a light and an empty beside the scan fits the scan alone (the
+    camera had refused the fit: user test); the panel's Fit button stays enabled. Alone, they
+    are refused as before."""
+    bpy = clean_scene
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    lamp = bpy.data.objects.new("Light", bpy.data.lights.new("Light", "POINT"))
+    empty = bpy.data.objects.new("Empty", None)
+    for obj in (cam, lamp, empty):
+        bpy.context.scene.collection.objects.link(obj)
+    verts, faces = grid(12)
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    assert ("operator", "tcb.fit_surface", True) in draw_panels(bpy, [cam, scan, lamp, empty])
+    assert fit(bpy, cam, scan, lamp, empty) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    assert [s.object for s in surface.tcb.sources] == [scan]
+    assert spline_of(surface).report["points"] == len(verts)
+    _expect_error(bpy, [cam, lamp], "'Camera' is a camera, not a mesh or point cloud")
+    _expect_error(bpy, [empty], "'Empty' is an empty that instances no mesh or point cloud")
+
+
 def test_error_empty_mesh(clean_scene):
     bpy = clean_scene
     _expect_error(bpy, [add_mesh(bpy, "Empty", np.zeros((0, 3)))], "'Empty' has no vertices")
