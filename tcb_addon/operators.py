@@ -513,8 +513,6 @@ def _summary(surf, seconds: float | None = None) -> str:
         f"{rep.get('seconds', 0.0) if seconds is None else seconds:.2f} s"
         + (f", {rep['outliers']} outlier{'s' if rep['outliers'] != 1 else ''} left out"
            if rep.get("outliers") else "")
-        + (f", {rep['loose_vertices']} loose vertices (in no face) left out"
-           if rep.get("loose_vertices") else "")
         + (f", the surface of iteration {rep['returned_iteration']} of {rep['iterations']} "
            + ("(lowest estimated error)" if rep.get("stop_reason") == _core().refine.STALLED
               else "(lowest RMS)")
@@ -538,6 +536,12 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
     reason = str(rep.get("stop_reason", ""))
     if (rep.get("swings") or {}).get("places"):  # core.surface.data_swings
         warnings = list(warnings) + [_core().surface.swing_warning(rep)]
+    loose = rep.get("loose_vertices", 0)
+    if loose and not any("in no face" in str(w) for w in warnings):
+        # (the engine's warning says it, with what to do: the summary had said it again, "1
+        # loose vertices (in no face) left out"; user test)
+        warnings = list(warnings) + [f"{loose} loose vert{'ex' if loose == 1 else 'ices'} (in "
+                                     "no face) left out"]
     text = _summary(surf, seconds) + "".join(f"; {n}" for n in list(notes) + list(warnings))
     if reason.startswith("tolerance reached") and "misses" not in reason:
         op.report({"WARNING"} if warnings else {"INFO"}, text)
@@ -1317,7 +1321,8 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         no_data = int(len(has_data) - has_data.sum())
         surface[NO_DATA_KEY] = no_data  # the panel's legend shows grey when there are any
         _show_attribute_colors(context)
-        what = "loose vertices (in no face)" if data.faces is not None else "outliers"
+        what = ((f"loose vert{'ex' if left_out == 1 else 'ices'} (in no face)")
+                if data.faces is not None else f"outlier{'' if left_out == 1 else 's'}")
         note = f" ({left_out} {what} left out of the fit not counted)" if left_out else ""
         if no_data:
             where = ("over the mesh's filled holes (no data there)" if data.faces is not None
