@@ -10,6 +10,7 @@ Errors become ``self.report({'ERROR'}, message)`` and ``{'CANCELLED'}`` with not
 from __future__ import annotations
 
 import base64
+import os
 import threading
 import time
 import warnings as _warnings
@@ -1468,8 +1469,14 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
             surface = active_surface(context)
             if surface is None:
                 raise bridge.SelectionError("Select a TCB surface (or its control net)")
+            if self.filepath.startswith("//") and not bpy.data.filepath:
+                # (an unsaved .blend has no folder: the file had been written to the folder
+                # Blender was started in, reported as "saved rel.npz"; user test)
+                raise bridge.SelectionError(
+                    f"'{self.filepath}' is relative to the .blend file, which is not saved "
+                    "yet: save the .blend file first, or give the file's full path")
             # ('//' is relative to the .blend: it had been written to the filesystem's root)
-            path = bpy.path.abspath(self.filepath)
+            path = os.path.abspath(os.path.expanduser(bpy.path.abspath(self.filepath)))
             stored_surface(surface).save(path)
         except _user_errors() as ex:
             self.report({"ERROR"}, str(ex))

@@ -234,18 +234,30 @@ def test_a_map_without_a_point_copy_removes_the_old_copy(clean_scene, capfd):
     assert surface.tcb.has_deviation
 
 
-def test_export_to_a_path_relative_to_the_blend(clean_scene, tmp_path):
+def test_export_to_a_path_relative_to_the_blend(clean_scene, tmp_path, monkeypatch, capfd):
     """'//' paths are relative to the .blend file: the spline had been written to the
-    filesystem's root."""
+    filesystem's root. In an unsaved file they are refused (the spline had been written to the
+    working folder, reported as "saved rel.npz": user test); the report names the full path."""
     bpy = clean_scene
     src = add_mesh(bpy, "Scan", *wave())
     assert fit(bpy, src) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
+    name = f"tcb_export_{tmp_path.name}.npz"
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    assert not bpy.data.filepath
+    with pytest.raises(RuntimeError, match=rf"'//{name}' is relative to the \.blend file, which "
+                                           r"is not saved yet: save the \.blend file first, or "
+                                           r"give the file's full path"):
+        run(bpy, bpy.ops.tcb.export_spline, surface, filepath=f"//{name}")
+    assert not list(work.iterdir())
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
     surface = bpy.data.objects[surface.name]
-    name = f"tcb_export_{tmp_path.name}.npz"
     try:
+        capfd.readouterr()
         assert run(bpy, bpy.ops.tcb.export_spline, surface, filepath=f"//{name}") == {"FINISHED"}
+        assert f"TCB: saved {tmp_path / name}" in capfd.readouterr().out
         assert (tmp_path / name).is_file() and not (Path("/") / name).exists()
         stored = spline_of(surface).control_points
         loaded = scenes.core_module().TCBSurface.load(tmp_path / name)
