@@ -1790,6 +1790,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
                 and report["faces_max_rel"] > FACES_MIN_REL):
             warnings.warn(faces_warning(report), RuntimeWarning, stacklevel=3)
     if param.faces is not None and report["control_points"] > COARSE_MESH_RATIO * report["points"]:
+        # (the largest bend between its faces, which says whether creases made the net big)
+        report["coarse_mesh_crease"] = largest_crease(points, np.asarray(param.faces))
         warnings.warn(coarse_mesh_warning(report), RuntimeWarning, stacklevel=3)
     if param.faces is None:
         # the RMS over the parameter area (core.refine.area_weights): a cloud of uneven density
@@ -1986,15 +1988,54 @@ FACES_MIN_REL = 1e-6  # ... and that error is above this share of the diagonal
 COARSE_MESH_RATIO = 4.0
 
 
-def coarse_mesh_warning(report: dict) -> str:
-    """The words for a net much larger than its mesh (``_run``)."""
-    return (f"the net has {report['control_points']} control points for a mesh of "
-            f"{report['points']} vertices: the surface follows the mesh's flat faces, and the "
-            "creases between them take many control points to meet the tolerance at the "
-            "vertices. For a smooth surface with a small net, subdivide the mesh first (in "
-            "Blender a Subdivision Surface modifier); or, if it is a height field over a plane, "
-            "fit its vertices as a point cloud (faces=None; in Blender a copy of the mesh with "
-            "its faces deleted: Delete > Only Faces)")
+# a mesh whose faces bend by at most this many degrees between neighbours has no creases for
+# coarse_mesh_warning to blame (a flat grid's or n-gon's bends are rounding, ~1e-6 degrees)
+CREASE_MIN_DEGREES = 0.01
+
+
+def largest_crease(points: np.ndarray, faces: np.ndarray) -> float:
+    """The largest angle in degrees between the normals of two triangles of ``faces`` ((F, 3)
+    int, into ``points`` (N, 3)) that share an edge: 0 for a flat mesh. Degenerate triangles
+    (no normal) are left out."""
+    p = np.asarray(points, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)[:, :3]
+    n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+    length = np.linalg.norm(n, axis=1)
+    ok = length > 1e-12 * max(float(length.max(initial=0.0)), 1e-300)
+    n, f = n[ok] / length[ok, None], f[ok]
+    if len(f) < 2:
+        return 0.0
+    edges = np.sort(np.stack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=1), axis=2)
+    edges = edges.reshape(-1, 2)
+    owner = np.repeat(np.arange(len(f)), 3)
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    e, o = edges[order], owner[order]
+    same = (e[1:] == e[:-1]).all(axis=1)  # consecutive halves of one shared edge
+    if not same.any():
+        return 0.0
+    a, b = o[:-1][same], o[1:][same]
+    cos = np.clip(np.einsum("ij,ij->i", n[a], n[b]), -1.0, 1.0)
+    return float(np.degrees(np.arccos(cos.min())))
+
+
+def coarse_mesh_warning(report: dict, budget: str = "max_control_points",
+                        subdivide: str = "subdivide the mesh first",
+                        cloud: str = "fit its vertices as a point cloud (faces=None)") -> str:
+    """The words for a net much larger than its mesh (``_run``): what made it large, by the
+    largest bend between the mesh's faces (``report["coarse_mesh_crease"]``, degrees), and
+    what gives a smaller net. ``budget``, ``subdivide``, ``cloud``: how the caller asks for a
+    smaller control-point budget, a subdivided mesh and the vertices alone (Blender words
+    them its way)."""
+    head = (f"the net has {report['control_points']} control points for a mesh of "
+            f"{report['points']} vertices")
+    crease = float(report.get("coarse_mesh_crease", 180.0))
+    if crease <= CREASE_MIN_DEGREES:  # (a flat grid, a flat n-gon: no creases to blame)
+        return (f"{head}, more than it needs: the mesh is flat (no creases between its faces), "
+                f"and a net of any size fits it; for a smaller net, lower {budget}")
+    return (f"{head}: the surface follows the mesh's flat faces, and the creases between them "
+            f"(up to {crease:.3g} degrees) take many control points to meet the tolerance at "
+            f"the vertices. For a smooth surface with a small net, {subdivide}; or, if it is a "
+            f"height field over a plane, {cloud}")
 
 
 def folds_warning(report: dict) -> str:

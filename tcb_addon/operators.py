@@ -537,6 +537,15 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
     reason = str(rep.get("stop_reason", ""))
     if (rep.get("swings") or {}).get("places"):  # core.surface.data_swings
         warnings = list(warnings) + [_core().surface.swing_warning(rep)]
+    # a net much larger than its mesh (core.surface.coarse_mesh_warning), in Blender's words
+    # (the engine's had said "faces=None": user test)
+    large_net = "coarse_mesh_crease" in rep
+    if large_net:
+        warnings = list(warnings) + [_core().surface.coarse_mesh_warning(
+            rep, budget="Max Control Points",
+            subdivide="subdivide the mesh first (a Subdivision Surface modifier)",
+            cloud="fit its vertices as a point cloud (a copy of the mesh with its faces "
+                  "deleted: Delete > Only Faces)")]
     loose = rep.get("loose_vertices", 0)
     if loose and not any("in no face" in str(w) for w in warnings):
         # (the engine's warning says it, with what to do: the summary had said it again, "1
@@ -575,7 +584,9 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
                   + (" (the smoothness was cross-validated)" if chosen
                      else ", or turn on Auto Smoothness"))
     else:
-        advice = {"control-point budget reached": "raise Max Control Points",
+        # (not with the large net's warning, which says the net is already far too big for
+        # the mesh: the two had been given together; user test)
+        advice = {"control-point budget reached": "" if large_net else "raise Max Control Points",
                   "iteration limit": "raise Max Iterations",
                   "no triangle has enough data to refine": "add points where the error is "
                   "largest (too few there for more knots)",
@@ -597,7 +608,10 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
             op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason}): {advice}")
         else:
             op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason})"
-                      + (f": {advice} or loosen the tolerance" if advice else ""))
+                      + (f": {advice} or loosen the tolerance" if advice
+                         else ": loosen the tolerance, or subdivide the mesh first (see the "
+                         "net's size above)"
+                         if large_net and reason == "control-point budget reached" else ""))
 
 
 # --- the worker-thread job and the modal/execute skeleton --------------------------------------
@@ -624,10 +638,10 @@ def _recording(fn, sink: list):
 
 def _engine_notes(op) -> list:
     """The engine's warnings recorded for ``op`` (:func:`_recording`), less the swing warning
-    (report_result words it from the report) and refine()'s word on edited control points
+    and the large net's (report_result words them from the report) and refine()'s word on edited control points
     (Refine says it in Blender's terms)."""
     return [m for m in getattr(op, "_engine", ()) if not m.startswith("the surface swings away")
-            and "edited control point" not in m]
+            and not m.startswith("the net has ") and "edited control point" not in m]
 
 
 class _Job:

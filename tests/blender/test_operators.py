@@ -256,6 +256,47 @@ def test_a_missed_tolerance_is_a_warning_that_says_what_to_change(clean_scene, c
     assert "Info: TCB:" in out.out + out.err and "not reached" not in out.out + out.err
 
 
+def test_a_large_net_for_a_small_mesh_is_warned_of_in_blender_words(clean_scene, capfd):
+    """A net much larger than its mesh: for a flat grid or a flat n-gon the warning had blamed
+    "the creases between the mesh's flat faces" (there are none), and it had said "faces=None"
+    to Blender users; after Refine to 1e-5 of a creased grid it had said the net is far too
+    big for the mesh and, in the same message, "raise Max Control Points" (user test)."""
+    bpy = clean_scene
+    verts, faces = grid(4, f=lambda x, y: 0.0 * x)
+    ring = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+    flats = [add_mesh(bpy, "Grid", verts, faces),
+             add_mesh(bpy, "Ngon", np.c_[np.cos(ring), np.sin(ring), np.zeros(12)],
+                      [list(range(12))])]
+    for flat in flats:
+        capfd.readouterr()
+        assert fit(bpy, flat, tolerance=0.05, max_control_points=2000) == {"FINISHED"}
+        text = capfd.readouterr().out
+        assert re.search(r"the net has \d+ control points for a mesh of \d+ vertices, more than "
+                         r"it needs: the mesh is flat \(no creases between its faces\), and a "
+                         r"net of any size fits it; for a smaller net, lower Max Control "
+                         r"Points", text), text
+        assert "creases between them" not in text and "faces=None" not in text, text
+    verts, faces = grid(11, f=lambda x, y: 0.3 * np.sin(3 * x) * np.cos(2 * y))
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    assert fit(bpy, scan, tolerance=1e-3, max_control_points=2000) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.refine(tolerance=1e-5) == {"FINISHED"}
+    text = capfd.readouterr().out
+    rep = spline_of(surface).report
+    assert rep["stop_reason"] == "control-point budget reached", rep["stop_reason"]
+    assert re.search(r"the net has \d+ control points for a mesh of 121 vertices: the surface "
+                     r"follows the mesh's flat faces, and the creases between them \(up to "
+                     r"[\d.]+ degrees\) take many control points .* subdivide the mesh first "
+                     r"\(a Subdivision Surface modifier\); or, .* point cloud \(a copy of the mesh with its "
+                     r"faces deleted: Delete > Only Faces\)", text), text
+    assert "raise Max Control Points" not in text and "faces=None" not in text, text
+    assert text.count("the net has") == 1, text
+    assert ("the tolerance was not reached (control-point budget reached): loosen the "
+            "tolerance, or subdivide the mesh first") in text, text
+
+
 def test_a_tolerance_below_the_noise_says_the_data_look_noisy(clean_scene, capfd):
     """A noisy scan fitted to a tolerance below its noise: the warning says that the error
     stopped falling, names noise and the RMS reached in the tolerance's units, not "raise Max

@@ -2486,7 +2486,7 @@ def test_a_coarse_mesh_whose_net_outgrows_it_is_warned_of():
 
     v, f = grid_mesh(4)
     with pytest.warns(RuntimeWarning, match=r"the net has \d+ control points for a mesh of 16 "
-                                            r"vertices: .*subdivide the mesh first .*fit its "
+                                            r"vertices: .*subdivide the mesh first.*fit its "
                                             r"vertices as a point cloud"):
         s = fit_surface(v, f)
     assert s.report["control_points"] > COARSE_MESH_RATIO * 16
@@ -2496,6 +2496,35 @@ def test_a_coarse_mesh_whose_net_outgrows_it_is_warned_of():
         fine = fit_surface(*grid_mesh(21))
     assert cloud.report["control_points"] < 16 * COARSE_MESH_RATIO
     assert fine.report["control_points"] < 441
+
+
+def test_a_flat_mesh_with_a_large_net_is_not_said_to_have_creases():
+    """A flat 4 x 4 grid and a flat 12-vertex n-gon got the large net's warning that blamed
+    "the creases between the mesh's flat faces", which they do not have (user test): the
+    largest bend between neighbouring faces decides the words; a creased mesh's warning
+    names its largest bend."""
+    from core.surface import largest_crease
+
+    v, f = grid_mesh(4)
+    flat = np.c_[v[:, :2], np.zeros(len(v))]
+    assert largest_crease(flat, f) == pytest.approx(0.0, abs=1e-6)
+    # two triangles folded by 90 degrees along their shared edge
+    assert largest_crease(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]),
+                          np.array([[0, 1, 2], [1, 0, 3]])) == pytest.approx(90.0)
+    ring = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+    ngon = np.c_[np.cos(ring), np.sin(ring), np.zeros(12)]
+    for points, faces in ((flat, f), (ngon, [list(range(12))])):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            s = fit_surface(points, faces, tolerance=0.05)
+        words = [str(w.message) for w in caught if str(w.message).startswith("the net has")]
+        assert len(words) == 1 and s.report["coarse_mesh_crease"] < 1e-3, words
+        assert "creases between them" not in words[0]
+        assert re.search(r"more than it needs: the mesh is flat \(no creases between its "
+                         r"faces\), .*lower max_control_points", words[0]), words[0]
+    with pytest.warns(RuntimeWarning, match=r"the creases between them \(up to [\d.]+ "
+                                            r"degrees\) take many control points"):
+        fit_surface(*grid_mesh(4))
 
 
 def _coarse_meshes():
