@@ -239,6 +239,7 @@ def test_export_to_a_path_relative_to_the_blend(clean_scene, tmp_path, monkeypat
     filesystem's root. In an unsaved file they are refused (the spline had been written to the
     working folder, reported as "saved rel.npz": user test); the report names the full path."""
     bpy = clean_scene
+    bpy.ops.wm.read_homefile(use_empty=True)  # (an unsaved file: an earlier test saved one)
     src = add_mesh(bpy, "Scan", *wave())
     assert fit(bpy, src) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
