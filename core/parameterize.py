@@ -2649,8 +2649,11 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
             f"handles or tunnels; cut them open so that the patch is a disk"
         )
 
-    # the loop in order, starting at its smallest vertex index
-    loop = depth_first_order(bgraph, int(bf.min()), directed=True, return_predecessors=False)
+    # the loop in order, starting at its vertex of least coordinates (x, then y, then z), so
+    # that the map does not depend on how the vertices are numbered (from the least index, a
+    # grid mesh's domain turned with the numbering, and its fit changed: user test)
+    start = int(bf[np.lexsort(p[bf].T[::-1])[0]])
+    loop = depth_first_order(bgraph, start, directed=True, return_predecessors=False)
     if len(loop) != len(bf):  # cannot happen after the checks above; keep the guarantee
         raise TopologyError("the boundary of the mesh is not a simple loop; a disk is needed")
 

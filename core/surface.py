@@ -1518,16 +1518,33 @@ def _area_samples(points, faces, count: int, seed: int = 0):
     """``count`` random points (seeded) on the triangles ``faces`` of ``points``, in proportion
     to their 3D area: the face (count,) of each and its barycentric coordinates (count, 3)
     (``s = sqrt(r_1)``: ``(1 - s, s (1 - r_2), s r_2)``, uniform on the triangle); none if
-    the faces have no area."""
+    the faces have no area. The draws do not depend on the order of the vertices, of the faces
+    or of a face's corners (each face is started at its corner of least coordinates, x first,
+    and the faces are drawn from in the order of their corners' coordinates): the same mesh
+    stored another way gets the same points (a half sphere of 65 vertices, its faces shuffled
+    as Blender's Sort Elements does, had got nets of 184 to 297 control points: user test)."""
     rng = np.random.default_rng(seed)
-    a, b, c = (points[faces[:, j]] for j in range(3))
+    faces = np.asarray(faces)
+    rank = np.empty(len(points), dtype=np.int64)
+    rank[np.lexsort(np.asarray(points).T[::-1])] = np.arange(len(points))
+    first = np.argmin(rank[faces], axis=1)
+    turn = (first[:, None] + np.arange(3)) % 3  # the corners from the least one on
+    rows = np.arange(len(faces))[:, None]
+    ranks = rank[faces[rows, turn]]
+    order = np.lexsort(ranks.T[::-1])
+    canon = faces[rows, turn][order]
+    a, b, c = (points[canon[:, j]] for j in range(3))
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
     if not area.sum() > 0:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-    face = rng.choice(len(faces), size=count, p=area / area.sum())
+    pick = rng.choice(len(canon), size=count, p=area / area.sum())
     r1, r2 = rng.random(count), rng.random(count)
     s = np.sqrt(r1)
-    return face, np.stack([1 - s, s * (1 - r2), s * r2], axis=1)
+    drawn = np.stack([1 - s, s * (1 - r2), s * r2], axis=1)  # of the turned corners
+    face = order[pick]
+    bary = np.empty_like(drawn)
+    bary[np.arange(count)[:, None], turn[face]] = drawn
+    return face, bary
 
 
 # the fold check of a mesh's fit (mesh_folds): points sampled on its faces, and the share of
@@ -1594,13 +1611,15 @@ def mesh_folds(space, control_points, points, uv, faces, seed: int = 0,
 def smooth_normals(points, faces, used, planes) -> np.ndarray:
     """Vertex normals (n, 3) of a noisy mesh, smooth over the noise: the normals of the planes
     fitted to each used vertex and its nearest (``planes``: :func:`_local_planes` of the used
-    vertices), each turned to agree with the sum of the angle-weighted vertex
-    normals (:func:`_vertex_normals`) over its neighbourhood; 0 at the vertices not used."""
+    vertices ``points[used]``, ``used`` a mask or indices), each turned to agree with the sum of
+    the angle-weighted vertex normals (:func:`_vertex_normals`) over its neighbourhood; 0 at
+    the vertices not used."""
     normal, _, _, idx = planes
-    summed = _vertex_normals(np.asarray(points, dtype=np.float64), faces)[1][
-        np.flatnonzero(used)][idx].sum(axis=1)
-    out = np.zeros((len(used), 3))
-    out[used] = normal * np.where(np.einsum("ij,ij->i", normal, summed) < 0, -1.0, 1.0)[:, None]
+    used = np.asarray(used)
+    pick = np.flatnonzero(used) if used.dtype == bool else used
+    summed = _vertex_normals(np.asarray(points, dtype=np.float64), faces)[1][pick][idx].sum(axis=1)
+    out = np.zeros((len(points), 3))
+    out[pick] = normal * np.where(np.einsum("ij,ij->i", normal, summed) < 0, -1.0, 1.0)[:, None]
     return out
 
 
@@ -1630,25 +1649,34 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     these very points (a cloud), so :func:`normalize` need not check them again."""
     t0 = time.perf_counter()
     used = np.asarray(param.used, dtype=bool)
-    lo, hi = column_bounds(np.asarray(param.uv)[used])
+    # a mesh's used vertices, in an order of their coordinates alone (x, then y, then z): the
+    # fit's seeded draws (the start's knots, subsets) pick the same points of the same mesh
+    # stored in another order (a half sphere of 65 vertices, its vertices or faces shuffled as
+    # Blender's Sort Elements does and bmesh edits leave them, had got nets of 184 to 494
+    # control points: user test). A cloud's points keep their order (a cloud of 3000 points
+    # shuffled: 499 to 507 control points)
+    kept = np.flatnonzero(used)
+    if param.faces is not None:
+        kept = kept[np.lexsort(np.asarray(points)[kept].T[::-1])]
+    lo, hi = column_bounds(np.asarray(param.uv)[kept])
     extent = hi - lo
     # (a strip holding several spacings of its points across is a surface: a road corridor
     # 5 km long and 4 m wide, 14 spacings across, had been refused: user test)
     across = np.sqrt(used.sum() * extent.min() / max(extent.max(), 1e-300))
     if extent.min() < MIN_ASPECT * extent.max() and (
-            across < MIN_ACROSS or _on_lines(np.asarray(param.uv)[used])):
+            across < MIN_ACROSS or _on_lines(np.asarray(param.uv)[kept])):
         raise InvalidInputError(
             f"the points lie almost on a curve: their parameter domain is {extent.min() / extent.max():.1e} "
             "times as wide as it is long; a surface needs points spread in two directions"
         )
     if checked and param.faces is None:
-        cloud = points if used.all() else points[used]
+        cloud = points[kept]
         norm = box_normalization(cloud)
         q = norm.apply(cloud)
     else:
-        q, norm = normalize(points[used])
+        q, norm = normalize(points[kept])
     diag_norm = 2.0  # normalize() maps the bounding box to half-diagonal 1
-    uv = np.asarray(param.uv)[used]
+    uv = np.asarray(param.uv)[kept]
     fit_uv, fit_q = uv, q
     subsampled = len(uv) > MAX_FIT_POINTS
     if subsampled:
@@ -1699,15 +1727,15 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
             return None, None, mesh_folds(
                 fit_state.space, fit_state.fit.control_points, at, np.asarray(param.uv), faces,
                 options.seed,
-                smooth=None if planes is None else smooth_normals(at, faces, used, planes))
+                smooth=None if planes is None else smooth_normals(at, faces, kept, planes))
         if param.axes is None:
             return None, None, None
         C = norm.undo(fit_state.fit.control_points)
         sub = np.random.default_rng(options.seed).permutation(len(uv))[:LAYER_POINTS]
-        across = ((points[used][sub] - fit_state.space.combine(uv[sub], C)[0])
+        across = ((points[kept][sub] - fit_state.space.combine(uv[sub], C)[0])
                   @ np.asarray(param.axes)[2])
         gap = data_layers(uv[sub], across, options.seed)
-        return gap, (data_spikes(points[used], errs, np.asarray(param.axes)[2])
+        return gap, (data_spikes(points[kept], errs, np.asarray(param.axes)[2])
                      if spikes else None), None
 
     if not subsampled:
@@ -1732,11 +1760,11 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         for s in range(0, len(uv), 200_000):
             A = best.space.evaluate(uv[s : s + 200_000])
             e[s : s + 200_000] = np.linalg.norm(A @ best.fit.control_points - q[s : s + 200_000], axis=1)
-        errors[used] = e * norm.scale
+        errors[kept] = e * norm.scale
     else:
-        errors[used] = best.fit.errors[: len(uv)] * norm.scale
+        errors[kept] = best.fit.errors[: len(uv)] * norm.scale
     if checks is None:
-        checks = data_checks(best, errors[used])
+        checks = data_checks(best, errors[kept])
     diagonal = 2.0 * norm.scale
     report = {
         "mode": options.mode,
@@ -1758,10 +1786,10 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # error within the budget; not always the last (history[i]["iteration"])
         "returned_iteration": int(best.iteration),
         # errors at the user's points (for meshes the fit also used samples on the faces)
-        "rms": float(np.sqrt(np.mean(errors[used] ** 2))),
-        "max": float(errors[used].max()),
-        "rms_rel": float(np.sqrt(np.mean(errors[used] ** 2)) / diagonal),
-        "max_rel": float(errors[used].max() / diagonal),
+        "rms": float(np.sqrt(np.mean(errors[kept] ** 2))),
+        "max": float(errors[kept].max()),
+        "rms_rel": float(np.sqrt(np.mean(errors[kept] ** 2)) / diagonal),
+        "max_rel": float(errors[kept].max() / diagonal),
         "diagonal": float(diagonal),
         "seconds": time.perf_counter() - t0,
         "stop_reason": reason,
@@ -1796,7 +1824,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     if param.faces is None:
         # the RMS over the parameter area (core.refine.area_weights): a cloud of uneven density
         # meets the tolerance by it too; equal to "rms" within ~10% for an even one
-        e2 = errors[used] ** 2
+        e2 = errors[kept] ** 2
         report["rms_area"] = float(np.sqrt(np.dot(area_weights(uv), e2) / len(e2)))
         report["rms_area_rel"] = report["rms_area"] / diagonal
     if report["loose_vertices"]:
@@ -1827,7 +1855,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     # crowd closer than the data: a sharp step, a gap), which the errors at the data cannot show
     # (swings within the tolerance are no matter, as in the loop)
     if swings is None:
-        at, near, off = uv, points[used], errors[used]
+        at, near, off = uv, points[kept], errors[kept]
         if param.faces is not None and not subsampled:
             # a mesh's samples on its faces are data too: between the vertices of a coarse
             # curved mesh (half a cylinder of 34 vertices) the vertices' neighbourhoods are
@@ -1869,7 +1897,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         report["smoothness_selection"] = best.selection
     if (noise is None and options.tolerance > 0 and not reason.startswith("tolerance reached")
             and reason != "cancelled"):  # a cloud's noise, to say what kept the tolerance off
-        report["noise"] = local_noise(points[used], seed=options.seed)
+        report["noise"] = local_noise(points[kept], seed=options.seed)
         report["noise_rel"] = report["noise"] / diagonal
     surf = TCBSurface(best.space, C, param, errors, report, best.n_interior, options,
                       active=best.active)
@@ -1882,7 +1910,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # of the slope (the same grid with the noise, not turned: RMS 15 times the scatter);
         # the distances of (a sample of) the data to their closest surface points are (1.8
         # times there, 8.1 times folded)
-        far_stall_check(surf, points[used], options.seed)
+        far_stall_check(surf, points[kept], options.seed)
     return surf
 
 

