@@ -45,6 +45,7 @@ from .parameterize import (
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
                      check_callback, prefetch_swing_triangles, swing_places)
+from .smooth_faces import angle_gradients, clough_tocher_points, face_gradients, vertex_gradients
 from .spline_space import SplineSpace, _whole, derivative_order, frozen
 from .simplex import orient2d
 
@@ -1423,20 +1424,21 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0, curved: bool = Tr
 
     ``count`` samples, allotted to the faces in proportion to their 3D area; each at random
     barycentric coordinates ``b`` (seeded), where the parameterization is linear: ``uv = sum
-    b_i uv_i``. The point is on the curved triangle through the face's corners that
-    :func:`curved_points` makes (``curved``), or on the flat face, ``p = sum b_i p_i``.
+    b_i uv_i``. The point is on the C^1 surface through the vertices that
+    :func:`smooth_points` makes (``curved``), or on the flat face, ``p = sum b_i p_i``.
     Fitting these as well as the vertices fits the mesh as a surface instead of interpolating
     a few hundred vertices (not in method.md: section 5 fits the data points as given). On
     the flat faces a coarse mesh was fitted as its facets, creases between them and all: a cap
     of a sphere of 55 vertices took 743 control points and ended 4.7e-3 of its diagonal (RMS)
-    from the sphere; on the curved triangles 151 control points, 1.0e-3
+    from the sphere; on point-normal triangles (:func:`curved_points`, C^0 across the edges in
+    the parameters) 146 and 1.0e-3; on the C^1 surface 146 and 3.6e-4
     (benchmarks/coarse_meshes.py).
     """
     face, bary = _area_samples(points, faces, count, seed)
     tri = faces[face]
     x = np.einsum("nk,nkj->nj", bary, uv[tri])
     if curved and len(face):
-        return curved_points(points, faces, face, bary), x
+        return smooth_points(points, uv, faces, face, bary), x
     return np.einsum("nk,nkj->nj", bary, points[tri]), x
 
 
@@ -1484,20 +1486,11 @@ def curved_points(points, faces, face, bary):
     barycentric coordinates of ``P_1, P_2, P_3``. Flat faces (all their normals the face's)
     stay flat; a face of no area, or a vertex whose normals cancel, has straight edges there.
     Adjacent faces share each edge's curve where neither end is a crease corner."""
-    corner, normal = _vertex_normals(points, faces)
-    normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    unit = corner / np.maximum(np.linalg.norm(corner, axis=1, keepdims=True), 1e-300)
+    own_corner, normal, unit = flat_corners(points, faces, normals=True)
     own = unit[face]
     tri = faces[face]
-    P, N = points[tri], normal[tri]  # (n, 3 corners, 3)
-    crease = np.einsum("nkj,nj->nk", N, own) < np.cos(np.radians(CREASE_ANGLE))
-    # a face with a corner inside a flat region (all of the vertex's faces within FLAT_ANGLE of
-    # its normal) stays flat
-    least = np.ones(len(points))
-    np.minimum.at(least, faces.ravel(),
-                  np.einsum("fkj,fj->fk", normal[faces], unit).ravel())
-    crease |= (least[tri] > np.cos(np.radians(FLAT_ANGLE))).any(axis=1, keepdims=True)
-    N = np.where(crease[..., None], own[:, None, :], N)
+    P = points[tri]  # (n, 3 corners, 3)
+    N = np.where(own_corner[face][..., None], own[:, None, :], normal[tri])
 
     def edge(i, j):  # b at 2/3 of P_i and 1/3 of P_j, pulled into P_i's tangent plane
         d = np.einsum("nj,nj->n", P[:, j] - P[:, i], N[:, i])[:, None]
@@ -1512,6 +1505,50 @@ def curved_points(points, faces, face, bary):
             + 3.0 * (b210 * w * w * u + b120 * w * u * u + b201 * w * w * v
                      + b021 * u * u * v + b102 * w * v * v + b012 * u * v * v)
             + 6.0 * b111 * w * u * v)
+
+
+def flat_corners(points, faces, normals: bool = False):
+    """The corners (f, 3) bool of the faces that keep the face's own plane in the curved
+    samples (:func:`curved_points`, :func:`smooth_points`): a corner whose vertex normal (unit,
+    :func:`_vertex_normals`) turns more than :data:`CREASE_ANGLE` from the face's normal, and
+    every corner of a face with a corner whose faces are all within :data:`FLAT_ANGLE` of the
+    vertex's normal (a flat region). With ``normals``, also the vertices' unit normals (n, 3)
+    and the faces' (f, 3)."""
+    corner, normal = _vertex_normals(points, faces)
+    normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    unit = corner / np.maximum(np.linalg.norm(corner, axis=1, keepdims=True), 1e-300)
+    turn = np.einsum("fkj,fj->fk", normal[faces], unit)
+    own = turn < np.cos(np.radians(CREASE_ANGLE))
+    least = np.ones(len(points))
+    np.minimum.at(least, faces.ravel(), turn.ravel())
+    own |= (least[faces] > np.cos(np.radians(FLAT_ANGLE))).any(axis=1, keepdims=True)
+    return (own, normal, unit) if normals else own
+
+
+def smooth_points(points, uv, faces, face, bary):
+    """Points at barycentric coordinates ``bary`` (n, 3) in the faces ``face`` (n,) of the mesh
+    ``(points, faces)`` parameterized by ``uv``, on the C^1 Clough-Tocher interpolant of its
+    map (:mod:`core.smooth_faces`). The gradient at a face's corner is the face's own linear
+    one at the corners of :func:`flat_corners` (creases and flat regions keep their facets),
+    :func:`core.smooth_faces.angle_gradients` at the other corners of a face with such a
+    corner (next to a crease or a plane, the quadratic through two rings of neighbours, which
+    reach across it, tilted a plane's long triangle next to a fillet: its samples 4e-3 of the
+    diagonal off the part, against 2.7e-4 so), and the vertex's quadratic fit
+    (:func:`core.smooth_faces.vertex_gradients`) elsewhere."""
+    own = flat_corners(points, faces)
+    gradients = vertex_gradients(points, uv, faces)
+    near = np.zeros(len(points))
+    near[faces[own.any(axis=1)].ravel()] = 1.0
+    if near.any():  # ... and the vertices within two edges of them (the quadratic's reach)
+        e = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+        A = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(points),) * 2)
+        A = (A + A.T).tocsr()
+        near = near + A @ near
+        near = (near + A @ near) > 0
+        gradients[near] = angle_gradients(points, uv, faces)[near]
+    gradients = np.where(own[..., None, None], face_gradients(points, uv, faces)[:, None],
+                         gradients[faces])
+    return clough_tocher_points(points, uv, faces, face, bary, gradients)
 
 
 def _area_samples(points, faces, count: int, seed: int = 0):

@@ -638,8 +638,8 @@ def _recording(fn, sink: list):
 
 def _engine_notes(op) -> list:
     """The engine's warnings recorded for ``op`` (:func:`_recording`), less the swing warning
-    and the large net's (report_result words them from the report) and refine()'s word on edited control points
-    (Refine says it in Blender's terms)."""
+    and the large net's (report_result words them from the report) and refine()'s word on
+    edited control points (Refine says it in Blender's terms)."""
     return [m for m in getattr(op, "_engine", ()) if not m.startswith("the surface swings away")
             and not m.startswith("the net has ") and "edited control point" not in m]
 

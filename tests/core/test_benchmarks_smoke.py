@@ -115,16 +115,20 @@ def test_noisy_meshes_quick():
 
 
 def test_coarse_meshes_quick():
-    """``benchmarks/coarse_meshes.py --quick``: on each of its three coarse meshes of smooth
-    shapes the curved face samples end at least 2.5x closer to the true surface than the flat
-    ones, with at most as many control points."""
+    """``benchmarks/coarse_meshes.py --quick --seeds 1``: on each of its three coarse meshes of
+    smooth shapes the C^1 face samples (the default) end at least 2.5x closer to the true
+    surface than the flat ones, with at most 2% more control points (grid 11 x 11: 151 against
+    150), and closer than the point-normal triangles' (sphere cap of 55 vertices: 3.6e-4
+    against 1.0e-3)."""
     res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "coarse_meshes.py"),
-                          "--quick"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+                          "--quick", "--seeds", "1"], capture_output=True, text=True,
+                         timeout=300, cwd=ROOT)
     assert res.returncode == 0, res.stderr[-3000:]
     rows = [[c.strip() for c in r.split("|")[1:-1]] for r in res.stdout.splitlines()
             if r.startswith("| ") and not r.startswith("| mesh")]
     assert [r[0] for r in rows] == ["sphere cap, 55 vertices", "sphere cap, 223 vertices",
                                     "grid 11 x 11"]
     for r in rows:
-        flat, curved = r[1:7], r[7:13]
-        assert int(curved[0]) <= int(flat[0]) and 2.5 * float(curved[3]) < float(flat[3]), r
+        flat, pn, c1 = r[1:5], r[5:9], r[9:13]
+        assert int(c1[0]) <= 1.02 * int(flat[0]) and 2.5 * float(c1[2]) < float(flat[2]), r
+        assert float(c1[2]) < float(pn[2]), r

@@ -1819,7 +1819,8 @@ def test_a_crease_between_large_and_small_faces_is_no_fold() -> None:
     0.62% of the fit's surface counted as folded, and a warning said so on a clean mesh
     (review: 0.07% against the faces' own normals, the crease rounded). With normals
     weighted by corner angles, and a fold counted only against both the face's normal and
-    the interpolated one: under 0.05%, no warning."""
+    the interpolated one: under the warning's 0.1% (seeds 0-4, since the samples are drawn in
+    an order of the coordinates: 0.09, 0.02, 0.02, 0.05 and 0%), no warning."""
     from core import fit_surface
 
     us = np.r_[np.linspace(-1, 0, 6)[:-1], np.linspace(0, 1, 61)]
@@ -1833,7 +1834,7 @@ def test_a_crease_between_large_and_small_faces_is_no_fold() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         surf = fit_surface(pts, faces)
-    assert surf.report["folded"] < 5e-4
+    assert surf.report["folded"] < 1e-3
 
 
 def test_a_round_cap_flattens_to_a_circle_by_both_carriers_of_its_curvature(monkeypatch):
