@@ -1425,7 +1425,9 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0, curved: bool = Tr
     ``count`` samples, allotted to the faces in proportion to their 3D area; each at random
     barycentric coordinates ``b`` (seeded), where the parameterization is linear: ``uv = sum
     b_i uv_i``. The point is on the C^1 surface through the vertices that
-    :func:`smooth_points` makes (``curved``), or on the flat face, ``p = sum b_i p_i``.
+    :func:`smooth_points` makes (``curved``; on a dense mesh, with fewer than
+    :data:`SMOOTH_SAMPLES_PER_FACE` samples per face, on the point-normal triangles of
+    :func:`curved_points`), or on the flat face, ``p = sum b_i p_i``.
     Fitting these as well as the vertices fits the mesh as a surface instead of interpolating
     a few hundred vertices (not in method.md: section 5 fits the data points as given). On
     the flat faces a coarse mesh was fitted as its facets, creases between them and all: a cap
@@ -1438,8 +1440,19 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0, curved: bool = Tr
     tri = faces[face]
     x = np.einsum("nk,nkj->nj", bary, uv[tri])
     if curved and len(face):
-        return smooth_points(points, uv, faces, face, bary), x
+        if count >= SMOOTH_SAMPLES_PER_FACE * len(faces):
+            return smooth_points(points, uv, faces, face, bary), x
+        return curved_points(points, faces, face, bary), x
     return np.einsum("nk,nkj->nj", bary, points[tri]), x
+
+
+# mesh_samples puts the samples on the C^1 surface (smooth_points) when there are at least this
+# many per face: its gradients cost 0.2 s for a mesh of 1e4 vertices and 2.0 s for one of 1e5
+# (the point-normal triangles 0.05 and 0.15 s), whose fit then took 5.7 s instead of 3.9;
+# dense meshes, whose faces are small, gain nothing from it (benchmarks/coarse_meshes.py: the
+# 917-vertex cap and the 41 x 41 grid level) and get a sample on a face in two or fewer
+# (mesh_sample_count's cap)
+SMOOTH_SAMPLES_PER_FACE = 2
 
 
 def mesh_sample_count(vertices: int, max_control_points: int) -> int:
