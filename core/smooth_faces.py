@@ -4,10 +4,10 @@ A mesh is fitted through its vertices and points sampled on its faces (``core.su
 mesh_samples``; not in method.md: section 5 fits the data points as given). The fit sees the
 mesh as the map ``x(u, v)`` from the parameters to space. On the flat faces, and on
 point-normal triangles (``core.surface.curved_points``), that map is only C^0 across the
-faces' edges, and a C^1 spline chases its kinks with knots: a 4 x 4 grid mesh of a smooth
-function took 573 control points at the default tolerance and ended 2% of its diagonal from
-the function. Sampled on the C^1 interpolant of this module it takes 150-170 (the initial net)
-and ends closer (benchmarks/coarse_meshes.py).
+faces' edges, and a C^1 spline chases its kinks with knots. Sampled on the C^1 interpolant
+of this module a sphere cap meshed with 55 vertices ends 3.7e-4 of its diagonal from the
+sphere (RMS) instead of 1.0e-3, and tori and saddles of 50-100 vertices meet a tolerance of
+1e-4 with 40-80% of the control points (benchmarks/coarse_meshes.py, docs/benchmarks.md).
 
 The interpolant is Clough and Tocher's macro-element (reduced form; Farin, "Triangular
 Bernstein-Bezier patches", CAGD 3, 1986, section 4.3; Lai and Schumaker, "Spline functions on
@@ -20,9 +20,10 @@ gradients of a quadratic map it is that map.
 
 The gradients ``dx/du, dx/dv`` (3 x 2) at each vertex are fitted: the quadratic through the
 vertex in the parameters that is nearest, in least squares, to its neighbours within two
-edges (:func:`vertex_gradients`). A face's corner that sits on a crease or in a flat region
-(``core.surface.flat_corners``: the point-normal triangles' rules) takes the face's own linear
-gradient instead, so creases stay creases and planes stay flat.
+edges (:func:`vertex_gradients`). At a vertex on a crease or in a flat region
+(``core.surface.flat_corners``: the point-normal triangles' rules) each face takes its own
+linear gradient instead, so creases stay creases and planes stay flat
+(``core.surface.smooth_points``).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 
 # relative size of the smallest eigenvalue of a vertex's (scaled) normal matrix under which
-# its quadratic fit is not trusted and angle_gradients is taken
+# its quadratic fit is not trusted and mean_gradients is taken
 QUADRATIC_CONDITION = 1e-6
 
 
@@ -50,6 +51,13 @@ def face_gradients(points, uv, faces) -> np.ndarray:
     return D @ inv
 
 
+def vertex_adjacency(faces, n: int) -> sp.csr_matrix:
+    """The symmetric (n, n) matrix with 1 where two vertices share an edge of ``faces``."""
+    e = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    A = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+    return ((A + A.T) > 0).astype(np.float64)
+
+
 def vertex_gradients(points, uv, faces) -> np.ndarray:
     """The gradient (n, 3, 2) of the map at each vertex ``i``: ``J`` of the quadratic
     ``x_i + J d + Q(d)`` (``d = u_j - u_i``) nearest, weighted least squares with weights
@@ -57,11 +65,9 @@ def vertex_gradients(points, uv, faces) -> np.ndarray:
     ``j`` within two edges of ``i``: exact for a quadratic map, second order on a smooth one.
     Where those neighbours do not fix a quadratic (fewer than 5, or their normal matrix, scaled
     by ``h_i``, has an eigenvalue under :data:`QUADRATIC_CONDITION` times its largest):
-    :func:`angle_gradients`. Vertices of no face get zero."""
+    :func:`mean_gradients`. Vertices of no face get zero."""
     n = len(points)
-    e = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    A = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
-    A = ((A + A.T) > 0).astype(np.float64)
+    A = vertex_adjacency(faces, n)
     ring = (A + A @ A).tocoo()
     keep = ring.row != ring.col
     i, j = ring.row[keep], ring.col[keep]
@@ -92,11 +98,11 @@ def vertex_gradients(points, uv, faces) -> np.ndarray:
         G[good] = np.swapaxes(coef[:, :2, :], 1, 2) / h[good, None, None]
     rest = ~good
     if rest.any():
-        G[rest] = angle_gradients(points, uv, faces)[rest]
+        G[rest] = mean_gradients(points, uv, faces)[rest]
     return G
 
 
-def clough_tocher_points(points, uv, faces, face, bary, gradients) -> np.ndarray:
+def clough_tocher_points(points, uv, faces, face, bary, gradients, straight=None) -> np.ndarray:
     """Points (n, 3) of the Clough-Tocher interpolant (module docstring) at barycentric
     coordinates ``bary`` (n, 3) in the faces ``face`` (n,), from the vertices' ``points``,
     their parameters ``uv`` and the gradients ``gradients`` (f, 3 corners, 3, 2) of each
@@ -109,7 +115,10 @@ def clough_tocher_points(points, uv, faces, face, bary, gradients) -> np.ndarray
     derivative across the edge along its normal ``n`` (barycentric direction ``(a, b, c)``):
     ``3 (a b_210 + b b_120 + c e_ij) = (G_i n + G_j n) / 2``; ``r_i = (e_ij + e_ik + q_i) / 3``
     on the inner edge ``V_i C`` (its C^1 conditions), and ``(r_0 + r_1 + r_2) / 3`` at ``C``.
-    A face of no parameter area gives its flat point ``sum b_k p_k``."""
+    A face of no parameter area gives its flat point ``sum b_k p_k``. ``straight`` (f, 3, 3)
+    bool: where ``straight[f, k, m]``, the edge from corner ``k`` toward corner ``m`` starts
+    along the chord, ``p_k + (p_m - p_k) / 3``, whatever ``G_k`` (two faces whose gradients at
+    a vertex differ still share the edge's curve when both start it so)."""
     V = uv[faces[face]]  # (n, 3, 2)
     P = points[faces[face]]  # (n, 3, 3)
     G = gradients[face]  # (n, 3, 3, 2)
@@ -117,8 +126,13 @@ def clough_tocher_points(points, uv, faces, face, bary, gradients) -> np.ndarray
     q = P + np.einsum("nkdt,nkt->nkd", G, C[:, None, :] - V) / 3.0  # toward C
     nxt, prv = [1, 2, 0], [2, 0, 1]
 
-    def toward(k, m):  # p_k + G_k (V_m - V_k) / 3 for the corners k and m (arrays)
-        return P[:, k] + np.einsum("ndt,nt->nd", G[:, k], V[:, m] - V[:, k]) / 3.0
+    chord = None if straight is None else straight[face]
+
+    def toward(k, m, rows=slice(None)):  # p_k + G_k (V_m - V_k) / 3 for corners k and m
+        step = np.einsum("ndt,nt->nd", G[rows, k], V[rows, m] - V[rows, k])
+        if chord is not None:
+            step = np.where(chord[rows, k, m][:, None], P[rows, m] - P[rows, k], step)
+        return P[rows, k] + step / 3.0
 
     # e[:, k]: the ordinate e_ij at the middle of micro-triangle k (edge i = k+1, j = k+2)
     e = np.empty((len(face), 3, 3))
@@ -150,8 +164,7 @@ def clough_tocher_points(points, uv, faces, face, bary, gradients) -> np.ndarray
     bk = bary[rows, k]
     s, t, w = bary[rows, i] - bk, bary[rows, j] - bk, 3.0 * bk
     pi, pj = P[rows, i], P[rows, j]
-    b210 = P[rows, i] + np.einsum("ndt,nt->nd", G[rows, i], V[rows, j] - V[rows, i]) / 3.0
-    b120 = P[rows, j] + np.einsum("ndt,nt->nd", G[rows, j], V[rows, i] - V[rows, j]) / 3.0
+    b210, b120 = toward(i, j, rows), toward(j, i, rows)
     b201, b021 = q[rows, i], q[rows, j]
     b102, b012 = r[rows, i], r[rows, j]
     b111 = e[rows, k]
@@ -164,21 +177,20 @@ def clough_tocher_points(points, uv, faces, face, bary, gradients) -> np.ndarray
     return np.where(ok[:, None], out, flat)
 
 
-def angle_gradients(points, uv, faces) -> np.ndarray:
+def mean_gradients(points, uv, faces) -> np.ndarray:
     """The mean (n, 3, 2) of the faces' linear gradients (:func:`face_gradients`) at each
-    vertex, weighted by the faces' corner angles there in the parameter plane: the gradient of
-    the map as the angle-weighted vertex normal is its normal. First order only, but it never
-    leaves the gradients of the vertex's own faces (zero at vertices of no face)."""
+    vertex, weighted by the faces' areas in the parameter plane (zero at vertices of no face).
+    First order only, but it stays within the gradients of the vertex's own faces, and a
+    sliver of the parameters, whose gradient is the least reliable, weighs least (weighted by
+    the corner angles, a sliver's corner of nearly 180 degrees weighed most: samples 1.7
+    diagonals off a mesh with a uv sliver of 1e-2, 2e7 at 1e-9: review)."""
     n = len(points)
-    Fg = face_gradients(points, uv, faces)
     x = uv[faces]
-    ang = np.empty(faces.shape)
-    for k in range(3):
-        a = x[:, (k + 1) % 3] - x[:, k]
-        b = x[:, (k + 2) % 3] - x[:, k]
-        ang[:, k] = np.arctan2(np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]), (a * b).sum(1))
+    area = 0.5 * np.abs((x[:, 1, 0] - x[:, 0, 0]) * (x[:, 2, 1] - x[:, 0, 1])
+                        - (x[:, 1, 1] - x[:, 0, 1]) * (x[:, 2, 0] - x[:, 0, 0]))
+    weighted = area[:, None, None] * face_gradients(points, uv, faces)
     total = np.zeros((n, 3, 2))
     for k in range(3):
-        np.add.at(total, faces[:, k], ang[:, k, None, None] * Fg)
-    weight = np.bincount(faces.ravel(), weights=ang.ravel(), minlength=n)
+        np.add.at(total, faces[:, k], weighted)
+    weight = np.bincount(faces.ravel(), weights=np.repeat(area, 3), minlength=n)
     return total / np.maximum(weight, 1e-300)[:, None, None]

@@ -45,7 +45,8 @@ from .parameterize import (
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
                      check_callback, prefetch_swing_triangles, swing_places)
-from .smooth_faces import angle_gradients, clough_tocher_points, face_gradients, vertex_gradients
+from .smooth_faces import (clough_tocher_points, face_gradients, mean_gradients,
+                           vertex_adjacency, vertex_gradients)
 from .spline_space import SplineSpace, _whole, derivative_order, frozen
 from .simplex import orient2d
 
@@ -1542,26 +1543,42 @@ def smooth_points(points, uv, faces, face, bary):
     """Points at barycentric coordinates ``bary`` (n, 3) in the faces ``face`` (n,) of the mesh
     ``(points, faces)`` parameterized by ``uv``, on the C^1 Clough-Tocher interpolant of its
     map (:mod:`core.smooth_faces`). The gradient at a face's corner is the face's own linear
-    one at the corners of :func:`flat_corners` (creases and flat regions keep their facets),
-    :func:`core.smooth_faces.angle_gradients` at the other corners of a face with such a
-    corner (next to a crease or a plane, the quadratic through two rings of neighbours, which
-    reach across it, tilted a plane's long triangle next to a fillet: its samples 4e-3 of the
-    diagonal off the part, against 2.7e-4 so), and the vertex's quadratic fit
-    (:func:`core.smooth_faces.vertex_gradients`) elsewhere."""
+    one at the corners of :func:`flat_corners` (creases and flat regions keep their facets);
+    the area-weighted mean of the faces' gradients (:func:`core.smooth_faces.mean_gradients`)
+    at the vertices within two edges of such corners (the quadratic through two rings of
+    neighbours reaches across a crease or a plane's edge: it tilted a plane's long STL
+    triangle next to a fillet, its samples 8.7e-4 of the diagonal (RMS) off the part, 2.7e-4
+    so; /tmp/s32/fp_dbg.py); elsewhere the vertex's quadratic fit
+    (:func:`core.smooth_faces.vertex_gradients`). An edge with such a corner at an end, in
+    either of its faces, starts along its chord there in both (``straight``), so the faces
+    meet: they had parted, up to 1.1e-3 of the diagonal on patch-01.off and 2.9e-2 on a
+    5 x 5 bump (review); giving all faces at such a vertex their own gradients closed that
+    too but faceted coarse meshes (an 8 x 8 grid of waves: 502 control points instead of
+    180)."""
     own = flat_corners(points, faces)
+    n = len(points)
     gradients = vertex_gradients(points, uv, faces)
-    near = np.zeros(len(points))
-    near[faces[own.any(axis=1)].ravel()] = 1.0
-    if near.any():  # ... and the vertices within two edges of them (the quadratic's reach)
-        e = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-        A = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(points),) * 2)
-        A = (A + A.T).tocsr()
+    if own.any():  # the vertices within two edges of flagged corners (the quadratic's reach)
+        A = vertex_adjacency(faces, n)
+        near = np.zeros(n)
+        near[faces[own]] = 1.0
         near = near + A @ near
         near = (near + A @ near) > 0
-        gradients[near] = angle_gradients(points, uv, faces)[near]
+        gradients[near] = mean_gradients(points, uv, faces)[near]
     gradients = np.where(own[..., None, None], face_gradients(points, uv, faces)[:, None],
                          gradients[faces])
-    return clough_tocher_points(points, uv, faces, face, bary, gradients)
+    straight = None
+    if own.any():
+        # (vertex k, vertex m) of each face's corners k, m: flagged at k in any face of the edge
+        k_of = np.repeat(np.arange(3), 3).reshape(3, 3)
+        m_of = k_of.T
+        key = faces[:, k_of] * np.int64(n) + faces[:, m_of]  # (f, 3, 3)
+        flagged = np.broadcast_to(own[:, :, None], key.shape)
+        keys, inverse = np.unique(key.ravel(), return_inverse=True)
+        any_own = np.zeros(len(keys), dtype=bool)
+        np.logical_or.at(any_own, inverse, flagged.ravel())
+        straight = any_own[inverse].reshape(key.shape) & (k_of != m_of)
+    return clough_tocher_points(points, uv, faces, face, bary, gradients, straight)
 
 
 def _area_samples(points, faces, count: int, seed: int = 0):
@@ -1572,7 +1589,7 @@ def _area_samples(points, faces, count: int, seed: int = 0):
     or of a face's corners (each face is started at its corner of least coordinates, x first,
     and the faces are drawn from in the order of their corners' coordinates): the same mesh
     stored another way gets the same points (a half sphere of 65 vertices, its faces shuffled
-    as Blender's Sort Elements does, had got nets of 184 to 297 control points: user test)."""
+    as Blender's Sort Elements does, had got nets of 184 to 494 control points: user test)."""
     rng = np.random.default_rng(seed)
     faces = np.asarray(faces)
     rank = np.empty(len(points), dtype=np.int64)
@@ -1749,7 +1766,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     if param.faces is not None:
         # fit the mesh's surface: vertices plus points sampled on its faces, curved through the
         # vertices unless the vertices are noisy (their normals turn with the noise)
-        count = mesh_sample_count(len(points), options.max_control_points)
+        # (of the vertices in faces: loose ones had changed the draws, review)
+        count = mesh_sample_count(len(kept), options.max_control_points)
         sp_, su_ = mesh_samples(norm.apply(points), np.asarray(param.uv), param.faces, count,
                                 seed=options.seed, curved=not noisy)
         fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
