@@ -152,7 +152,8 @@ def clough_tocher_points(points, uv, faces, face, bary, gradients, straight=None
         c = -a - b
         c = np.where(np.abs(c) > 1e-300, c, 1.0)
         across = (np.einsum("ndt,nt->nd", G[:, i], nrm) + np.einsum("ndt,nt->nd", G[:, j], nrm))
-        e[:, k] = (across / 6.0 - a[:, None] * toward(i, j) - b[:, None] * toward(j, i)) / c[:, None]
+        e[:, k] = ((across / 6.0 - a[:, None] * toward(i, j) - b[:, None] * toward(j, i))
+                   / c[:, None])
     # r[:, i]: on the inner edge V_i C, between the micro-triangles of the edges at V_i
     # (micro-triangle prv[i] has edge (i, i+1), nxt[i] has edge (i-1, i))
     r = (e[:, prv] + e[:, nxt] + q) / 3.0

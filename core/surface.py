@@ -1547,9 +1547,9 @@ def smooth_points(points, uv, faces, face, bary):
     the area-weighted mean of the faces' gradients (:func:`core.smooth_faces.mean_gradients`)
     at the vertices within two edges of such corners (the quadratic through two rings of
     neighbours reaches across a crease or a plane's edge: it tilted a plane's long STL
-    triangle next to a fillet, its samples 8.7e-4 of the diagonal (RMS) off the part, 2.7e-4
-    so; /tmp/s32/fp_dbg.py); elsewhere the vertex's quadratic fit
-    (:func:`core.smooth_faces.vertex_gradients`). An edge with such a corner at an end, in
+    triangle next to a fillet, its samples 8.7e-4 of the diagonal (RMS) off the part, 1.9e-4
+    so, point-normal triangles 2.7e-4; /tmp/s32/fp_dbg.py); elsewhere the vertex's quadratic
+    fit (:func:`core.smooth_faces.vertex_gradients`). An edge with such a corner at an end, in
     either of its faces, starts along its chord there in both (``straight``), so the faces
     meet: they had parted, up to 1.1e-3 of the diagonal on patch-01.off and 2.9e-2 on a
     5 x 5 bump (review); giving all faces at such a vertex their own gradients closed that
