@@ -58,14 +58,14 @@ def vertex_adjacency(faces, n: int) -> sp.csr_matrix:
     return ((A + A.T) > 0).astype(np.float64)
 
 
-def vertex_gradients(points, uv, faces) -> np.ndarray:
+def vertex_gradients(points, uv, faces, mean=None) -> np.ndarray:
     """The gradient (n, 3, 2) of the map at each vertex ``i``: ``J`` of the quadratic
     ``x_i + J d + Q(d)`` (``d = u_j - u_i``) nearest, weighted least squares with weights
     ``h_i^2 / (h_i^2 + |d|^2)`` (``h_i`` the RMS of the vertex's ``|d|``), to the vertices
     ``j`` within two edges of ``i``: exact for a quadratic map, second order on a smooth one.
     Where those neighbours do not fix a quadratic (fewer than 5, or their normal matrix, scaled
     by ``h_i``, has an eigenvalue under :data:`QUADRATIC_CONDITION` times its largest):
-    :func:`mean_gradients`. Vertices of no face get zero."""
+    :func:`mean_gradients` (``mean``, if the caller has it). Vertices of no face get zero."""
     n = len(points)
     A = vertex_adjacency(faces, n)
     ring = (A + A @ A).tocoo()
@@ -98,7 +98,7 @@ def vertex_gradients(points, uv, faces) -> np.ndarray:
         G[good] = np.swapaxes(coef[:, :2, :], 1, 2) / h[good, None, None]
     rest = ~good
     if rest.any():
-        G[rest] = mean_gradients(points, uv, faces)[rest]
+        G[rest] = (mean_gradients(points, uv, faces) if mean is None else mean)[rest]
     return G
 
 

@@ -39,9 +39,9 @@ from .fit import (AUTO_SMOOTHNESS, DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL
 from .geometry import column_bounds, float32_rounding
 from .parallel import background
 from .parameterize import (
-    Parameterization, _as_points, _check_finite, _local_planes, box_normalization, corner_angles,
-    fill_value_rows, fill_value_words, local_noise, local_scatter, normalize, parameterize,
-    spike_points,
+    Parameterization, _as_points, _check_finite, _edge_pairs, _local_planes, box_normalization,
+    corner_angles, fill_value_rows, fill_value_words, local_noise, local_scatter, normalize,
+    parameterize, spike_points,
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
                      check_callback, prefetch_swing_triangles, swing_places)
@@ -1557,14 +1557,15 @@ def smooth_points(points, uv, faces, face, bary):
     180)."""
     own = flat_corners(points, faces)
     n = len(points)
-    gradients = vertex_gradients(points, uv, faces)
+    mean = mean_gradients(points, uv, faces)
+    gradients = vertex_gradients(points, uv, faces, mean=mean)
     if own.any():  # the vertices within two edges of flagged corners (the quadratic's reach)
         A = vertex_adjacency(faces, n)
         near = np.zeros(n)
         near[faces[own]] = 1.0
         near = near + A @ near
         near = (near + A @ near) > 0
-        gradients[near] = mean_gradients(points, uv, faces)[near]
+        gradients[near] = mean[near]
     gradients = np.where(own[..., None, None], face_gradients(points, uv, faces)[:, None],
                          gradients[faces])
     straight = None
@@ -2101,16 +2102,12 @@ def largest_crease(points: np.ndarray, faces: np.ndarray) -> float:
     n, f = n[ok] / length[ok, None], f[ok]
     if len(f) < 2:
         return 0.0
-    edges = np.sort(np.stack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=1), axis=2)
-    edges = edges.reshape(-1, 2)
-    owner = np.repeat(np.arange(len(f)), 3)
-    order = np.lexsort((edges[:, 1], edges[:, 0]))
-    e, o = edges[order], owner[order]
-    same = (e[1:] == e[:-1]).all(axis=1)  # consecutive halves of one shared edge
-    if not same.any():
+    edges = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)  # face by face
+    edge_id = np.unique(edges[:, 0] * len(p) + edges[:, 1], return_inverse=True)[1].ravel()
+    h1, h2 = _edge_pairs(edge_id)  # the two halves of each shared edge
+    if not len(h1):
         return 0.0
-    a, b = o[:-1][same], o[1:][same]
-    cos = np.clip(np.einsum("ij,ij->i", n[a], n[b]), -1.0, 1.0)
+    cos = np.clip(np.einsum("ij,ij->i", n[h1 // 3], n[h2 // 3]), -1.0, 1.0)
     return float(np.degrees(np.arccos(cos.min())))
 
 
