@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 from .configurations import _segments_cross
 from .simplex import orient2d
 
-__all__ = ["closest_point_on_triangles", "column_bounds", "distances_at_vertices",
+__all__ = ["closest_point_on_triangles", "column_bounds", "coordinate_order", "distances_at_vertices",
            "ear_clipping", "float32_rounding", "point_mesh_distance", "simple_polygon"]
 
 
@@ -33,6 +33,32 @@ def column_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lo = np.array([a[:, j].min() for j in range(a.shape[1])])
     hi = np.array([a[:, j].max() for j in range(a.shape[1])])
     return lo, hi
+
+
+def coordinate_order(points: np.ndarray) -> np.ndarray | None:
+    """The order of the rows of ``points`` (n, d) by their coordinates alone (the first
+    column, ties by the second, ...; ``np.lexsort`` of the reversed columns), or None when
+    they are in that order already. The fit's seeded draws (subsets, the start's knots) pick
+    points by their place in this order, so the same data stored in another order gets the
+    same surface (a cloud of 3000 points shuffled had got 499 to 507 control points).
+
+    A stable sort of the first column when it has no ties (1e6 points: 0.05 s against 0.48 s
+    for the full lexsort; the same order); a check in one pass when the rows are sorted."""
+    p = np.asarray(points)
+    n = len(p)
+    if n < 2:
+        return None
+    d = np.diff(p, axis=0)
+    step = d[:, 0]
+    for j in range(1, p.shape[1]):  # the first column that differs decides
+        step = np.where(step == 0, d[:, j], step)
+    if not (step < 0).any():
+        return None
+    order = np.argsort(p[:, 0], kind="stable")
+    x = p[order, 0]
+    if (x[1:] == x[:-1]).any():
+        order = np.lexsort(p.T[::-1])
+    return order
 
 
 def float32_rounding(points, advice: str, columns=None) -> str | None:

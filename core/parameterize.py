@@ -32,7 +32,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from .errors import (
     HolesError, InvalidInputError, OutlierError, ParameterizationError, TCBError, TopologyError,
 )
-from .geometry import column_bounds, ear_clipping, simple_polygon
+from .geometry import column_bounds, coordinate_order, ear_clipping, simple_polygon
 from .parallel import pmap, row_blocks
 from .simplex import orient2d
 
@@ -1636,6 +1636,27 @@ def parameterize_points(
         ParameterizationError: the cloud folds over every candidate plane (or the one given),
             or is too noisy to be checked for folds (with no ``projection``).
     """
+    # the cloud in an order of its coordinates (coordinate_order): the checks' seeded samples
+    # pick the same points of the same cloud stored in another order; the rows given back
+    # (and an outlier error's indices) are in the order given
+    p = _as_points(points)
+    order = coordinate_order(p)
+    if order is None:
+        return _parameterize_points(p, drop_outliers, projection, spikes, strays)
+    try:
+        par = _parameterize_points(p[order], drop_outliers, projection, spikes, strays)
+    except OutlierError as exc:
+        if len(exc.indices) == 0:
+            raise
+        raise outlier_error(p, np.sort(order[np.asarray(exc.indices)])) from None
+    uv = np.empty_like(par.uv)
+    used = np.empty_like(par.used)
+    uv[order], used[order] = par.uv, par.used
+    return replace(par, uv=_readonly(uv), used=_readonly(used))
+
+
+def _parameterize_points(points, drop_outliers, projection, spikes, strays) -> Parameterization:
+    """:func:`parameterize_points` of the points in the order given."""
     direction = projection_direction(projection)
     if drop_outliers and spikes and DROP_SPIKES:
         # the spikes and pits inside the cloud too (spike_points), across the projection

@@ -36,7 +36,7 @@ from .configurations import Configurations
 from .errors import CancelledError, FileFormatError, InvalidInputError, TCBError
 from .fit import (AUTO_SMOOTHNESS, DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL,
                   SPARSE_SMOOTHNESS, DefaultSmoothness, fit_control_points)
-from .geometry import column_bounds, float32_rounding
+from .geometry import column_bounds, coordinate_order, float32_rounding
 from .parallel import background
 from .parameterize import (
     Parameterization, _as_points, _check_finite, _edge_pairs, _local_planes, box_normalization,
@@ -1717,15 +1717,15 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     these very points (a cloud), so :func:`normalize` need not check them again."""
     t0 = time.perf_counter()
     used = np.asarray(param.used, dtype=bool)
-    # a mesh's used vertices, in an order of their coordinates alone (x, then y, then z): the
-    # fit's seeded draws (the start's knots, subsets) pick the same points of the same mesh
-    # stored in another order (a half sphere of 65 vertices, its vertices or faces shuffled as
+    # the used points, in an order of their coordinates alone (coordinate_order): the fit's
+    # seeded draws (the start's knots, subsets) pick the same points of the same data stored
+    # in another order (a half sphere of 65 vertices, its vertices or faces shuffled as
     # Blender's Sort Elements does and bmesh edits leave them, had got nets of 184 to 494
-    # control points: user test). A cloud's points keep their order (a cloud of 3000 points
-    # shuffled: 499 to 507 control points)
+    # control points: user test; a cloud of 3000 points shuffled 499 to 507)
     kept = np.flatnonzero(used)
-    if param.faces is not None:
-        kept = kept[np.lexsort(np.asarray(points)[kept].T[::-1])]
+    order = coordinate_order(np.asarray(points)[kept])
+    if order is not None:
+        kept = kept[order]
     lo, hi = column_bounds(np.asarray(param.uv)[kept])
     extent = hi - lo
     # (a strip holding several spacings of its points across is a surface: a road corridor
@@ -2478,7 +2478,12 @@ def data_swings(space, C, uv, points, errors, seed: int = 0,
     the places too). ``space`` with control points ``C`` (all functions), the data's
     parameters ``uv``, ``points`` and fit errors ``errors`` (one unit); a place counts when
     its excess is above ``margin``. Returns (places flagged, places checked, the largest
-    excess)."""
+    excess). The points are taken in an order of their coordinates (``coordinate_order``):
+    the check's seeded sample does not depend on the order they are stored in, and the
+    report's check (made in that order by the fit) is what this call says."""
+    order = coordinate_order(points)
+    if order is not None:
+        uv, points, errors = (np.asarray(a)[order] for a in (uv, points, errors))
     where, checked, largest = swing_places(space, C, uv, points, errors, seed, margin,
                                            domain=True)
     return len(where), checked, largest

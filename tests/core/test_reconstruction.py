@@ -23,6 +23,7 @@ from core import (
     build_space,
     fit_surface,
 )
+from core.errors import OutlierError
 from core.fit import fit_control_points
 from core import refine
 import core.surface
@@ -698,10 +699,11 @@ def test_refine_continues_with_a_tighter_tolerance():
 
 def test_a_sparse_cloud_gets_a_cross_validated_smoothness_unless_one_is_given(monkeypatch):
     """60 random points of Franke's function, about 1 per control point: with smoothness
-    1e-4 the surface swung up to 4.3 times the height range away from the function between
-    the points (seeds 1-5); the default is cross-validated there (errors 0.18-0.31 of the
-    range). A value given explicitly is used as given, with a warning. (The loop's taking
-    back of insertions that swing, on by default, keeps this one closer: 0.39 of the range.)"""
+    1e-4 the surface swings away from the function between the points (seeds 1-5: up to 0.32-
+    1.16 of the height range; before the points were fitted in an order of their coordinates
+    up to 4.3); the default is cross-validated there (errors 0.19-0.37 of the range). A value
+    given explicitly is used as given, with a warning. (The loop's taking back of insertions
+    that swing, on by default, keeps this one closer: 0.21 of the range against 0.88.)"""
     import warnings
 
     xy = np.random.default_rng(1).random((60, 2))
@@ -729,7 +731,7 @@ def test_a_sparse_cloud_gets_a_cross_validated_smoothness_unless_one_is_given(mo
     said = [str(w.message) for w in caught]
     assert any(re.search(r"60 points for \d+ control points.*overshoot.*'auto'", t) for t in said)
     assert given.report["smoothness"] == 1e-4 and "smoothness_selection" not in given.report
-    assert worst_error(given) > 1.0
+    assert worst_error(given) > 3 * worst_error(default)
     # the swing check (core.surface.data_swings) sees it too; the cross-validated one is clean
     assert given.report["swings"]["places"] > 0 and any("swings away" in t for t in said)
     assert default.report["swings"]["places"] == 0
@@ -862,7 +864,9 @@ def test_noise_in_the_sparse_part_of_an_uneven_cloud_is_not_fitted():
     over the area cannot honestly meet the tolerance. Steering the knots by it fitted the noise
     (1000 control points, 9 fits, 6x the tolerance off the true shape; without the area RMS
     150 and 2.7x): a run stops when the estimate of the error at new points over the area
-    stops falling, with the area weights' effective count of points (about the tile's)."""
+    stops falling, with the area weights' effective count of points (about the tile's). Off
+    the true shape: 1.18-1.47x the tolerance over the noise's seeds 7-10 (1.00-1.56x before
+    the points were fitted in an order of their coordinates)."""
     rng = np.random.default_rng(0)
     xy = np.vstack([rng.normal(50, 0.5, (20_000, 2)), rng.uniform(0, 100, (1000, 2))])
     pts = np.c_[xy, 3 * np.sin(xy[:, 0] / 8)]
@@ -874,7 +878,7 @@ def test_noise_in_the_sparse_part_of_an_uneven_cloud_is_not_fitted():
     assert 1.5 * tol < r["rms_area"] < 2.5 * tol  # the noise, not fitted
     g = np.random.default_rng(3).uniform(5, 95, (5000, 2))
     s = surf(surf.parameterization.project(np.c_[g, 3 * np.sin(g[:, 0] / 8)]))
-    assert np.sqrt(np.mean((s[:, 2] - 3 * np.sin(s[:, 0] / 8)) ** 2)) < 1.3 * tol
+    assert np.sqrt(np.mean((s[:, 2] - 3 * np.sin(s[:, 0] / 8)) ** 2)) < 1.6 * tol
 
 
 def step_tile(n: int = 10_000, seed: int = 0) -> np.ndarray:
@@ -1336,25 +1340,39 @@ def test_the_swing_checks_triangles_made_ahead_are_those_it_uses(monkeypatch, th
     assert np.array_equal(again[0], plain[0])
 
 
-def test_a_cross_validated_smoothness_that_swings_off_the_data_is_raised():
+def test_a_cross_validated_smoothness_that_swings_off_the_data_is_raised(monkeypatch):
     """30 points of sin(3x): cross-validation chose 1e-5 and the surface swung 1.2 off the
     function between the points (its height range is 2; 1e-4 gives 0.23): held-out data
     points cannot see a swing in a gap between them (user test). A chosen smoothness whose
     surface swings (core.surface.data_swings) is replaced by the next larger candidate that
-    does not; the selection says so. Where the choice does not swing, it stays."""
-    def off(surf):
+    does not; the selection says so. Where the choice does not swing, it stays.
+
+    Since the points are fitted in an order of their coordinates, no cloud of 20-50 points of
+    sin(kx), k = 3..6, seeds 0-9, gets a swinging choice (the user test's cloud now gets 1e-5,
+    0.23 off inside its domain): the cross-validation is made to choose the least smoothing
+    here, 1e-7, whose surface swings (0.52 off inside the domain at 2 places; 1e-6 too, 0.45),
+    and 1e-5 (0.21) is taken."""
+    def off(surf):  # inside the data's domain (beyond it the surface extrapolates)
         g = np.random.default_rng(9).random((5000, 2))
-        S = surf(surf.parameterization.project(np.c_[g, np.sin(3 * g[:, 0])]))
+        uv = surf.parameterization.project(np.c_[g, np.sin(3 * g[:, 0])])
+        S = surf(uv[surf.domain_contains(uv)])
         return np.abs(S[:, 2] - np.sin(3 * S[:, 0])).max()
 
-    xy = np.random.default_rng(0).random((30, 2))
+    one_se = core.fit._one_standard_error
+    monkeypatch.setattr(core.fit, "_one_standard_error",
+                        lambda sq, w: (min(sq), one_se(sq, w)[1]))  # the least smoothing
+    xy = np.random.default_rng(3).random((30, 2))
+    P = np.c_[xy, np.sin(3 * xy[:, 0])]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # sparse data
-        surf = fit_surface(np.c_[xy, np.sin(3 * xy[:, 0])])
+        surf = fit_surface(P)
+        chosen = fit_surface(P, smoothness=1e-7)
     sel = surf.report["smoothness_selection"]
-    assert sel["chosen"] == 1e-5 and surf.report["smoothness"] == 1e-4
-    assert "1e-05, the cross-validated choice, the surface swung away" in sel["smoother"]
-    assert surf.report["swings"]["places"] == 0 and off(surf) < 0.3
+    assert sel["chosen"] == 1e-7 and surf.report["smoothness"] == 1e-5
+    assert "1e-07, the cross-validated choice, the surface swung away" in sel["smoother"]
+    assert chosen.report["swings"]["places"] > 0 and surf.report["swings"]["places"] == 0
+    assert off(surf) < 0.3 < 0.5 < off(chosen)
+    monkeypatch.setattr(core.fit, "_one_standard_error", one_se)
     xy = np.random.default_rng(1).random((30, 2))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -1843,11 +1861,12 @@ def test_a_callback_must_return_a_bool_or_none():
     with pytest.raises(InvalidInputError, match="callback must return None or False"):
         fit_surface(points, max_iterations=2, callback=lambda report: np.array([1, 2]))
     seen = []
-    # 300 points are a sparse cloud: a cancelled run is not cross-validated, and says so
+    # 300 points are a sparse cloud: a cancelled run is not cross-validated, and says so (the
+    # third fit has 174 control points, under 2 points each; the second's 153 are not sparse)
     with pytest.warns(RuntimeWarning, match="cancelled before the smoothness was cross-validated"):
-        surf = fit_surface(points, max_iterations=3, tolerance=0,
-                           callback=lambda report: seen.append(report) or np.bool_(len(seen) == 2))
-    assert surf.report["stop_reason"] == "cancelled" and len(seen) == 2
+        surf = fit_surface(points, max_iterations=4, tolerance=0,
+                           callback=lambda report: seen.append(report) or np.bool_(len(seen) == 3))
+    assert surf.report["stop_reason"] == "cancelled" and len(seen) == 3
     # a smoothness given is never cross-validated: the warning does not say it would have been
     with pytest.warns(RuntimeWarning, match="make it 'auto'") as got:
         fit_surface(points, max_iterations=3, tolerance=0, smoothness=1e-4,
@@ -2700,6 +2719,34 @@ def _half_sphere(nu=16, nv=8):
             a, b, c, d = ring(r, j), ring(r + 1, j), ring(r + 1, j + 1), ring(r, j + 1)
             faces += [[a, b, c], [a, c, d]]
     return verts, np.array(faces)
+
+
+def test_the_same_cloud_stored_in_another_order_gets_the_same_surface():
+    """A cloud's points shuffled: the same surface (the checks' samples, the fit's draws and
+    the swing check take the points in an order of their coordinates, core.geometry.
+    coordinate_order; before, 3000 points shuffled got 499 to 507 control points), rows given
+    back in the order given, and an outlier error naming the rows of the order given."""
+    rng = np.random.default_rng(0)
+    xy = rng.random((3000, 2))
+    pts = np.c_[xy, np.exp(-((xy - 0.5) ** 2).sum(1) * 8) + 0.2 * np.sin(6 * xy[:, 0])]
+    pts = np.vstack([pts, [[0.5, 0.5, 9.0], [3.0, 3.0, 0.0]]])  # two outliers
+    base = fit_surface(pts, tolerance=2e-4, drop_outliers=True)
+    at, _ = base.tessellation_uv(32)
+    assert not base.parameterization.used[-2:].any()
+    for _ in range(2):
+        perm = rng.permutation(len(pts))
+        back = np.argsort(perm)
+        surf = fit_surface(pts[perm], tolerance=2e-4, drop_outliers=True)
+        assert surf.report["control_points"] == base.report["control_points"]
+        np.testing.assert_array_equal(surf.parameterization.used[back], base.parameterization.used)
+        np.testing.assert_allclose(surf.parameterization.uv[back], base.parameterization.uv,
+                                   atol=1e-12)
+        np.testing.assert_allclose(surf.errors[back], base.errors, rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(surf(at), base(at), atol=1e-8)
+        with pytest.raises(OutlierError) as caught:
+            fit_surface(pts[perm], tolerance=2e-4)
+        assert sorted(caught.value.indices) == sorted(back[-2:])
+        assert f"#{min(back[-2:])} " in str(caught.value)
 
 
 def test_the_same_mesh_stored_in_another_order_gets_the_same_surface():
