@@ -24,6 +24,7 @@ from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 from .parameterize import fill_value_rows, fill_value_words, projection_direction
 from .refine import STALLED, SWINGS_LEFT, mostly_taken_back, replaced_default_reason
 from .surface import (FOLDED_SHARE, MAX_RESOLUTION, default_swung, grid_frame,
+                      tessellation_fill,
                       noise_near_tolerance, stopped_at_noise)
 
 __all__ = ["main"]
@@ -71,7 +72,9 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--resolution", type=int, default=None,
                    help="tessellation steps across the longer side of the domain (default: 64, or "
                    "2 sqrt(control points) for a larger net, at most 512, more where the surface "
-                   "leaves out most of the domain; at least 8 across the shorter one)")
+                   "leaves out most of the domain; at least 8 across the shorter one; a "
+                   "domain filling under half the square on its longer side gets as many grid "
+                   "cells as a half-filled square)")
     f.add_argument("--net", help="write the control net (.obj or .ply) here")
     f.add_argument("--spline", help="write the spline (.npz, TCBSurface.save) here")
     f.add_argument("--drop-invalid", action="store_true",
@@ -228,9 +231,13 @@ def default_resolution(control_points: int, surf=None) -> int:
     side, across = float(extent.max()), float(extent.min())
     if covered >= 0.5 * side * side:
         return base
-    want = base * side / np.sqrt(max(covered, 1e-300))
+    # tessellation_uv's step over such a domain is already finer than side / resolution by
+    # ``finer`` (a domain polygon filling less than TESSELLATION_FULL_SHARE of its square:
+    # tessellation_fill); the resolution asked for is smaller by that much, for the same step
+    finer = tessellation_fill(surf.parameterization)
+    want = base * side / np.sqrt(max(covered, 1e-300)) * finer
     cap = np.sqrt(MAX_AUTO_CELLS * side / max(across, 1e-300 * side))  # (cells: r^2 across/side)
-    return int(min(MAX_RESOLUTION, cap, np.ceil(want)))
+    return int(max(base, min(MAX_RESOLUTION, cap * finer, np.ceil(want))))
 
 
 def _progress(quiet: bool):

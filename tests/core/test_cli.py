@@ -213,7 +213,10 @@ def test_the_automatic_resolution_grows_over_a_domain_mostly_left_out(tmp_path):
     assert r.returncode == 0, r.stderr
     row = re.search(r"^surface\s+.*\((\d+) vertices, .*resolution (\d+), automatic\)$", r.stdout,
                     re.M)
-    assert row and int(row.group(2)) > 500, r.stdout
+    # (the resolution says less since core.surface.tessellation_step makes the steps over a
+    # domain filling under half its square finer by itself: 276 here, 1000+ before, for about
+    # the same 2000 vertices on each patch)
+    assert row and int(row.group(2)) > 128, r.stdout
     verts, _ = read_geometry(tmp_path / "two.obj")
     assert np.count_nonzero(verts[:, 0] < 10) > 1000 and np.count_nonzero(verts[:, 0] > 10) > 1000
 
