@@ -499,10 +499,32 @@ class TCBSurface:
             tri = tri[far <= trim]
         return tri
 
-    def tessellate(self, resolution: int = 64) -> tuple[np.ndarray, np.ndarray]:
-        """Vertices (V, 3) and triangles (F, 3) of the surface over the data's domain."""
+    def tessellate(self, resolution: int = 64, callback=None) -> tuple[np.ndarray, np.ndarray]:
+        """Vertices (V, 3) and triangles (F, 3) of the surface over the data's domain.
+
+        The vertices are evaluated in chunks of CLOSEST_CHUNK parameters, each summed as it
+        comes (``SplineSpace.combine``: no sparse matrix of all of them, tens of entries per
+        vertex; about the time of ``self(uv)``, and its values to rounding);
+        ``callback({"points_done": k, "points": V})`` hears of each chunk and may return True
+        to stop (CancelledError)."""
         uv, faces = self.tessellation_uv(resolution)
-        return self(uv), faces.copy()
+        return self._points(uv, callback), faces.copy()
+
+    def _points(self, uv, callback=None) -> np.ndarray:
+        """``self(uv)`` (m, 3), to rounding, by chunks with ``callback`` (see tessellate)."""
+        uv = np.asarray(uv, dtype=np.float64)
+        # the fourth column sums the basis: NaN rows where it is no partition of unity
+        c = np.c_[self._c, np.ones(len(self._c))]
+        out = np.empty((len(uv), 3))
+        for s in range(0, max(len(uv), 1), CLOSEST_CHUNK):
+            e = min(s + CLOSEST_CHUNK, len(uv))
+            if e > s:
+                values = self._space.combine(uv[s:e], c)[0]
+                values[np.abs(values[:, 3] - 1.0) > _COVER_TOL, :3] = np.nan
+                out[s:e] = values[:, :3]
+            if callback is not None and callback({"points_done": e, "points": len(uv)}):
+                raise CancelledError("the tessellation was cancelled")
+        return out
 
     def control_net(self) -> tuple[np.ndarray, np.ndarray]:
         """Control points (n, 3) and the control-net triangles (f, 3) over them (method.md 7:

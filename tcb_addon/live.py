@@ -444,7 +444,8 @@ def detach(surface_obj) -> None:
         _remove(holder)
 
 
-def relink(surface_obj, surf, resolution: int, report=None, rewrite: bool = True) -> bool:
+def relink(surface_obj, surf, resolution: int, report=None, rewrite: bool = True,
+           weights=None) -> bool:
     """Bring the live link of ``surface_obj`` up to date after its mesh was rewritten from
     ``surf`` at ``resolution`` (Refine, Re-tessellate). Surfaces without a live net (fitted
     without, or the modifier and weights removed) keep none.
@@ -458,7 +459,8 @@ def relink(surface_obj, surf, resolution: int, report=None, rewrite: bool = True
       the surface's own mesh through, or the hidden net drives it as before).
     - Otherwise the weights are rewritten (with ``rewrite``; without it, only when the link
       is broken: weights deleted, modifier inputs not the surface's net and weights, an old
-      node group), in a weights object of the surface's own (see :func:`attach`).
+      node group), in a weights object of the surface's own (see :func:`attach`; ``weights``:
+      the :func:`padded_weights` of its tessellation, computed already).
     """
     st = surface_obj.tcb
     mod = surface_obj.modifiers.get(MODIFIER_NAME)
@@ -494,11 +496,11 @@ def relink(surface_obj, surf, resolution: int, report=None, rewrite: bool = True
             and mod.get(ids.get("Weights", "")) == st.weights
         ):
             return False
-    attach(surface_obj, net, surf, resolution)
+    attach(surface_obj, net, surf, resolution, weights)
     return False
 
 
-def attach(surface_obj, net_obj, surf, resolution: int) -> bpy.types.Object:
+def attach(surface_obj, net_obj, surf, resolution: int, weights=None) -> bpy.types.Object:
     """Make ``surface_obj`` follow ``net_obj`` live; returns the (hidden) weights object.
 
     The weights are written into the surface's own weights object: a new one if it has none
@@ -506,8 +508,10 @@ def attach(surface_obj, net_obj, surf, resolution: int) -> bpy.types.Object:
     the surface but not its hidden weights), so that the other surface keeps its weights."""
     from . import bridge
 
-    uv, _ = surf.tessellation_uv(resolution)
-    index, weight, vertex, k = padded_weights(surf.evaluation_matrix(uv))
+    if weights is None:
+        uv, _ = surf.tessellation_uv(resolution)
+        weights = padded_weights(surf.evaluation_matrix(uv))
+    index, weight, vertex, k = weights
     mesh = bridge.new_mesh(f"{surface_obj.name} Weights", np.zeros((len(index), 3), np.float32))
     for name, values, kind in (
         ("tcb_index", index, "INT"),

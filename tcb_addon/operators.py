@@ -456,8 +456,11 @@ def moved_note(surface_obj, what: str = WRITTEN_BACK) -> str | None:
             "apply the move to the source and fit again)")
 
 
-def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = None):
-    verts, faces = surf.tessellate(resolution)
+def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = None,
+                       tessellation=None):
+    """The surface mesh of ``surf`` at ``resolution`` into ``surface_obj`` (``tessellation``:
+    its ``(verts, faces)`` computed already, as Re-tessellate's job does)."""
+    verts, faces = tessellation if tessellation is not None else surf.tessellate(resolution)
     local = bridge.to_local(surface_obj, verts)
     name = name or surface_obj.data.name
     mesh = bridge.new_mesh(name, local, faces)
@@ -1141,12 +1144,45 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
 # --- Re-tessellate, deviation map, net visibility, export ---------------------------------------
 
 
-class TCB_OT_retessellate(bpy.types.Operator):
+def _tessellation(surf, resolution: int, weights: bool, callback=None):
+    """Re-tessellate's engine part (on the job's thread): the surface mesh ``(verts, faces)``
+    at ``resolution`` and, with ``weights``, the live net's padded weights of its vertices
+    (:func:`live.padded_weights`), from one evaluation of the basis (they had been evaluated
+    twice, for the mesh and for the weights). ``callback`` hears ``{"points_done", "points"}``
+    after each chunk of CLOSEST_CHUNK vertices and may return True to stop (CancelledError):
+    resolution 2048 is 3 million vertices, 20-40 s."""
+    core = _core()
+    uv, faces = surf.tessellation_uv(resolution)
+    if not weights:
+        return (*surf.tessellate(resolution, callback=callback), None)
+    import scipy.sparse as sp
+
+    chunk = core.surface.CLOSEST_CHUNK
+    coefficients, active = surf.coefficients, surf.active
+    verts = np.empty((len(uv), 3))
+    parts = []
+    for s in range(0, len(uv), chunk):
+        A = surf.space.evaluate(uv[s:s + chunk])
+        v = A @ coefficients
+        v[np.abs(np.asarray(A.sum(axis=1)).ravel() - 1.0) > core.surface._COVER_TOL] = np.nan
+        verts[s:s + chunk] = v
+        parts.append(A[:, active] if len(active) != A.shape[1] else A)
+        if callback is not None and callback({"points_done": min(s + chunk, len(uv)),
+                                              "points": len(uv)}):
+            raise core.CancelledError("the tessellation was cancelled")
+    matrix = sp.vstack(parts, format="csr") if parts else sp.csr_matrix((0, len(active)))
+    return verts, faces.copy(), live.padded_weights(matrix)
+
+
+class TCB_OT_retessellate(_EngineOperator, bpy.types.Operator):
     """Rebuild the surface mesh of the active TCB surface from its stored spline"""
 
     bl_idname = "tcb.retessellate"
     bl_label = "Re-tessellate"
     bl_options = {"REGISTER", "UNDO"}
+    # the mesh is evaluated on a thread, with the share of the vertices done in the status bar
+    # and Esc to cancel (resolution 2048 had blocked Blender for 41 s: user test)
+    _what = "Re-tessellating"
 
     resolution: IntProperty(name="Resolution", default=64, soft_min=2, soft_max=512)
 
@@ -1158,20 +1194,29 @@ class TCB_OT_retessellate(bpy.types.Operator):
         surface = active_surface(context)
         if surface is not None and not self.properties.is_property_set("resolution"):
             self.resolution = surface.tcb.resolution or self.resolution
-        return self.execute(context)
+        return _EngineOperator.invoke(self, context, event)
 
-    def execute(self, context):
-        try:
-            check_settings(self)
-            surface = editable_surface(context)
-            surf = stored_surface(surface)
-            moved = moved_note(surface)
-            write_surface_mesh(surface, surf, self.resolution)
-            if live.relink(surface, surf, self.resolution, self.report):
-                store_spline(surface, surf)  # the net was dropped: its edits are kept
-        except _user_errors() as ex:
-            self.report({"ERROR"}, str(ex))
-            return {"CANCELLED"}
+    def prepare(self, context):
+        check_settings(self)
+        surface = editable_surface(context)
+        surf = stored_surface(surface)
+        self._surface, self._surf = surface, surf
+        # the live net's weights are made on the job's thread too, when relink will want them
+        # (a net in the scene and a live link; otherwise relink drops or keeps none)
+        st, net = surface.tcb, surface.tcb.net
+        weights = (net is not None and net.type == "MESH" and bool(net.users_collection)
+                   and (surface.modifiers.get(live.MODIFIER_NAME) is not None
+                        or st.weights is not None))
+        return ("run", _tessellation, dict(surf=surf, resolution=self.resolution,
+                                           weights=weights))
+
+    def finish(self, context, result):
+        surface, surf = self._surface, self._surf
+        verts, faces, weights = result
+        moved = moved_note(surface)
+        write_surface_mesh(surface, surf, self.resolution, tessellation=(verts, faces))
+        if live.relink(surface, surf, self.resolution, self.report, weights=weights):
+            store_spline(surface, surf)  # the net was dropped: its edits are kept
         surface.tcb.resolution = self.resolution
         for problem in (moved, net_vertex_problem(surface)):
             if problem:

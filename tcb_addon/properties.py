@@ -145,8 +145,11 @@ class FitSettings:
         name="Resolution",
         description=(
             "Subdivisions of the output surface mesh along the longer side of the domain (at "
-            "least 8 across the shorter one; finer where steep parts are crowded). 1024 gives "
-            "about 0.8 million vertices in 10-20 s, 2048 about 3 million in a minute"
+            "least 8 across the shorter one; a long or ragged domain, filling under half the "
+            "square on its longer side, gets as many grid cells as a half-filled square; finer "
+            "where steep parts are crowded). 1024 gives about 0.8 million vertices in 10-20 s, "
+            "2048 about 3 million in about 40 s (Re-tessellate shows its progress; "
+            "Esc cancels)"
         ),
         # (4096: 12 million vertices, about 4 minutes and 7 GiB with Blender waiting: user test)
         default=64, soft_min=2, soft_max=512,

@@ -542,3 +542,46 @@ def test_loading_a_file_during_the_modal_cancels_the_job(clean_scene, driver, tm
     assert [timer for mine, timer in calls if mine] == [None]  # once, its timer removed
     assert job.cancel and not job.thread.is_alive()
     assert "Scan" not in bpy.data.objects
+
+
+def test_re_tessellate_runs_on_the_job_thread_with_progress_and_esc_keeps_the_old_mesh(
+        clean_scene, driver, monkeypatch):
+    """Re-tessellate at 2048 took 41 s with no progress and no way out (user test): it runs
+    like Fit, on the job's thread, with the share of the vertices done in the status bar and
+    Esc to cancel, which leaves the surface, its live net's weights and the file as they were;
+    run to the end it gives the mesh and weights of the synchronous path."""
+    bpy = clean_scene
+    ops, core = ops_module(), core_module()
+    src = add_mesh(bpy, "Scan", *grid(16, **WAVE))
+    assert fit(bpy, src, tolerance=5e-3, resolution=16) == {"FINISHED"}
+    s = bpy.data.objects[SURFACE]
+    assert s.tcb.weights is not None  # (a live net: its weights are remade too)
+    before = (inventory(bpy), state(s), state(s.tcb.weights), len(s.data.vertices))
+    monkeypatch.setattr(core.surface, "CLOSEST_CHUNK", 64)  # (many chunks: Esc is seen)
+    driver.reports.clear()
+    assert driver.invoke(bpy.ops.tcb.retessellate, s, resolution=48) == {"RUNNING_MODAL"}
+    assert driver.run(esc_after=0)[0] == {"CANCELLED"}
+    assert driver.reports == [("WARNING", "TCB: cancelled; nothing was changed")]
+    s = bpy.data.objects[SURFACE]
+    assert (inventory(bpy), state(s), state(s.tcb.weights), len(s.data.vertices)) == before
+
+    statuses = []
+    status = ops._EngineOperator._status
+    monkeypatch.setattr(ops._EngineOperator, "_status",
+                        lambda self, c, t: (statuses.append(t), status(self, c, t)))
+    assert driver.invoke(bpy.ops.tcb.retessellate, s, resolution=48) == {"RUNNING_MODAL"}
+    assert driver.run()[0] == {"FINISHED"}
+    assert any(t and t.startswith("TCB: Re-tessellating, ") and t.endswith(
+        " points (Esc to cancel)") for t in statuses), statuses
+    assert statuses[-1] is None
+    s = bpy.data.objects[SURFACE]
+    modal = (positions(s), state(s.tcb.weights), s.tcb.resolution)
+    assert s.tcb.resolution == 48 and len(s.data.vertices) > before[3]
+    with bpy.context.temp_override(**select(bpy, s)):
+        assert bpy.ops.tcb.retessellate(resolution=16) == {"FINISHED"}
+        assert bpy.ops.tcb.retessellate(resolution=48) == {"FINISHED"}
+    s = bpy.data.objects[SURFACE]
+    assert np.allclose(positions(s), modal[0], atol=1e-6) and state(s.tcb.weights) == modal[1]
+    # the weights drive the mesh: the net's surface where it is
+    uv, _ = spline_of(s).tessellation_uv(48)
+    assert np.allclose(evaluated(bpy, s), spline_of(s)(uv), atol=1e-5)

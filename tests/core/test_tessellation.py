@@ -1,6 +1,6 @@
 """The default surface mesh is faithful to the spline: a long or ragged domain gets as many grid
 cells as a half-filled square (core.surface.tessellation_step), a square or disk domain as
-before."""
+before; a fine tessellation reports its progress and can be stopped."""
 
 import warnings
 from pathlib import Path
@@ -93,3 +93,26 @@ def nefertiti_fit():
         warnings.simplefilter("ignore", RuntimeWarning)  # (a swing at one place)
         return fit_surface(points, faces)
 
+
+def test_tessellate_reports_its_chunks_and_stops_when_asked(long_patch, monkeypatch):
+    """``tessellate(resolution, callback)`` evaluates the vertices by chunks, telling the
+    callback of each (Re-tessellate's progress: 2048 is 3 million vertices), with the values
+    of ``surf(uv)`` to rounding; a callback returning True stops it (Esc)."""
+    import core.surface
+    from core import CancelledError
+
+    monkeypatch.setattr(core.surface, "CLOSEST_CHUNK", 500)
+    heard = []
+    verts, tris = long_patch.tessellate(64, callback=lambda r: heard.append(dict(r)) and False)
+    uv, tri = long_patch.tessellation_uv(64)
+    assert [r["points_done"] for r in heard] == list(range(500, len(uv), 500)) + [len(uv)]
+    assert all(r["points"] == len(uv) for r in heard)
+    np.testing.assert_array_equal(tris, tri)
+    np.testing.assert_allclose(verts, long_patch(uv), rtol=0, atol=1e-12)
+    # outside where the basis sums to 1: NaN rows, as surf(uv) gives
+    far = np.vstack([uv[:3], uv.max(axis=0) + 10.0])
+    np.testing.assert_array_equal(np.isnan(long_patch._points(far)), np.isnan(long_patch(far)))
+    calls = []
+    with pytest.raises(CancelledError):
+        long_patch.tessellate(64, callback=lambda r: calls.append(r) or len(calls) == 2)
+    assert len(calls) == 2
