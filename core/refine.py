@@ -863,6 +863,14 @@ ITERATION_POINTS = 200_000
 # least MIN_PROBE_KNOTS (smaller starts are not probed)
 PROBE_FRACTION = 4
 MIN_PROBE_KNOTS = 8
+# a fresh start that meets the tolerance is followed by a coarser one when the error-rate
+# model predicts at most this share of its knots (and at least MIN_START_KNOTS)
+SHRINK_FRACTION = 0.7
+MIN_START_KNOTS = 6
+# ... sized for this share of the tolerance: the insertions stop at the first fit below it,
+# typically 0.5-1x of it; a coarser start aimed at the tolerance itself leaves no room (the
+# RMS of one knot count is not one number: it varies 1.5x with the knots' draws)
+SHRINK_TARGET = 0.5
 # a run with a tolerance stops when the error has stopped falling (_stalled): over at least
 # STALL_WINDOW insertions and 1.5x the knots, the best RMS fell like knots^-r with r <
 # STALL_RATE (dense noise, 10 000 points: 0.035-0.05, i.e. about 1.5% less error for 50% more
@@ -1086,7 +1094,12 @@ def adaptive_fit(
     both counts (``control_points`` and ``functions``).
     With a tolerance and the automatic start, the first fits size the start: a probe with a
     quarter of its knots, then fresh starts with the count :func:`next_start` predicts; they
-    count as iterations. A continued run (``start_knots``) with a tolerance inserts the knots
+    count as iterations. A fresh start that meets the tolerance with room to spare is followed
+    by a coarser fresh start, with the knots :func:`predicted_knots` gives for SHRINK_TARGET
+    of the tolerance when that is at most SHRINK_FRACTION of them (at least MIN_START_KNOTS),
+    as long as they meet it; the first that misses ends the run and the last that met it is
+    returned (a plane, a sphere cap, a bump had nets of 140-148 control points, the probe's,
+    whatever the tolerance: now 37-70 at 1e-2 and 1e-3; benchmarks/net_size.py). A continued run (``start_knots``) with a tolerance inserts the knots
     :func:`predicted_knots` says are missing, up to doubling them. Reports say whether an
     iteration's knots were placed ``"afresh"``, ``"continued"`` or ``"inserted"``
     (``knots_placed``). The best iteration is the one that meets the tolerance, else the one of
@@ -1258,6 +1271,7 @@ def adaptive_fit(
     taken_back: set = set()  # the knots of the insertions taken back (bytes)
     in_a_row = 0  # insertions taken back since the last fit kept
     settle_restart = False  # the fit is the one a restart that swung was sized from
+    shrinking = None  # a coarser fresh start after one that met the tolerance by far
 
     def insert(knots, triangles, steer, count) -> np.ndarray:
         """New knots (insertion_points), none in the regions where they made it swing."""
@@ -1409,6 +1423,8 @@ def adaptive_fit(
         within = n_ctrl <= options.max_control_points
 
         def better(current, key, current_key):
+            if shrinking and value > tol:  # (a coarser start that missed: never returned)
+                return False
             return current is None or (within and (current.n_control > options.max_control_points
                                                    or key < current_key or value <= tol))
 
@@ -1432,6 +1448,22 @@ def adaptive_fit(
             reason = "cancelled"
             break
         if value <= tol:
+            reason = "tolerance reached"
+            # a fresh start that meets the tolerance by far (a loose tolerance, a smooth
+            # shape): a coarser fresh start with the knots the error-rate model predicts, at
+            # least MIN_START_KNOTS; the finer fit stays the one returned if it misses
+            if (shrinking is not False and fresh and options.initial_knots is None
+                    and it < options.max_iterations - 1 and len(interior) > MIN_START_KNOTS):
+                want = predicted_knots(len(interior), max(value, 1e-300),
+                                       SHRINK_TARGET * tol, sized, options.degree)
+                want = max(int(np.ceil(want)), MIN_START_KNOTS)
+                if want <= SHRINK_FRACTION * len(interior):
+                    sized, sizing, shrinking = (len(interior), value), False, True
+                    interior, ring_knots = place(want)
+                    n_before, pending, prev = len(interior), np.zeros((0, 2)), None
+                    continue
+            break
+        if shrinking:  # a coarser start missed the tolerance: the finer one is returned
             reason = "tolerance reached"
             break
         if it == options.max_iterations - 1:

@@ -260,7 +260,10 @@ def test_a_large_net_for_a_small_mesh_is_warned_of_in_blender_words(clean_scene,
     """A net much larger than its mesh: for a flat grid or a flat n-gon the warning had blamed
     "the creases between the mesh's flat faces" (there are none), and it had said "faces=None"
     to Blender users; after Refine to 1e-5 of a creased grid it had said the net is far too
-    big for the mesh and, in the same message, "raise Max Control Points" (user test)."""
+    big for the mesh and, in the same message, "raise Max Control Points" (user test). Since
+    a start that meets the tolerance by far is followed by coarser ones (core.refine
+    SHRINK_TARGET), the flat meshes get small nets (40 control points, were 147) and no such
+    warning (its words for flat meshes are a core test's, with the probe's knots given)."""
     bpy = clean_scene
     verts, faces = grid(4, f=lambda x, y: 0.0 * x)
     ring = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
@@ -271,11 +274,8 @@ def test_a_large_net_for_a_small_mesh_is_warned_of_in_blender_words(clean_scene,
         capfd.readouterr()
         assert fit(bpy, flat, tolerance=0.05, max_control_points=2000) == {"FINISHED"}
         text = capfd.readouterr().out
-        assert re.search(r"the net has \d+ control points for a mesh of \d+ vertices, more than "
-                         r"it needs: the mesh is flat \(no creases between its faces\), and a "
-                         r"net of any size fits it; for a smaller net, lower Max Control "
-                         r"Points", text), text
-        assert "creases between them" not in text and "faces=None" not in text, text
+        assert spline_of(bpy.context.view_layer.objects.active).report["control_points"] <= 45
+        assert "the net has" not in text and "faces=None" not in text, text
     verts, faces = grid(11, f=lambda x, y: 0.3 * np.sin(3 * x) * np.cos(2 * y))
     scan = add_mesh(bpy, "Scan", verts, faces)
     assert fit(bpy, scan, tolerance=1e-3, max_control_points=2000) == {"FINISHED"}

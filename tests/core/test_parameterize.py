@@ -750,7 +750,10 @@ def test_a_terrain_mesh_keeps_its_four_corners_although_its_sides_go_up_and_down
 def test_the_corners_of_a_grid_mesh_are_fitted_as_well_as_the_same_points_as_a_cloud() -> None:
     """41 x 41 grid mesh of z = 0.3 sin 2x (user test): mapped onto the unit circle its
     corners were 0.029-0.049 off the surface (max error 0.049, 272 control points), against
-    0.0017 for the same vertices as a cloud (152). On a rectangle: 0.0014 with 153."""
+    0.0017 for the same vertices as a cloud (152). On a rectangle: 0.0014 with 153. Since a
+    start that meets the tolerance by far is followed by coarser ones (core.refine
+    SHRINK_TARGET) both nets are smaller (55 and 66 control points, max 0.0069 and 0.0070):
+    the corners stay within the fit's max error (0.0047), far from the circle's 0.029."""
     from core import fit_surface
 
     g = np.linspace(-1, 1, 41)
@@ -761,10 +764,10 @@ def test_the_corners_of_a_grid_mesh_are_fitted_as_well_as_the_same_points_as_a_c
     faces = np.concatenate([np.column_stack([a, a + 1, a + 42]),
                             np.column_stack([a, a + 42, a + 41])])
     mesh, cloud = fit_surface(pts, faces), fit_surface(pts)
-    assert mesh.report["max"] < 2 * cloud.report["max"] < 0.004
+    assert mesh.report["max"] < 2 * cloud.report["max"] < 0.02
     assert mesh.report["control_points"] < 1.2 * cloud.report["control_points"]
     corners = pts[[0, 40, 41 * 40, 41 * 41 - 1]]
-    assert mesh.distances(corners).max() < 0.002
+    assert mesh.distances(corners).max() < min(mesh.report["max"], 0.01)
 
 
 def test_mean_value_map_reproduces_a_planar_disk() -> None:
@@ -1595,7 +1598,9 @@ def test_meshes_with_ragged_borders_are_fitted_with_small_nets() -> None:
     546 (max error 1.0% of the diagonal); with their own shapes 140 and 140 (the full grid:
     148; benchmarks/mesh_maps.py). No warning; the tessellation stays inside the (not
     convex) domain and on the data: its vertices are within 0.5% of the diagonal of the
-    mesh's faces."""
+    mesh's faces. (Since a start that meets the tolerance by far is followed by coarser ones,
+    the notched grid's net is smaller and its max error 4.4e-3 of the diagonal, was under
+    3e-3.)"""
     from core import fit_surface
 
     def height(x, y):
@@ -1613,7 +1618,7 @@ def test_meshes_with_ragged_borders_are_fitted_with_small_nets() -> None:
             warnings.filterwarnings("ignore", "[0-9]+ of the [0-9]+ vertices are in no face")
             surf = fit_surface(pts, faces)
         assert surf.report["control_points"] <= most
-        assert surf.report["rms_rel"] <= 1e-3 and surf.report["max_rel"] < 3e-3
+        assert surf.report["rms_rel"] <= 1e-3 and surf.report["max_rel"] < 6e-3
         uv, tri = surf.tessellation_uv(64)
         assert surf.domain_contains(uv[tri].mean(axis=1)).all()
         v = surf(uv)

@@ -126,6 +126,44 @@ def test_the_net_follows_the_tolerance_and_the_start_without_one_is_unchanged():
     assert [h["knots_placed"] for h in free.report["history"]] == ["afresh", "inserted"]
 
 
+def test_a_loose_tolerance_on_a_smooth_shape_gets_a_small_net():
+    """A fresh start that meets the tolerance with room to spare is followed by coarser fresh
+    starts sized for half the tolerance (core.refine.SHRINK_TARGET; at most SHRINK_FRACTION of
+    the knots, at least MIN_START_KNOTS) while they meet it: a plane got 148 control points,
+    the probe's, whatever the tolerance; now 40, and a bump at 1e-2 / 1e-3 37 / 70 (140
+    before). Where half the tolerance needs about the probe's knots it stays (the bump at
+    3e-4). The first coarser start that misses ends the run, and the last that met it is
+    returned (a wave at 3e-4: 41, 22 and 7 knots, the last at 5.7e-4: the 22 knots' 90
+    control points). ``initial_knots`` given is kept."""
+    xy = np.random.default_rng(0).random((3000, 2))
+    probe = automatic_start("tcb", 2000) // 4
+
+    def run(z, tol):
+        r = fit_surface(np.c_[xy, z], tolerance=tol).report
+        h = r["history"]
+        knots = [x["interior_knots"] for x in h]
+        assert r["stop_reason"] == "tolerance reached" and r["rms_rel"] <= tol
+        assert knots[0] == probe and all(a > b for a, b in zip(knots, knots[1:]))
+        assert all(x["knots_placed"] == "afresh" for x in h)
+        assert all(x["rms_rel"] <= tol for x in h[:-1])  # only the last can miss ...
+        if h[-1]["rms_rel"] > tol:  # ... and then the one before it is returned
+            assert r["returned_iteration"] == h[-2]["iteration"]
+            assert r["control_points"] == h[-2]["control_points"]
+        return r, knots
+
+    plane = 0.3 * xy[:, 0] + 0.1 * xy[:, 1]
+    r, knots = run(plane, 1e-2)
+    assert knots == [probe, 6] and r["control_points"] <= 45 and r["rms_rel"] < 1e-12
+    assert fit_surface(np.c_[xy, plane], tolerance=1e-2,
+                       initial_knots=probe).report["control_points"] > 100
+    bump = 0.2 * np.exp(-4 * ((xy - 0.5) ** 2).sum(axis=1))
+    cps = [run(bump, tol)[0]["control_points"] for tol in (1e-2, 1e-3, 3e-4)]
+    assert cps[0] < cps[1] < 0.6 * cps[2] and len(run(bump, 3e-4)[1]) == 1
+    wave = 0.1 * np.sin(3 * xy[:, 0]) * np.cos(2 * xy[:, 1])
+    r, knots = run(wave, 3e-4)
+    assert len(knots) == 3 and r["history"][-1]["rms_rel"] > 3e-4  # the miss
+
+
 def test_refine_below_the_surface_budget_is_refused_and_a_far_tolerance_grows_fast():
     """refine() with a budget below the surface's control points raises a specific error (it
     was a bare AssertionError); towards a tolerance 100x tighter the net doubles per iteration
@@ -1613,7 +1651,8 @@ def test_fill_holes_spans_a_mesh_s_holes_and_keeps_its_own_vertices_and_faces(tm
     # a C-shaped hole: its centre does not see its border, a fan would squeeze the map (max
     # error 0.073 of the diagonal, 326 control points, 0.012 off the function in the hole):
     # its border is clipped into ears instead, and it fits as a disk of its size does (147
-    # control points, max 8.8e-4; measured: 141, 7.1e-4, 9.1e-4 off in the hole)
+    # control points, max 8.8e-4; measured: 141, 7.1e-4, 9.1e-4 off in the hole; since a
+    # start that meets the tolerance by far is followed by coarser ones: 76, 1.7e-3)
     cells = np.c_[a, b, c, d]
     r, q = np.divmod(np.arange(len(cells)), m - 1)
     ring = np.hypot(r - 14.5, q - 14.5)
@@ -1621,7 +1660,7 @@ def test_fill_holes_spans_a_mesh_s_holes_and_keeps_its_own_vertices_and_faces(tm
     with pytest.warns(RuntimeWarning, match="vertices are in no face"):
         c_surf = fit_surface(P, cells[~cut], fill_holes=True)
     assert c_surf.report["holes_filled"] == 1 and c_surf.report["control_points"] <= 170
-    assert c_surf.report["max_rel"] < 1.5e-3
+    assert c_surf.report["max_rel"] < 3e-3
     kept = cells[~cut]
     c_par = c_surf.parameterization
     np.testing.assert_array_equal(np.sort(np.sort(c_par.faces, axis=1), axis=0),
@@ -2377,7 +2416,9 @@ def test_a_cloud_scanned_in_lines_is_tessellated_between_them_and_a_notch_is_not
     (the slab of a place's nearest points, all on one line, bounds nothing beside it: 20
     profiles fitted within 6e-4 of the function were flagged at 1826 places)."""
     f = lambda x, y: 0.2 * np.sin(3 * x) * np.cos(2 * y)  # noqa: E731
-    for lines, off in ((10, 0.012), (20, 1.5e-3)):  # (measured 8.4e-3 and 5.9e-4)
+    # (measured 8.4e-3 and 5.9e-4 with 150 control points; since a start that meets the
+    # tolerance by far is followed by coarser ones, 63 and 52: 1.3e-2 and 4.9e-3)
+    for lines, off in ((10, 0.02), (20, 8e-3)):
         xy = np.c_[np.repeat(np.linspace(0, 1, lines), 1000), np.tile(np.linspace(0, 1, 1000),
                                                                         lines)]
         with warnings.catch_warnings():
@@ -2532,7 +2573,9 @@ def test_a_flat_mesh_with_a_large_net_is_not_said_to_have_creases():
     """A flat 4 x 4 grid and a flat 12-vertex n-gon got the large net's warning that blamed
     "the creases between the mesh's flat faces", which they do not have (user test): the
     largest bend between neighbouring faces decides the words; a creased mesh's warning
-    names its largest bend."""
+    names its largest bend. Since a start that meets the tolerance by far is followed by
+    coarser ones (core.refine.SHRINK_TARGET), a flat mesh gets a small net (40 control
+    points, was 147): the warning is then made with the probe's knots given."""
     from core.surface import largest_crease
 
     v, f = grid_mesh(4)
@@ -2544,9 +2587,12 @@ def test_a_flat_mesh_with_a_large_net_is_not_said_to_have_creases():
     ring = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
     ngon = np.c_[np.cos(ring), np.sin(ring), np.zeros(12)]
     for points, faces in ((flat, f), (ngon, [list(range(12))])):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            assert fit_surface(points, faces, tolerance=0.05).report["control_points"] <= 45
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            s = fit_surface(points, faces, tolerance=0.05)
+            s = fit_surface(points, faces, tolerance=0.05, initial_knots=41)
         words = [str(w.message) for w in caught if str(w.message).startswith("the net has")]
         assert len(words) == 1 and s.report["coarse_mesh_crease"] < 1e-3, words
         assert "creases between them" not in words[0]
