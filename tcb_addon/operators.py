@@ -1079,8 +1079,11 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             # a mirrored source fitted before its faces were read turned (bridge._world_faces):
             # its faces as they were read then (review: "changed since ... (other faces)")
             faces = np.ascontiguousarray(faces[:, ::-1])
-        faces_changed = key is not None and (faces is None or digest(faces) != key)
-        same_points = surf.fitted_to(data.points, data.rounding)  # (a digest: once)
+        # the same data stored in another order (Sort Elements: "changed since ... (other
+        # faces)" or "(other coordinates ...)", nothing having moved; user test) are the same
+        order = surf.data_order(data.points, data.rounding)  # (a digest and a sort: once)
+        same_points = order is not None
+        faces_changed = key is not None and (faces is None or not surf.same_faces(faces, order))
         if (not same_points or faces_changed) and data.unmodified:
             # (nothing was moved: "changed since ... (other coordinates: moved, ...)" had led;
             # user test)

@@ -351,6 +351,55 @@ def test_a_mirrored_source_fitted_before_its_faces_were_turned_can_be_refined(cl
     assert spline_of(surface).report["faces_digest"] == then
 
 
+def sort_elements(bpy, obj, elements, seed):
+    """Edit Mode > Mesh > Sort Elements (Randomize) on all of ``obj``'s ``elements``."""
+    with bpy.context.temp_override(**select(bpy, obj)):
+        assert bpy.ops.object.mode_set(mode="EDIT") == {"FINISHED"}
+        try:
+            bpy.ops.mesh.select_all(action="SELECT")
+            assert bpy.ops.mesh.sort_elements(type="RANDOMIZE", elements=elements,
+                                              seed=seed) == {"FINISHED"}
+        finally:
+            bpy.ops.object.mode_set(mode="OBJECT")
+
+
+def test_refine_takes_the_source_after_sort_elements(clean_scene, capfd):
+    """Mesh > Sort Elements moves no vertex, but Refine had called the source changed ("other
+    faces", or "other coordinates: moved, transformed or edited", user test): it refines the
+    same mesh stored in another order (its vertices, its faces; a cloud's points), and the
+    refined spline follows the new order (Deviation Map: no "changed since"). A vertex moved
+    after the sort is still refused."""
+    bpy = clean_scene
+    quads = grid(12, f=lambda x, y: 0.3 * np.sin(3 * x) * np.cos(2 * y))
+    for name, data in (("Quads", quads), ("Triangles", wave()), ("Cloud", (wave()[0], None))):
+        src = add_mesh(bpy, name, *data)
+        assert fit(bpy, src) == {"FINISHED"}
+        surface = bpy.context.view_layer.objects.active
+        for seed, elements in enumerate(({"VERT"}, {"FACE"}, {"VERT", "FACE"})):
+            if data[1] is None and elements != {"VERT"}:
+                continue
+            before = positions(src)
+            sort_elements(bpy, src, elements, seed + 1)
+            now = positions(src)
+            assert not np.array_equal(now, before) or elements == {"FACE"}
+            assert np.array_equal(np.unique(now, axis=0), np.unique(before, axis=0))
+            n = surface.tcb.control_points
+            assert run(bpy, bpy.ops.tcb.refine, surface, max_control_points=2 * n + 50,
+                       tolerance=1e-5, max_iterations=2) == {"FINISHED"}, (name, elements)
+            assert surface.tcb.control_points > n, (name, elements)
+            capfd.readouterr()
+            assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+            assert "changed since" not in capfd.readouterr().out, (name, elements)
+        moved = positions(src)
+        moved[7, 2] += 0.05
+        src.data.attributes["position"].data.foreach_set("vector",
+                                                         moved.astype(np.float32).ravel())
+        src.data.update()
+        with pytest.raises(RuntimeError, match=rf"'{name}' changed since '{name} TCB Surface' "
+                                               r"was fitted \(other coordinates"):
+            run(bpy, bpy.ops.tcb.refine, surface)
+
+
 def test_results_in_a_collection_shown_by_an_instance_are_not_deleted(clean_scene):
     """A live surface, its net, weights and source in a collection shown only through a
     collection instance are in no scene, but not deleted: the next Fit of another source had

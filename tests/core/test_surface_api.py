@@ -181,3 +181,136 @@ def test_more_initial_knots_than_the_points_hold_are_cut_with_a_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         fit_surface(points, initial_knots=375, max_iterations=1)
+
+
+def shuffled(points, faces, seed):
+    """The same mesh stored in another order (as Blender's Sort Elements leaves it): vertices
+    and faces permuted, each face's corners turned; ``perm`` with ``points[perm]`` the new
+    vertices."""
+    rng = np.random.default_rng(seed)
+    perm = rng.permutation(len(points))
+    inv = np.argsort(perm)
+    f = inv[faces][rng.permutation(len(faces))]
+    k = f.shape[1]
+    turn = rng.integers(0, k, len(f))
+    f = f[np.arange(len(f))[:, None], (turn[:, None] + np.arange(k)) % k]
+    return points[perm], f, perm
+
+
+def quad_grid(n=14):
+    t = np.linspace(-1.0, 1.0, n)
+    x, y = np.meshgrid(t, t, indexing="ij")
+    verts = np.c_[x.ravel(), y.ravel(), (0.3 * np.sin(3 * x) * np.cos(2 * y)).ravel()]
+    i = np.arange(n * n).reshape(n, n)
+    return verts, np.c_[i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(),
+                        i[:-1, 1:].ravel()]
+
+
+REPORT_FIGURES = ("control_points", "iterations", "rms", "max", "rms_rel", "max_rel",
+                  "faces_rms", "faces_max", "stop_reason", "points")
+
+
+def test_refine_takes_the_same_mesh_stored_in_another_order(tmp_path):
+    """refine() had refused a mesh whose vertices and faces were stored in another order
+    (Blender's Sort Elements: "changed since ... was fitted", nothing having moved): it takes
+    the same points permuted with the same faces renumbered, in any order and any rotation of
+    their corners, also from a file; the result is the one of the data in its own order
+    (control points to 1e-9, the same report figures), with its per-point errors and
+    parameters in the given order. A moved point or another face is still refused."""
+    points, faces = quad_grid()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        surf = fit_surface(points, faces, tolerance=1e-3, max_control_points=120,
+                           max_iterations=2)
+        args = dict(tolerance=1e-4, max_control_points=260, max_iterations=2)
+        loaded = TCBSurface.from_bytes(surf.to_bytes(compact=True))  # (float32 parameters)
+        plains = {id(s): s.refine(points, faces, **args) for s in (surf, loaded)}
+        for seed in (0, 1):
+            p, f, perm = shuffled(points, faces, seed)
+            for s in (surf, loaded):
+                plain = plains[id(s)]
+                moved = s.refine(p, f, **args)
+                assert not s.fitted_to(p)  # (fitted_to compares the order too)
+                assert np.array_equal(p[s.data_order(p)], points)
+                assert np.abs(moved.control_points - plain.control_points).max() < 1e-9
+                for key in REPORT_FIGURES:
+                    assert moved.report[key] == plain.report[key], key
+                np.testing.assert_array_equal(moved.errors, plain.errors[perm])
+                np.testing.assert_array_equal(moved.parameterization.uv,
+                                              plain.parameterization.uv[perm])
+                # the refined surface is the given data's: it takes them as they are now
+                assert moved.fitted_to(p) and moved.same_faces(f)
+                again = moved.refine(p, f, max_iterations=1)
+                assert np.array_equal(again.parameterization.faces,
+                                      np.argsort(perm)[plain.parameterization.faces])
+                back = moved.refine(points, faces, max_iterations=1)  # (and the old order)
+                assert back.report["control_points"] == again.report["control_points"]
+            assert surf.refine(p, max_iterations=1).report["iterations"] == 3  # faces=None
+    p, f, _ = shuffled(points, faces, 2)
+    diagonal = surf.report["diagonal"]
+    off = p.copy()
+    off[5] += [0.0, 0.0, 1e-4 * diagonal]
+    rounded_too = (p * (1 + 1e-12)).astype(np.float32).astype(np.float64)
+    for other in (off, rounded_too):
+        assert surf.data_order(other) is None
+        with pytest.raises(InvalidInputError, match="same order; these differ"):
+            surf.refine(other, f, max_iterations=1)
+    turned = f.copy()
+    turned[3] = turned[3, ::-1]  # (a reversed winding is another face)
+    other = f.copy()
+    other[0, 0] = other[1, 0] if other[1, 0] not in other[0] else other[1, 1]
+    for bad in (turned, other, f[1:], np.r_[f, f[:1]]):
+        assert not surf.same_faces(bad, surf.data_order(p))
+        with pytest.raises(InvalidInputError, match="the faces this surface was fitted to"):
+            surf.refine(p, bad, max_iterations=1)
+
+
+def test_refine_takes_a_cloud_stored_in_another_order_also_with_repeated_points():
+    """A cloud's points permuted (some repeated exactly: any matching of those is the same
+    data) are refined as in their own order; a point moved is refused."""
+    points = ridge_cloud(400, seed=3)
+    points = np.r_[points, points[:25]]  # 25 points twice
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        surf = fit_surface(points, max_iterations=2, max_control_points=60)
+        plain = surf.refine(points, max_control_points=120, max_iterations=2)
+        perm = np.random.default_rng(4).permutation(len(points))
+        moved = surf.refine(points[perm], max_control_points=120, max_iterations=2)
+    assert np.abs(moved.control_points - plain.control_points).max() < 1e-9
+    for key in ("control_points", "iterations", "rms", "max", "rms_area"):
+        assert moved.report[key] == plain.report[key], key
+    np.testing.assert_array_equal(moved.errors, plain.errors[perm])
+    off = points[perm]
+    off[9, 2] += 1e-3
+    with pytest.raises(InvalidInputError, match="same order; these differ"):
+        surf.refine(off, max_iterations=1)
+
+
+def test_a_surface_saved_before_the_ranks_takes_another_order_after_one_refine():
+    """A file saved before the surface kept the ranks of its points (and the faces' set
+    digest) refuses the data in another order, with the messages as before; refined once on
+    the data in their order (with their faces), it keeps them and takes the other order."""
+    import io
+    import json
+
+    points, faces = quad_grid(10)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        surf = fit_surface(points, faces, tolerance=1e-3, max_control_points=80,
+                           max_iterations=1)
+        arrays = dict(np.load(io.BytesIO(surf.to_bytes())))
+        del arrays["data_rank"]
+        report = json.loads(str(arrays["report"]))
+        del report["faces_set_digest"]
+        arrays["report"] = np.array(json.dumps(report))
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        old = TCBSurface.from_bytes(buf.getvalue())
+        p, f, _ = shuffled(points, faces, 5)
+        assert old.data_order(p) is None
+        with pytest.raises(InvalidInputError, match="same order; these differ"):
+            old.refine(p, f, max_iterations=1)
+        with pytest.raises(InvalidInputError, match="the faces this surface was fitted to"):
+            old.refine(points, faces[::-1], max_iterations=1)
+        new = old.refine(points, faces, max_iterations=1)
+        assert new.refine(p, f, max_iterations=1).report["iterations"] == 3
