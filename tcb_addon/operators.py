@@ -1264,7 +1264,9 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         surface = editable_surface(context)
         data = source_data(context, surface)
         surf = stored_surface(surface)
-        if data.unmodified and not surf.fitted_to(data.points, data.rounding):
+        # (the same data in another order, as Sort Elements leaves them, are no change)
+        self._order = surf.data_order(data.points, data.rounding)
+        if data.unmodified and self._order is None:
             # (its map had measured the other shape, 10x off, with a warning: user test)
             raise bridge.SelectionError(
                 f"{'; '.join(data.unmodified)}: the map measures the shape '{surface.name}' "
@@ -1275,7 +1277,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         # vertices as they are now (finish checks that they did not change meanwhile)
         verts = _painted_vertices(context, surface, surf) if cloud else None
         return ("run", _data_distances, dict(surf=surf, points=data.points, cloud=cloud,
-                                             vertices=verts))
+                                             vertices=verts, order=self._order))
 
     def finish(self, context, result):
         surface, data, surf = self._surface, self._data, self._surf
@@ -1285,7 +1287,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         # the source moved or edited since the fit: the distances measure that, not the fit
         # (user test: RMS 0.2 for a fit of 1.4e-4, and nothing said why; Refine refuses)
         changed = None
-        if not surf.fitted_to(data.points, data.rounding):
+        if self._order is None:
             # (a source hidden since the fit, read without its modifiers, is refused in
             # prepare: nothing was edited, and fitting it again would fit the other shape)
             changed = (
@@ -1298,7 +1300,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
 
         # points the fit left out (Drop Outliers) keep their distance on the point copy but
         # do not set the statistics, the colour range or (clouds) the surface's colours
-        counted = _counted(surf, len(data_dist))
+        counted = _counted(surf, len(data_dist), self._order)
         left_out = int(len(data_dist) - counted.sum())
         fitted_dist = data_dist[counted]
         verts = _painted_vertices(context, surface, surf)
@@ -1433,14 +1435,21 @@ def _over_holes(surface, surf, n: int) -> np.ndarray:
     return surf.parameterization.in_holes(uv)
 
 
-def _counted(surf, n: int) -> np.ndarray:
+def _counted(surf, n: int, order=None) -> np.ndarray:
     """Mask of the ``n`` data points that a fit used: the Deviation Map's statistics, colour
-    range and (clouds) surface colours leave out those the fit left out (Drop Outliers)."""
+    range and (clouds) surface colours leave out those the fit left out (Drop Outliers).
+    ``order``: ``surf.data_order`` of the points (stored in another order since the fit)."""
     used = np.asarray(surf.parameterization.used, dtype=bool)
-    return used if len(used) == n else np.ones(n, dtype=bool)
+    if len(used) != n:
+        return np.ones(n, dtype=bool)
+    if order is not None and len(order) == n:
+        mask = np.empty_like(used)
+        mask[order] = used  # (points[order[k]] is the data's point k)
+        return mask
+    return used
 
 
-def _data_distances(surf, points, cloud, vertices=None, callback=None):
+def _data_distances(surf, points, cloud, vertices=None, callback=None, order=None):
     """The Deviation Map's engine part (on the job's thread): (feet, distances, shading) of
     the data points; a cloud's feet are its closest surface points, a mesh needs none (None).
     ``shading``: for a cloud with the surface mesh's world ``vertices``, ``(vertices,
@@ -1453,7 +1462,7 @@ def _data_distances(surf, points, cloud, vertices=None, callback=None):
         if vertices is not None:
             from ..core.geometry import distances_at_vertices
 
-            counted = _counted(surf, len(dist))
+            counted = _counted(surf, len(dist), order)
             shading = (vertices, *distances_at_vertices(vertices, feet[counted], dist[counted]))
         return feet, dist, shading
     dist = np.abs(np.asarray(surf.distances(points, callback=callback), dtype=np.float64))
