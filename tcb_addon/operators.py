@@ -1079,11 +1079,14 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             # a mirrored source fitted before its faces were read turned (bridge._world_faces):
             # its faces as they were read then (review: "changed since ... (other faces)")
             faces = np.ascontiguousarray(faces[:, ::-1])
-        # the same data stored in another order (Sort Elements: "changed since ... (other
-        # faces)" or "(other coordinates ...)", nothing having moved; user test) are the same
-        order = surf.data_order(data.points, data.rounding)  # (a digest and a sort: once)
-        same_points = order is not None
-        faces_changed = key is not None and (faces is None or not surf.same_faces(faces, order))
+        # the same values in any order (a sort and a digest): the same data stored in another
+        # order (Sort Elements: "changed since ... (other faces)" or "(other coordinates ...)",
+        # nothing having moved; user test) are the same, with the same faces renumbered; the
+        # engine parameterizes them again (TCBSurface.reordered) on the job's thread
+        same_set = surf.same_data_set(data.points)
+        same_points = same_set or surf.fitted_to(data.points, data.rounding)
+        faces_changed = key is not None and (faces is None or not surf.same_faces(
+            faces, data.points if same_set else None))
         if (not same_points or faces_changed) and data.unmodified:
             # (nothing was moved: "changed since ... (other coordinates: moved, ...)" had led;
             # user test)
@@ -1264,9 +1267,14 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         surface = editable_surface(context)
         data = source_data(context, surface)
         surf = stored_surface(surface)
-        # (the same data in another order, as Sort Elements leaves them, are no change)
-        self._order = surf.data_order(data.points, data.rounding)
-        if data.unmodified and self._order is None:
+        # the same data in another order, as Sort Elements leaves them, are no change: the
+        # points the fit left out are found in their new order on the job's thread
+        same_set = surf.same_data_set(data.points)
+        self._reordered = same_set and _core().surface.data_digest(data.points) != (
+            (surf.report or {}).get("data_digest"))
+        self._same = (same_set and not self._reordered) or (
+            not same_set and surf.fitted_to(data.points, data.rounding))
+        if data.unmodified and not (self._same or self._reordered):
             # (its map had measured the other shape, 10x off, with a warning: user test)
             raise bridge.SelectionError(
                 f"{'; '.join(data.unmodified)}: the map measures the shape '{surface.name}' "
@@ -1276,18 +1284,24 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         # a cloud's surface colours are computed on the job's thread too, at the surface's
         # vertices as they are now (finish checks that they did not change meanwhile)
         verts = _painted_vertices(context, surface, surf) if cloud else None
+        if self._reordered:
+            return ("run", _reordered_distances, dict(surf=surf, points=data.points,
+                                                      faces=data.faces, vertices=verts))
         return ("run", _data_distances, dict(surf=surf, points=data.points, cloud=cloud,
-                                             vertices=verts, order=self._order))
+                                             vertices=verts))
 
     def finish(self, context, result):
         surface, data, surf = self._surface, self._data, self._surf
-        feet, data_dist, shading = result
+        feet, data_dist, shading, *used = result
+        # (reordered: the mask of the points the fit used in their order now; None: they map
+        # to other parameters, so the data are not the same after all)
+        used = used[0] if used else surf.parameterization.used
         moved = moved_note(surface, "the colors are painted on it where it is now, the "
                                     "distances are those to the spline (Re-tessellate puts it back)")
         # the source moved or edited since the fit: the distances measure that, not the fit
         # (user test: RMS 0.2 for a fit of 1.4e-4, and nothing said why; Refine refuses)
         changed = None
-        if self._order is None:
+        if not (self._same or self._reordered and used is not None):
             # (a source hidden since the fit, read without its modifiers, is refused in
             # prepare: nothing was edited, and fitting it again would fit the other shape)
             changed = (
@@ -1300,7 +1314,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
 
         # points the fit left out (Drop Outliers) keep their distance on the point copy but
         # do not set the statistics, the colour range or (clouds) the surface's colours
-        counted = _counted(surf, len(data_dist), self._order)
+        counted = _counted(len(data_dist), used)
         left_out = int(len(data_dist) - counted.sum())
         fitted_dist = data_dist[counted]
         verts = _painted_vertices(context, surface, surf)
@@ -1435,26 +1449,37 @@ def _over_holes(surface, surf, n: int) -> np.ndarray:
     return surf.parameterization.in_holes(uv)
 
 
-def _counted(surf, n: int, order=None) -> np.ndarray:
-    """Mask of the ``n`` data points that a fit used: the Deviation Map's statistics, colour
-    range and (clouds) surface colours leave out those the fit left out (Drop Outliers).
-    ``order``: ``surf.data_order`` of the points (stored in another order since the fit)."""
+def _counted(n: int, used) -> np.ndarray:
+    """Mask of the ``n`` data points that a fit used (``used``: the parameterization's, or of
+    the data in another order, :func:`_reordered_distances`; None: all): the Deviation Map's
+    statistics, colour range and (clouds) surface colours leave out those the fit left out
+    (Drop Outliers)."""
+    used = None if used is None else np.asarray(used, dtype=bool)
+    return used if used is not None and len(used) == n else np.ones(n, dtype=bool)
+
+
+def _reordered_distances(surf, points, faces, vertices=None, callback=None):
+    """:func:`_data_distances` of the data the surface was fitted to stored in another order
+    (Sort Elements), and the mask of the points the fit used in that order: the stored one
+    when it uses all, else that of the data parameterized again (``TCBSurface.reordered``;
+    None when they map to other parameters: then all points count, and the map says that the
+    data changed)."""
     used = np.asarray(surf.parameterization.used, dtype=bool)
-    if len(used) != n:
-        return np.ones(n, dtype=bool)
-    if order is not None and len(order) == n:
-        mask = np.empty_like(used)
-        mask[order] = used  # (points[order[k]] is the data's point k)
-        return mask
-    return used
+    if not used.all():
+        param = surf.reordered(points, faces)
+        used = None if param is None else np.asarray(param.used, dtype=bool)
+    return (*_data_distances(surf, points, faces is None, vertices, callback, used=used), used)
 
 
-def _data_distances(surf, points, cloud, vertices=None, callback=None, order=None):
+def _data_distances(surf, points, cloud, vertices=None, callback=None, used=False):
     """The Deviation Map's engine part (on the job's thread): (feet, distances, shading) of
     the data points; a cloud's feet are its closest surface points, a mesh needs none (None).
     ``shading``: for a cloud with the surface mesh's world ``vertices``, ``(vertices,
     values, has_data)`` of :func:`core.geometry.distances_at_vertices` from the counted
-    points (0.9 s for 1e6 points, which had held up Blender in ``finish``), else None."""
+    points (0.9 s for 1e6 points, which had held up Blender in ``finish``), else None.
+    ``used``: the mask of the points the fit used (:func:`_counted`; default: the stored one)."""
+    if used is False:
+        used = surf.parameterization.used
     if cloud:
         feet = np.asarray(surf.closest_points(points, callback=callback), dtype=np.float64)
         dist = np.linalg.norm(feet - points, axis=1)
@@ -1462,7 +1487,7 @@ def _data_distances(surf, points, cloud, vertices=None, callback=None, order=Non
         if vertices is not None:
             from ..core.geometry import distances_at_vertices
 
-            counted = _counted(surf, len(dist), order)
+            counted = _counted(len(dist), used)
             shading = (vertices, *distances_at_vertices(vertices, feet[counted], dist[counted]))
         return feet, dist, shading
     dist = np.abs(np.asarray(surf.distances(points, callback=callback), dtype=np.float64))
