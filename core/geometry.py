@@ -20,7 +20,8 @@ from .configurations import _segments_cross
 from .simplex import orient2d
 
 __all__ = ["closest_point_on_triangles", "column_bounds", "coordinate_order", "distances_at_vertices",
-           "ear_clipping", "float32_rounding", "point_mesh_distance", "simple_polygon"]
+           "ear_clipping", "float32_rounding", "point_mesh_distance", "quad_triangles",
+           "simple_polygon"]
 
 
 def column_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -59,6 +60,52 @@ def coordinate_order(points: np.ndarray) -> np.ndarray | None:
     if (x[1:] == x[:-1]).any():
         order = np.lexsort(p.T[::-1])
     return order
+
+
+def quad_triangles(points: np.ndarray, quads: np.ndarray, tie_rtol: float = 0.0,
+                   tie_first: bool = False) -> np.ndarray:
+    """Two triangles ``(2 m, 3)`` of each quad ``(a, b, c, d)`` of ``quads`` (m, 4), quad by
+    quad, cut along the shorter diagonal (``(a, b, c), (a, c, d)`` or ``(b, c, d), (b, d, a)``,
+    the quad's winding) of those whose two triangles face the quad's way (its Newell normal;
+    a concave quad has one such diagonal); of equal diagonals (a square), the one through the
+    corner of least coordinates (x, then y, then z). The cut does not depend on which corner a
+    quad starts at (a fan from the first corner did: a 6 x 6 quad grid got 146-167 control
+    points as its quads' corners were turned; review), and the shorter diagonal is Blender's
+    Triangulate default (Shortest Diagonal). Quads with neither diagonal facing their way (a
+    bow tie) are cut along the shorter too; with NaN corners along ``a c``.
+
+    ``tie_rtol``: diagonals whose squared lengths differ by at most this share of the larger
+    are a tie; ``tie_first``: ties are cut along ``a c`` (the extension, for Blender's
+    vertices rounded to float32 by Apply Rotation & Scale: a square's cut by its least corner
+    could flip, and Refine then saw other faces)."""
+    q = np.asarray(quads, dtype=np.int64)
+    if len(q) == 0:
+        return np.zeros((0, 3), dtype=np.int64)
+    P = np.asarray(points, dtype=np.float64)[q]  # (m, 4, 3)
+    a, b, c, d = (P[:, j] for j in range(4))
+    with np.errstate(invalid="ignore", over="ignore"):
+        normal = np.cross(P, np.roll(P, -1, axis=1)).sum(axis=1)
+        facing = lambda u, v, w: np.einsum("ij,ij->i", np.cross(v - u, w - u), normal) > 0  # noqa: E731
+        ok_ac = facing(a, b, c) & facing(a, c, d)
+        ok_bd = facing(b, c, d) & facing(b, d, a)
+        ac = np.einsum("ij,ij->i", c - a, c - a)
+        bd = np.einsum("ij,ij->i", d - b, d - b)
+    # the corner of least coordinates: compared two by two, lexicographically
+    least = np.zeros(len(q), dtype=np.int64)
+    for j in range(1, 4):
+        x, y = P[np.arange(len(q)), least], P[:, j]
+        less = x[:, 0] > y[:, 0]
+        for k in (1, 2):
+            tie = x[:, :k] == y[:, :k]
+            less |= tie.all(axis=1) & (x[:, k] > y[:, k])
+        least = np.where(less, j, least)
+    with np.errstate(invalid="ignore"):
+        tie = np.abs(bd - ac) <= tie_rtol * np.maximum(ac, bd)
+    shorter = np.where(tie, False if tie_first else least % 2 == 1, bd < ac)
+    by_bd = np.where(ok_ac == ok_bd, shorter, ok_bd)
+    first = np.where(by_bd[:, None], q[:, [1, 2, 3]], q[:, [0, 1, 2]])
+    second = np.where(by_bd[:, None], q[:, [1, 3, 0]], q[:, [0, 2, 3]])
+    return np.stack([first, second], axis=1).reshape(-1, 3)
 
 
 def float32_rounding(points, advice: str, columns=None) -> str | None:

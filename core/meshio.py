@@ -1,8 +1,8 @@
 """Reading and writing geometry files for the command-line tool.
 
 Readers return ``(points, faces)``: ``points (n, 3) float64`` and ``faces (f, 3) int64``
-triangles (polygons split into fans ``(v0, v_j, v_{j+1})``), or ``faces = None`` for a point
-cloud. Supported:
+triangles (quads cut along a diagonal, larger polygons split into fans ``(v0, v_j, v_{j+1})``),
+or ``faces = None`` for a point cloud. Supported:
 
 =========================  =====================================================================
 ``.off``                   ASCII OFF (``OFF``/``COFF``/``NOFF``/``CNOFF``/``STOFF`` headers,
@@ -26,7 +26,8 @@ Writers: :func:`write_mesh` for ``.obj`` (ASCII) and ``.ply`` (binary little end
 
 Bulk data are parsed with numpy (``np.loadtxt``, structured dtypes on the raw bytes); only OBJ
 files and binary PLY files with mixed polygon sizes use a Python loop over lines / faces.
-Polygons are split into triangles by fans from their first vertex, except concave ones (an
+Quads are cut along the shorter diagonal (core.geometry.quad_triangles); larger polygons are
+split into triangles by fans from their first vertex, except concave ones (an
 L-shaped n-gon), which are ear-clipped in their plane (a loop over those only).
 Every problem with a file raises :class:`~.errors.FileFormatError` naming the file.
 Text (and PLY headers) may start with a UTF-8 byte-order mark; UTF-16 text is refused.
@@ -46,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FileFormatError, InvalidInputError
-from .geometry import ear_clipping, float32_rounding
+from .geometry import ear_clipping, float32_rounding, quad_triangles
 from .parameterize import fill_value_rows
 
 __all__ = ["READ_EXTENSIONS", "WRITE_EXTENSIONS", "read_geometry", "write_mesh"]
@@ -208,8 +209,9 @@ def _fan_groups(groups: list[tuple[np.ndarray, np.ndarray]], verts: np.ndarray |
 
 
 def _concave_split(verts: np.ndarray, polys: np.ndarray) -> np.ndarray:
-    """Triangles ``(m (k-2), 3)`` of ``(m, k)`` polygons of the vertices ``verts``: fans
-    ``(v0, v_j, v_j+1)``, except for a polygon that is not convex, which is ear-clipped
+    """Triangles ``(m (k-2), 3)`` of ``(m, k)`` polygons of the vertices ``verts``: quads cut
+    along the diagonal their shape gives (:func:`core.geometry.quad_triangles`), larger
+    polygons in fans ``(v0, v_j, v_j+1)``, except for a polygon that is not convex, which is ear-clipped
     (:func:`core.geometry.ear_clipping`) in the plane of its Newell normal, keeping its
     winding. A fan from the first vertex of a concave polygon overlaps itself: an L-shaped
     8-gon, as Blender's Dissolve Faces makes and its OBJ export writes, gave a flipped
@@ -222,6 +224,8 @@ def _concave_split(verts: np.ndarray, polys: np.ndarray) -> np.ndarray:
     m, k = polys.shape
     if k < 4 or m == 0 or polys.min() < 0 or polys.max() >= len(verts):
         return tris
+    if k == 4:  # quads: the diagonal their shape gives, whatever corner they start at
+        return quad_triangles(verts, polys)
     P = verts[polys].astype(np.float64)  # (m, k, 3)
     with np.errstate(invalid="ignore", over="ignore"):  # (NaN or huge vertices: fans)
         P = P - P.mean(axis=1, keepdims=True)  # (centred: float32 files, offsets; review)

@@ -32,7 +32,8 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from .errors import (
     HolesError, InvalidInputError, OutlierError, ParameterizationError, TCBError, TopologyError,
 )
-from .geometry import column_bounds, coordinate_order, ear_clipping, simple_polygon
+from .geometry import (column_bounds, coordinate_order, ear_clipping, quad_triangles,
+                       simple_polygon)
 from .parallel import pmap, row_blocks
 from .simplex import orient2d
 
@@ -1872,12 +1873,15 @@ def _fans(f: np.ndarray) -> np.ndarray:
                     axis=-1).reshape(-1, 3)
 
 
-def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+def _as_triangles(faces: np.ndarray, n_vertices: int, points: np.ndarray | None = None
+                  ) -> np.ndarray:
     """Validate ``faces`` (``(f, k)`` integer, ``k >= 3``, or a sequence of polygons of any
     lengths) and split polygons into fans, in the order of the polygons.
 
     A polygon ``(v0, ..., v_{k-1})`` becomes the triangles ``(v0, v_j, v_{j+1})``,
-    ``j = 1..k-2`` (quads: ``(a, b, c), (a, c, d)``).
+    ``j = 1..k-2``; quads, given the ``points``, are cut along a diagonal chosen by their
+    shape (:func:`core.geometry.quad_triangles`: the cut does not depend on the corner they
+    start at), else ``(a, b, c), (a, c, d)``.
     """
     rows = None
     try:
@@ -1944,15 +1948,20 @@ def _as_triangles(faces: np.ndarray, n_vertices: int) -> np.ndarray:
             f"{int(bad.sum())} face indices are out of range (the mesh has {n_vertices} "
             f"vertices, valid indices are 0..{n_vertices - 1}); fix the face list{hint}"
         )
+    def split(polys):  # quads along a diagonal of their shape (with the points), else fans
+        if polys.shape[1] == 4 and points is not None:
+            return quad_triangles(points, polys)
+        return _fans(polys)
+
     if rows is None:
-        return _fans(f)
+        return split(f)
     # fans of the polygons of each length, put back in the order of the polygons
     size = np.array([len(r) for r in rows])
     first = np.concatenate([[0], np.cumsum(size)[:-1]])
     tris, owner = [], []
     for k in np.unique(size):
         which = np.flatnonzero(size == k)
-        tris.append(_fans(f[first[which, None] + np.arange(k)]))
+        tris.append(split(f[first[which, None] + np.arange(k)]))
         owner.append(np.repeat(which, k - 2))
     return np.concatenate(tris)[np.argsort(np.concatenate(owner), kind="stable")]
 
@@ -2561,7 +2570,7 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     """
     p = _as_points(points, what="vertices")
     n = len(p)
-    tris = _as_triangles(faces, n)
+    tris = _as_triangles(faces, n, p)
 
     # drop degenerate (repeated index) and repeated faces
     ok = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 2] != tris[:, 0])

@@ -1014,10 +1014,10 @@ class TCBSurface:
         values in the same order (a digest of them is kept in ``report["data_digest"]``), or
         values within rounding of them (see :meth:`fitted_to` and its ``rounding``), or the
         same values in another order with the same faces renumbered, in any order of the faces
-        (Blender's Sort Elements; a triangle's corners may be turned, a polygon's not; the
-        faces must then be given): these are
-        parameterized again (:meth:`reordered`, which costs a parameterization), and the
-        refined surface is the one of the data in their new order.
+        (Blender's Sort Elements; a triangle's or a quad's corners may be turned, a larger
+        polygon's not; the faces must then be given): these are parameterized again
+        (:meth:`reordered`, which costs a parameterization), and the refined surface is the
+        one of the data in their new order.
         ``changes`` override settings (the fields of :class:`RefineOptions`), e.g.
         ``tolerance=``, ``max_control_points=``, ``max_iterations=`` (default: 5 more
         iterations); an unknown name is an :class:`InvalidInputError`.
@@ -1435,12 +1435,13 @@ def point_labels(points) -> np.ndarray:
 def faces_set_digest(faces, points) -> str | None:
     """A digest (BLAKE2b, 128 bits, hex) of ``faces`` (f, k) on ``points`` as a set of
     polygons of labelled vertices: each index ``i`` replaced by the :func:`point_labels` of
-    ``points`` (which follow the vertices' coordinates), a triangle turned to its least
-    rotation (a reversed winding is another face) and the rows sorted. The same mesh stored in
-    another order (its vertices, its faces: Blender's Sort Elements; a triangle's corners
-    turned) has the same digest; ``refine()`` compares it when :func:`faces_digest` differs.
-    A polygon of more corners that starts at another corner is another face: the fit splits it
-    into a fan from its first corner (a quad grid's quads so turned mapped 0.02 elsewhere).
+    ``points`` (which follow the vertices' coordinates), a triangle or a quad turned to its
+    least rotation (a reversed winding is another face) and the rows sorted. The same mesh
+    stored in another order (its vertices, its faces: Blender's Sort Elements; a triangle's or
+    a quad's corners turned: the fit cuts a quad by its shape, core.geometry.quad_triangles)
+    has the same digest; ``refine()`` compares it when :func:`faces_digest` differs. A polygon
+    of more corners that starts at another corner is another face: the fit splits it into a
+    fan from its first corner.
     None when the faces are no integer (f, k) array of indices into ``points``."""
     f = _int_faces(faces)
     n = len(points)
@@ -1448,7 +1449,7 @@ def faces_set_digest(faces, points) -> str | None:
         return None
     lab = point_labels(points)[f]
     k = lab.shape[1]
-    if len(lab) and k == 3:
+    if len(lab) and k in (3, 4):
         turns = lab[:, (np.arange(k)[:, None] + np.arange(k)) % k]  # (f, k rotations, k)
         least = np.ones(turns.shape[:2], dtype=bool)
         for c in range(k):  # the lexicographically least rotation

@@ -146,14 +146,57 @@ def read_positions(data) -> np.ndarray:
     return buf.reshape(n, 3)
 
 
-def read_triangles(mesh) -> np.ndarray:
+def read_triangles(mesh, matrix=None) -> np.ndarray:
     """(t, 3) int32 vertex indices of the mesh's triangulated faces (Blender's triangulation,
-    with n-gons that cut the same diagonal triangulated again: :func:`_untangle_diagonals`)."""
+    with quads cut along the diagonal their shape gives in world space (``matrix``, the
+    object's; :func:`_quads_by_shape`) and n-gons that cut the same diagonal triangulated
+    again: :func:`_untangle_diagonals`)."""
     tris = mesh.loop_triangles
     buf = np.empty(len(tris) * 3, dtype=np.int32)
     if len(tris):
         tris.foreach_get("vertices", buf)
-    return _untangle_diagonals(mesh, buf.reshape(-1, 3))
+    return _untangle_diagonals(mesh, _quads_by_shape(mesh, buf.reshape(-1, 3), matrix))
+
+
+# quads whose diagonals' squared lengths differ by at most this share keep Blender's cut (a
+# square's): Apply Rotation & Scale rounds the vertices to float32 again, by 1.2e-7 of their
+# distance from the origin (a grid 2e4 away with quads 13 wide: 5e-4 of a squared diagonal;
+# at 1e-4 Refine saw other faces there)
+QUAD_TIE_RTOL = 1e-2
+
+
+def _quads_by_shape(mesh, tris: np.ndarray, matrix=None) -> np.ndarray:
+    """``tris`` (Blender's loop triangles) with each quad's two triangles replaced, in their
+    places, by the cut of ``core.geometry.quad_triangles`` in world space: the shorter
+    diagonal, whatever corner the quad starts at (Blender cuts from its first corner unless
+    that is concave, so a quad grid whose corners were turned had got 146-167 control points:
+    review); of diagonals within QUAD_TIE_RTOL (a square), Blender's, from the first corner.
+    World space: Apply Rotation & Scale leaves the cut as it was."""
+    n_poly = len(mesh.polygons)
+    if len(tris) == n_poly or n_poly == 0:  # all triangles (most scans)
+        return tris
+    total = np.empty(n_poly, dtype=np.int32)
+    mesh.polygons.foreach_get("loop_total", total)
+    if not (total == 4).any():
+        return tris
+    poly = np.empty(len(tris), dtype=np.int32)
+    mesh.loop_triangles.foreach_get("polygon_index", poly)
+    slots = np.flatnonzero(total[poly] == 4).reshape(-1, 2)  # a quad's two, side by side
+    quads = poly[slots[:, 0]]
+    start = np.empty(n_poly, dtype=np.int32)
+    mesh.polygons.foreach_get("loop_start", start)
+    loops = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", loops)
+    corners = loops[start[quads, None] + np.arange(4)]
+    from .. import core  # the extension's own engine
+
+    pos = read_positions(mesh).astype(np.float64)
+    if matrix is not None:
+        pos = pos @ np.array(matrix, dtype=np.float64)[:3, :3].T
+    out = tris.copy()
+    cut = core.geometry.quad_triangles(pos, corners, tie_rtol=QUAD_TIE_RTOL, tie_first=True)
+    out[slots.reshape(-1)] = cut
+    return out
 
 
 def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
@@ -432,7 +475,7 @@ def read_selection(context, objects=None) -> InputData:
         if ob.type == "MESH":
             mesh = ob.data
             pts = read_positions(mesh)
-            tris = read_triangles(mesh) if len(mesh.polygons) else None
+            tris = read_triangles(mesh, inst.matrix_world) if len(mesh.polygons) else None
             tris = _faces_or_cloud(owner, pts, tris, notes)
         elif ob.type == "POINTCLOUD":
             pts, tris = read_positions(ob.data), None
@@ -449,7 +492,8 @@ def read_selection(context, objects=None) -> InputData:
             continue
         data = obj.data
         pts = read_positions(data)
-        tris = read_triangles(data) if obj.type == "MESH" and len(data.polygons) else None
+        tris = (read_triangles(data, obj.matrix_world)
+                if obj.type == "MESH" and len(data.polygons) else None)
         tris = _faces_or_cloud(obj, pts, tris, notes)
         if len(pts):
             parts[key].append((_world_checked(obj, pts, obj.matrix_world),

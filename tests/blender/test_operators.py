@@ -2100,3 +2100,24 @@ def test_the_engines_warnings_are_in_the_report_not_on_the_console(clean_scene, 
     assert re.search(r"Warning: TCB: .*only the smoothness 0\.001 holds the surface", out), out
     assert not [w for w in escaped if issubclass(w.category, RuntimeWarning)], escaped
     assert "RuntimeWarning" not in out + err
+
+
+def test_a_quad_mesh_whose_corners_start_elsewhere_gets_the_same_surface(clean_scene):
+    """Blender cuts a quad from its first corner; the extension cuts it along its shorter
+    diagonal (core.geometry.quad_triangles; in world space, and of diagonals within 1% of
+    each other Blender's), so a quad grid whose faces start at other corners (bmesh edits,
+    imports) gets the same surface (a 6 x 6 grid had got 146-167 control points as its
+    corners turned: review)."""
+    bpy = clean_scene
+    # (no quad's diagonals within 1% of each other: those keep Blender's cut, QUAD_TIE_RTOL)
+    verts, quads = grid(8, f=lambda x, y: 0.4 * np.exp(x) * np.sin(2 * y + 0.3))
+    turned = np.array([np.roll(q, k) for q, k in
+                       zip(quads, np.random.default_rng(1).integers(1, 4, len(quads)))])
+    splines = []
+    for name, faces in (("Plain", quads), ("Turned", turned)):
+        obj = add_mesh(bpy, name, verts, faces)
+        assert fit(bpy, obj, tolerance=1e-3) == {"FINISHED"}
+        splines.append(spline_of(bpy.data.objects[f"{name} TCB Surface"]))
+    a, b = splines
+    assert len(a.control_points) == len(b.control_points)
+    np.testing.assert_allclose(a.control_points, b.control_points, atol=1e-9)

@@ -6,6 +6,7 @@ from core.geometry import (
     closest_point_on_triangles,
     distances_at_vertices,
     point_mesh_distance,
+    quad_triangles,
 )
 from core.meshio import read_geometry
 from pathlib import Path
@@ -137,3 +138,50 @@ def test_ear_clipping_survives_the_rounding_of_straight_runs_and_long_edges():
             (orient2d(prv, poly, nxt) == 0) & (np.einsum("ij,ij->i", prv - poly, nxt - poly) > 0)
         ).any()
         assert simple_polygon(poly) == (not crossing.any() and not degenerate)
+
+
+def test_quads_are_cut_along_their_shorter_diagonal_whatever_corner_they_start_at():
+    """core.geometry.quad_triangles: the shorter diagonal of those whose triangles face the
+    quad's way (a concave quad's only one), ties by the corner of least coordinates; the
+    same triangles for every rotation of a quad's corners, in the quad's winding."""
+    rng = np.random.default_rng(0)
+    P = rng.random((400, 3))
+    quads = rng.permutation(400).reshape(-1, 4)
+    P[quads[:, 2], 2] += 0.5  # (some bent, some convex, some concave in projection)
+    cut = quad_triangles(P, quads).reshape(-1, 2, 3)
+
+    def canon(t):  # a face's corners from its least index, the faces sorted
+        t = np.array([np.roll(f, -int(np.argmin(f))) for f in t])
+        return t[np.lexsort(t.T[::-1])]
+
+    for k in (1, 2, 3):
+        again = quad_triangles(P, np.roll(quads, k, axis=1)).reshape(-1, 2, 3)
+        for a, b in zip(cut, again):
+            np.testing.assert_array_equal(canon(a), canon(b))
+    # the winding is the quad's: both triangles face the quad's way (Newell normal) wherever
+    # one of the two cuts does (not in a bow tie)
+    Q = P[quads]
+    newell = np.cross(Q, np.roll(Q, -1, axis=1)).sum(axis=1)
+
+    def facing(tris):
+        T = P[tris.reshape(-1, 3)]
+        n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]).reshape(-1, 2, 3)
+        return (np.einsum("qtj,qj->qt", n, newell) > 0).all(axis=1)
+
+    either = facing(quads[:, [0, 1, 2, 0, 2, 3]]) | facing(quads[:, [1, 2, 3, 1, 3, 0]])
+    assert 0.5 < either.mean() < 1 and facing(cut)[either].all()
+    # the shorter diagonal: a flat rhombus, longer along x
+    rh = np.array([[0, 0, 0], [2, -1, 0], [4, 0, 0], [2, 1, 0.0]])
+    for k in range(4):
+        t = quad_triangles(rh, np.roll([0, 1, 2, 3], k)[None])
+        assert set(np.intersect1d(t[0], t[1]).tolist()) == {1, 3}
+    # a concave quad (a dart): only the diagonal through its reflex corner stays inside
+    dart = np.array([[0, 0, 0], [4, 2, 0], [1, 1, 0], [0, 4, 0.0]])  # reflex at 2
+    for k in range(4):
+        t = quad_triangles(dart, np.roll([0, 1, 2, 3], k)[None])
+        assert set(np.intersect1d(t[0], t[1]).tolist()) == {0, 2}
+    # a square: the diagonal through the corner of least coordinates (0, 0, 0)
+    sq = np.array([[1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 0.0]])
+    for k in range(4):
+        t = quad_triangles(sq, np.roll([0, 1, 2, 3], k)[None])
+        assert set(np.intersect1d(t[0], t[1]).tolist()) == {1, 3}

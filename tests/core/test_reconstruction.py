@@ -25,6 +25,7 @@ from core import (
 )
 from core.errors import OutlierError
 from core.fit import fit_control_points
+from core.geometry import quad_triangles
 from core import refine
 import core.surface
 from core.surface import FORMAT_VERSION
@@ -1532,8 +1533,9 @@ def grid_mesh(n):
 
 def test_a_list_of_triangles_and_quads_is_a_mesh():
     """A mesh's polygons in one list, triangles and quads mixed (numpy's "inhomogeneous
-    shape" had been the answer: user test): each polygon is split into a fan, in the order of
-    the polygons, so the fit is that of the same triangles; the indices are checked as one
+    shape" had been the answer: user test): each polygon is split (a quad along its shorter
+    diagonal, core.geometry.quad_triangles), in the order of the polygons, so the fit is that
+    of the same triangles; the indices are checked as one
     (1-based ones are named as such), and polygons of fewer than 3 vertices are named."""
     n = 12
     v, _ = grid_mesh(n)
@@ -1542,7 +1544,7 @@ def test_a_list_of_triangles_and_quads_is_a_mesh():
     mixed = [list(q) for q in quads[:40]] + [list(t) for q in quads[40:]
                                              for t in (q[[0, 1, 2]], q[[0, 2, 3]])]
     mixed[3], mixed[50] = mixed[50], mixed[3]  # (a triangle among the quads)
-    tris = np.vstack([np.array([q[:3], [q[0], q[2], q[3]]]) if len(q) == 4 else [q]
+    tris = np.vstack([quad_triangles(v, np.array([q])) if len(q) == 4 else [q]
                       for q in mixed])
     surf = fit_surface(v, mixed, tolerance=1e-2)
     ref = fit_surface(v, tris, tolerance=1e-2)
@@ -1664,8 +1666,7 @@ def test_fill_holes_spans_a_mesh_s_holes_and_keeps_its_own_vertices_and_faces(tm
     kept = cells[~cut]
     c_par = c_surf.parameterization
     np.testing.assert_array_equal(np.sort(np.sort(c_par.faces, axis=1), axis=0),
-                                  np.sort(np.sort(np.r_[kept[:, [0, 1, 2]], kept[:, [0, 2, 3]]],
-                                                  axis=1), axis=0))
+                                  np.sort(np.sort(quad_triangles(P, kept), axis=1), axis=0))
     assert np.all(orient2d(*(c_par.uv[c_par.faces[:, k]] for k in range(3))) > 0)
     cen = np.c_[(q[cut] + 0.5) / (m - 1), (r[cut] + 0.5) / (m - 1)]
     near = c_surf.closest_points(np.c_[cen, f(*cen.T)])
@@ -2793,6 +2794,39 @@ def test_the_same_cloud_stored_in_another_order_gets_the_same_surface():
             fit_surface(pts[perm], tolerance=2e-4)
         assert sorted(caught.value.indices) == sorted(back[-2:])
         assert f"#{min(back[-2:])} " in str(caught.value)
+
+
+def test_a_quad_mesh_whose_quads_start_at_other_corners_gets_the_same_surface(tmp_path):
+    """Quads are cut along their shorter diagonal (core.geometry.quad_triangles), not from
+    their first corner: a 6 x 6 quad grid got 142-335 control points as its quads' corners
+    were turned (review); now one surface. The same for a file's quads (core.meshio)."""
+    x, y = np.meshgrid(np.linspace(0, 1, 6), np.linspace(0, 1, 6), indexing="ij")
+    P = np.c_[x.ravel(), y.ravel(), 0.5 * x.ravel() ** 2 + 0.8 * np.sin(3 * y.ravel()) * x.ravel()]
+    i = np.arange(36).reshape(6, 6)
+    Q = np.c_[i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # (a coarse mesh's large net)
+        base = fit_surface(P, Q)
+    at, _ = base.tessellation_uv(32)
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        turned = Q[np.arange(len(Q))[:, None], (rng.integers(0, 4, len(Q))[:, None]
+                                                 + np.arange(4)) % 4]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            surf = fit_surface(P, turned)
+        assert surf.report["control_points"] == base.report["control_points"]
+        np.testing.assert_allclose(surf(at), base(at), atol=1e-8)
+    # an OBJ file's quads: read as the same triangles (each turned to its least corner)
+    cuts = []
+    for name, quads in (("plain", Q), ("turned", turned)):
+        path = tmp_path / f"{name}.obj"
+        path.write_text("".join(f"v {a!r} {b!r} {c!r}\n" for a, b, c in P)
+                        + "".join(f"f {a + 1} {b + 1} {c + 1} {d + 1}\n" for a, b, c, d in quads))
+        _, tris = read_geometry(path)
+        tris = np.array([np.roll(t, -int(np.argmin(t))) for t in tris])
+        cuts.append(tris[np.lexsort(tris.T[::-1])])
+    np.testing.assert_array_equal(cuts[0], cuts[1])
 
 
 def test_the_same_mesh_stored_in_another_order_gets_the_same_surface():
