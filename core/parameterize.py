@@ -2550,7 +2550,8 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     scanned face 824 (722; benchmarks/mesh_maps.py). Steep peaks (three_peaks.off) keep their
     rectangle.
 
-    Cleaning: polygons are split into fans; faces with a repeated vertex and repeated faces are
+    Cleaning: quads are cut along their shorter diagonal (:func:`core.geometry.quad_triangles`),
+    larger polygons split into fans; faces with a repeated vertex and repeated faces are
     dropped; zero-area caps are flipped away (:func:`_flip_caps`); faces are re-oriented
     consistently (majority orientation kept). Vertices that no
     face references are left out: their ``uv`` rows are NaN and ``used`` is False.

@@ -971,7 +971,8 @@ def predicted_knots(n: int, error: float, tol: float, previous: tuple | None,
     of the same run, or None).
 
     Model (an addition to method.md section 6): the error falls like ``n^-r``. ``r = (k + 1) / 2``
-    on smooth data (``h^(k+1)`` with ``h ~ n^-1/2``); with an earlier fit it is the measured
+    on smooth data (``h^(k+1)`` with ``h ~ n^-1/2``); with an earlier fit (of fewer knots and
+    a larger error, or of more knots and a smaller one) it is the measured
     ``log(e_1/e) / log(n/n_1)``, clipped to ``[0.5, (k + 1) / 2]`` (measured between 20 and 166
     knots: scans 0.15-1.7, smooth functions 0.9-2.4). The count is ``n (e / tol)^(1/r)``, with
     10% to spare.
@@ -979,8 +980,10 @@ def predicted_knots(n: int, error: float, tol: float, previous: tuple | None,
     rate = (degree + 1) / 2
     if previous is not None:
         n1, e1 = previous
-        measured = (np.log(e1 / error) / np.log(n / n1) if n > n1 and e1 > error > 0
-                    else 0.0)
+        # (a finer fit before, as when coarser starts follow one that met the tolerance: the
+        # rate between them too; it had been taken as 0.5, the steepest cut: review)
+        falls = n != n1 and e1 > 0 and error > 0 and (n > n1) == (e1 > error)
+        measured = np.log(e1 / error) / np.log(n / n1) if falls else 0.0
         rate = float(np.clip(measured, 0.5, rate))
     return 1.1 * n * (error / max(tol, 1e-300)) ** (1.0 / rate)
 
@@ -1097,9 +1100,10 @@ def adaptive_fit(
     count as iterations. A fresh start that meets the tolerance with room to spare is followed
     by a coarser fresh start, with the knots :func:`predicted_knots` gives for SHRINK_TARGET
     of the tolerance when that is at most SHRINK_FRACTION of them (at least MIN_START_KNOTS),
-    as long as they meet it; the first that misses ends the run and the last that met it is
-    returned (a plane, a sphere cap, a bump had nets of 140-148 control points, the probe's,
-    whatever the tolerance: now 37-70 at 1e-2 and 1e-3; benchmarks/net_size.py). A continued run (``start_knots``) with a tolerance inserts the knots
+    as long as they meet it; the first that misses (or swings) ends the run and the last that
+    met it is returned (a plane, a sphere cap, a bump had nets of 140-148 control points, the
+    probe's, whatever the tolerance: now 37-70 at 1e-2 and 1e-3; benchmarks/net_size.py). A
+    continued run (``start_knots``) with a tolerance inserts the knots
     :func:`predicted_knots` says are missing, up to doubling them. Reports say whether an
     iteration's knots were placed ``"afresh"``, ``"continued"`` or ``"inserted"``
     (``knots_placed``). The best iteration is the one that meets the tolerance, else the one of
@@ -1371,6 +1375,15 @@ def adaptive_fit(
             elif known and len(swung):
                 swung = swung[~_in_discs(swung, known)]
         settle_restart = False
+        if len(swung) and restarted and shrinking:
+            # a coarser start that swings is a miss: the finer one it followed is returned
+            # (as a sizing restart it had been taken back to that one, which then shrank to
+            # it again, until the iteration limit: review)
+            report["swings"] = int(len(swung))
+            history.append(report)
+            fit.basis = None
+            reason = "tolerance reached"
+            break
         if len(swung) and restarted:
             # a restart with more knots than the data hold: again with fewer, half way back
             # to the fit it was sized from (and that one itself at last); no more sizing
@@ -1452,8 +1465,8 @@ def adaptive_fit(
             # a fresh start that meets the tolerance by far (a loose tolerance, a smooth
             # shape): a coarser fresh start with the knots the error-rate model predicts, at
             # least MIN_START_KNOTS; the finer fit stays the one returned if it misses
-            if (shrinking is not False and fresh and options.initial_knots is None
-                    and it < options.max_iterations - 1 and len(interior) > MIN_START_KNOTS):
+            if (fresh and options.initial_knots is None and it < options.max_iterations - 1
+                    and len(interior) > MIN_START_KNOTS):
                 want = predicted_knots(len(interior), max(value, 1e-300),
                                        SHRINK_TARGET * tol, sized, options.degree)
                 want = max(int(np.ceil(want)), MIN_START_KNOTS)

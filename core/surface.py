@@ -2550,7 +2550,8 @@ def fit_surface(
         Scanned points, or mesh vertices.
     faces : (F, 3) int, optional
         Triangles of a disk-topology mesh ((F, k) polygons, or a list of polygons of any
-        lengths, are split into fans; then the mesh is parameterized over the unit disk,
+        lengths, are split: quads along their shorter diagonal, larger polygons into fans;
+        then the mesh is parameterized over the unit disk,
         or a rectangle when its boundary has four corners, or its own boundary flattened
         when that distorts the triangles less;
         otherwise the cloud is projected on its best-fit plane).

@@ -127,27 +127,28 @@ def test_the_net_follows_the_tolerance_and_the_start_without_one_is_unchanged():
     assert [h["knots_placed"] for h in free.report["history"]] == ["afresh", "inserted"]
 
 
-def test_a_loose_tolerance_on_a_smooth_shape_gets_a_small_net():
+def test_a_loose_tolerance_on_a_smooth_shape_gets_a_small_net(monkeypatch):
     """A fresh start that meets the tolerance with room to spare is followed by coarser fresh
     starts sized for half the tolerance (core.refine.SHRINK_TARGET; at most SHRINK_FRACTION of
     the knots, at least MIN_START_KNOTS) while they meet it: a plane got 148 control points,
     the probe's, whatever the tolerance; now 40, and a bump at 1e-2 / 1e-3 37 / 70 (140
     before). Where half the tolerance needs about the probe's knots it stays (the bump at
     3e-4). The first coarser start that misses ends the run, and the last that met it is
-    returned (a wave at 3e-4: 41, 22 and 7 knots, the last at 5.7e-4: the 22 knots' 90
-    control points). ``initial_knots`` given is kept."""
+    returned (made to miss here: aimed at 4x the tolerance); so does one that swings (it had
+    been taken back as a sizing restart to the finer start, which shrank to it again, until
+    the iteration limit: review). ``initial_knots`` given is kept."""
     xy = np.random.default_rng(0).random((3000, 2))
     probe = automatic_start("tcb", 2000) // 4
 
-    def run(z, tol):
-        r = fit_surface(np.c_[xy, z], tolerance=tol).report
+    def run(z, tol, **kw):
+        r = fit_surface(np.c_[xy, z], tolerance=tol, **kw).report
         h = r["history"]
         knots = [x["interior_knots"] for x in h]
         assert r["stop_reason"] == "tolerance reached" and r["rms_rel"] <= tol
         assert knots[0] == probe and all(a > b for a, b in zip(knots, knots[1:]))
         assert all(x["knots_placed"] == "afresh" for x in h)
         assert all(x["rms_rel"] <= tol for x in h[:-1])  # only the last can miss ...
-        if h[-1]["rms_rel"] > tol:  # ... and then the one before it is returned
+        if h[-1]["rms_rel"] > tol or "swings" in h[-1]:  # ... and then the one before it
             assert r["returned_iteration"] == h[-2]["iteration"]
             assert r["control_points"] == h[-2]["control_points"]
         return r, knots
@@ -160,9 +161,22 @@ def test_a_loose_tolerance_on_a_smooth_shape_gets_a_small_net():
     bump = 0.2 * np.exp(-4 * ((xy - 0.5) ** 2).sum(axis=1))
     cps = [run(bump, tol)[0]["control_points"] for tol in (1e-2, 1e-3, 3e-4)]
     assert cps[0] < cps[1] < 0.6 * cps[2] and len(run(bump, 3e-4)[1]) == 1
-    wave = 0.1 * np.sin(3 * xy[:, 0]) * np.cos(2 * xy[:, 1])
-    r, knots = run(wave, 3e-4)
-    assert len(knots) == 3 and r["history"][-1]["rms_rel"] > 3e-4  # the miss
+    monkeypatch.setattr(refine, "SHRINK_TARGET", 4.0)
+    r, knots = run(bump, 1e-3)
+    assert len(knots) == 2 and r["history"][-1]["rms_rel"] > 1e-3  # the miss
+    monkeypatch.setattr(refine, "SHRINK_TARGET", 0.5)
+    swing_places = refine.swing_places
+
+    def swinging(space, C, uv, points, errors, *args, domain=False, **kw):  # coarse ones swing
+        where, checked, largest = swing_places(space, C, uv, points, errors, *args,
+                                               domain=domain, **kw)
+        if not domain and space.n_basis <= 120:
+            where = np.vstack([where, [[0.5, 0.5]]])
+        return where, checked, largest
+
+    monkeypatch.setattr(refine, "swing_places", swinging)
+    r, knots = run(bump, 1e-2, max_iterations=8)
+    assert len(knots) == 2 and r["history"][-1]["swings"] == 1
 
 
 def test_refine_below_the_surface_budget_is_refused_and_a_far_tolerance_grows_fast():
@@ -1719,7 +1733,9 @@ def test_a_slot_whose_fan_bulges_away_along_a_bend_is_clipped(monkeypatch):
     """A strip bent by 90 degrees with a slot along the bend: the slot's fan faces backwards
     nowhere, but it tents away from the strip (its centre lies inside the bend); its border,
     clipped, spans the slot with less than HOLE_BULGE of the fan's area, so it is clipped.
-    Measured: max error 2.1e-3 of the diagonal clipped, 6.0e-3 with the fan."""
+    Measured: max error 2.1e-3 of the diagonal clipped, 6.0e-3 with the fan; now 1.6e-3 and
+    6.8e-3, both from the probe's start (the coarser starts after a start that meets the
+    tolerance by far made nets of different sizes: 4.1e-3 against 6.8e-3)."""
     import core.parameterize as parameterize_module
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
@@ -1732,7 +1748,8 @@ def test_a_slot_whose_fan_bulges_away_along_a_bend_is_clipped(monkeypatch):
     for rule, bulge in (("fan", 0.0), ("shipped", parameterize_module.HOLE_BULGE)):
         monkeypatch.setattr(parameterize_module, "HOLE_BULGE", bulge)
         with pytest.warns(RuntimeWarning, match="vertices are in no face"):
-            surf = fit_surface(P, F, fill_holes=True)
+            surf = fit_surface(P, F, fill_holes=True,
+                               initial_knots=automatic_start("tcb", 2000) // 4)
         par = surf.parameterization
         assert len(par.faces) == 2 * len(F) and surf.report["holes_filled"] == 1
         assert np.all(orient2d(*(par.uv[par.faces[:, k]] for k in range(3))) > 0)

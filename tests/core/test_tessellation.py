@@ -12,16 +12,16 @@ from core import fit_surface
 from core.surface import TESSELLATION_FULL_SHARE, grid_frame, tessellation_fill
 
 
-def crescent(nr=6, nt=40):
-    """A half ring of quads 0.4 wide and 3.8 long, waved along it: its map keeps its own
-    boundary, which fills 0.15 of the square on its longer side (a Suzanne brow patch: 0.26)."""
-    r, t = np.meshgrid(np.linspace(1.0, 1.4, nr), np.linspace(0, np.pi, nt))
-    x, y = r * np.cos(t), r * np.sin(t)
-    z = 1.5 * np.sin(4 * t) * (r - 1.2) + 0.1 * np.cos(3 * x)
-    idx = np.arange(nr * nt).reshape(nt, nr)
-    a, b, c, d = (idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(),
-                  idx[1:, :-1].ravel())
-    return np.c_[x.ravel(), y.ravel(), z.ravel()], np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+def crescent():
+    """A half ring of quads 0.4 wide and 3.8 long, waved along it (benchmarks/
+    tessellation_fidelity.py's half_ring): its map keeps its own boundary, which fills 0.15 of
+    the square on its longer side (a Suzanne brow patch: 0.26)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    from tessellation_fidelity import half_ring
+
+    return half_ring()
 
 
 def mesh_at(uv, tri, verts, x):
