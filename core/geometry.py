@@ -19,9 +19,9 @@ from scipy.spatial import cKDTree
 from .configurations import _segments_cross
 from .simplex import orient2d
 
-__all__ = ["closest_point_on_triangles", "column_bounds", "coordinate_order", "distances_at_vertices",
-           "ear_clipping", "float32_rounding", "point_mesh_distance", "quad_triangles",
-           "simple_polygon"]
+__all__ = ["closest_point_on_triangles", "column_bounds", "coordinate_order",
+           "distances_at_vertices", "ear_clipping", "float32_rounding", "point_mesh_distance",
+           "quad_triangles", "simple_polygon"]
 
 
 def column_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -69,7 +69,7 @@ def quad_triangles(points: np.ndarray, quads: np.ndarray, tie_rtol: float = 0.0,
     the quad's winding) of those whose two triangles face the quad's way (its Newell normal;
     a concave quad has one such diagonal); of equal diagonals (a square), the one through the
     corner of least coordinates (x, then y, then z). The cut does not depend on which corner a
-    quad starts at (a fan from the first corner did: a 6 x 6 quad grid got 146-167 control
+    quad starts at (a fan from the first corner did: a 6 x 6 quad grid got 142-335 control
     points as its quads' corners were turned; review), and the shorter diagonal is Blender's
     Triangulate default (Shortest Diagonal). Quads with neither diagonal facing their way (a
     bow tie) are cut along the shorter too; with NaN corners along ``a c``.

@@ -1876,7 +1876,7 @@ def _fans(f: np.ndarray) -> np.ndarray:
 def _as_triangles(faces: np.ndarray, n_vertices: int, points: np.ndarray | None = None
                   ) -> np.ndarray:
     """Validate ``faces`` (``(f, k)`` integer, ``k >= 3``, or a sequence of polygons of any
-    lengths) and split polygons into fans, in the order of the polygons.
+    lengths) and split the polygons into triangles, in the order of the polygons.
 
     A polygon ``(v0, ..., v_{k-1})`` becomes the triangles ``(v0, v_j, v_{j+1})``,
     ``j = 1..k-2``; quads, given the ``points``, are cut along a diagonal chosen by their

@@ -508,23 +508,43 @@ class TCBSurface:
         ``callback({"points_done": k, "points": V})`` hears of each chunk and may return True
         to stop (CancelledError)."""
         uv, faces = self.tessellation_uv(resolution)
-        return self._points(uv, callback), faces.copy()
+        return self._points(uv, callback)[0], faces.copy()
 
-    def _points(self, uv, callback=None) -> np.ndarray:
-        """``self(uv)`` (m, 3), to rounding, by chunks with ``callback`` (see tessellate)."""
+    def tessellate_with_matrix(self, resolution: int = 64, callback=None
+                               ) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix]:
+        """:meth:`tessellate` and the :meth:`evaluation_matrix` of its vertices (V, n), from
+        one evaluation of the basis (a live control net's weights: Blender's Re-tessellate
+        had evaluated it twice, once for each)."""
+        uv, faces = self.tessellation_uv(resolution)
+        verts, matrix = self._points(uv, callback, matrix=True)
+        return verts, faces.copy(), matrix
+
+    def _points(self, uv, callback=None, matrix: bool = False):
+        """``self(uv)`` (m, 3), to rounding, by chunks with ``callback`` (see tessellate), and
+        with ``matrix`` the :meth:`evaluation_matrix` of ``uv`` (else None)."""
         uv = np.asarray(uv, dtype=np.float64)
         # the fourth column sums the basis: NaN rows where it is no partition of unity
         c = np.c_[self._c, np.ones(len(self._c))]
         out = np.empty((len(uv), 3))
+        parts = []
         for s in range(0, max(len(uv), 1), CLOSEST_CHUNK):
             e = min(s + CLOSEST_CHUNK, len(uv))
             if e > s:
-                values = self._space.combine(uv[s:e], c)[0]
+                if matrix:
+                    A = self._space.evaluate(uv[s:e])
+                    values = A @ c
+                    parts.append(A if len(self._active) == A.shape[1] else A[:, self._active])
+                else:
+                    values = self._space.combine(uv[s:e], c)[0]
                 values[np.abs(values[:, 3] - 1.0) > _COVER_TOL, :3] = np.nan
                 out[s:e] = values[:, :3]
             if callback is not None and callback({"points_done": e, "points": len(uv)}):
                 raise CancelledError("the tessellation was cancelled")
-        return out
+        if not matrix:
+            return out, None
+        if not parts:
+            return out, sp.csr_matrix((0, len(self._active)))
+        return out, sp.vstack(parts, format="csr")
 
     def control_net(self) -> tuple[np.ndarray, np.ndarray]:
         """Control points (n, 3) and the control-net triangles (f, 3) over them (method.md 7:

@@ -146,16 +146,18 @@ def read_positions(data) -> np.ndarray:
     return buf.reshape(n, 3)
 
 
-def read_triangles(mesh, matrix=None) -> np.ndarray:
+def read_triangles(mesh, matrix=None, positions=None) -> np.ndarray:
     """(t, 3) int32 vertex indices of the mesh's triangulated faces (Blender's triangulation,
     with quads cut along the diagonal their shape gives in world space (``matrix``, the
-    object's; :func:`_quads_by_shape`) and n-gons that cut the same diagonal triangulated
-    again: :func:`_untangle_diagonals`)."""
+    object's; ``positions``: the mesh's :func:`read_positions` when already read;
+    :func:`_quads_by_shape`) and n-gons that cut the same diagonal triangulated again:
+    :func:`_untangle_diagonals`)."""
     tris = mesh.loop_triangles
     buf = np.empty(len(tris) * 3, dtype=np.int32)
     if len(tris):
         tris.foreach_get("vertices", buf)
-    return _untangle_diagonals(mesh, _quads_by_shape(mesh, buf.reshape(-1, 3), matrix))
+    tris = _quads_by_shape(mesh, buf.reshape(-1, 3), matrix, positions)
+    return _untangle_diagonals(mesh, tris)
 
 
 # quads whose diagonals' squared lengths differ by at most this share keep Blender's cut (a
@@ -165,13 +167,13 @@ def read_triangles(mesh, matrix=None) -> np.ndarray:
 QUAD_TIE_RTOL = 1e-2
 
 
-def _quads_by_shape(mesh, tris: np.ndarray, matrix=None) -> np.ndarray:
+def _quads_by_shape(mesh, tris: np.ndarray, matrix=None, positions=None) -> np.ndarray:
     """``tris`` (Blender's loop triangles) with each quad's two triangles replaced, in their
     places, by the cut of ``core.geometry.quad_triangles`` in world space: the shorter
     diagonal, whatever corner the quad starts at (Blender cuts from its first corner unless
-    that is concave, so a quad grid whose corners were turned had got 146-167 control points:
-    review); of diagonals within QUAD_TIE_RTOL (a square), Blender's, from the first corner.
-    World space: Apply Rotation & Scale leaves the cut as it was."""
+    that is concave, so a 6 x 6 quad grid whose corners were turned had got 142-335 control
+    points: review); of diagonals within QUAD_TIE_RTOL (a square), Blender's, from the first
+    corner. World space: Apply Rotation & Scale leaves the cut as it was."""
     n_poly = len(mesh.polygons)
     if len(tris) == n_poly or n_poly == 0:  # all triangles (most scans)
         return tris
@@ -190,7 +192,7 @@ def _quads_by_shape(mesh, tris: np.ndarray, matrix=None) -> np.ndarray:
     corners = loops[start[quads, None] + np.arange(4)]
     from .. import core  # the extension's own engine
 
-    pos = read_positions(mesh).astype(np.float64)
+    pos = (read_positions(mesh) if positions is None else positions).astype(np.float64)
     if matrix is not None:
         pos = pos @ np.array(matrix, dtype=np.float64)[:3, :3].T
     out = tris.copy()
@@ -475,7 +477,8 @@ def read_selection(context, objects=None) -> InputData:
         if ob.type == "MESH":
             mesh = ob.data
             pts = read_positions(mesh)
-            tris = read_triangles(mesh, inst.matrix_world) if len(mesh.polygons) else None
+            tris = (read_triangles(mesh, inst.matrix_world, pts)
+                    if len(mesh.polygons) else None)
             tris = _faces_or_cloud(owner, pts, tris, notes)
         elif ob.type == "POINTCLOUD":
             pts, tris = read_positions(ob.data), None
@@ -492,7 +495,7 @@ def read_selection(context, objects=None) -> InputData:
             continue
         data = obj.data
         pts = read_positions(data)
-        tris = (read_triangles(data, obj.matrix_world)
+        tris = (read_triangles(data, obj.matrix_world, pts)
                 if obj.type == "MESH" and len(data.polygons) else None)
         tris = _faces_or_cloud(obj, pts, tris, notes)
         if len(pts):

@@ -1153,31 +1153,14 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
 def _tessellation(surf, resolution: int, weights: bool, callback=None):
     """Re-tessellate's engine part (on the job's thread): the surface mesh ``(verts, faces)``
     at ``resolution`` and, with ``weights``, the live net's padded weights of its vertices
-    (:func:`live.padded_weights`), from one evaluation of the basis (they had been evaluated
-    twice, for the mesh and for the weights). ``callback`` hears ``{"points_done", "points"}``
-    after each chunk of CLOSEST_CHUNK vertices and may return True to stop (CancelledError):
-    resolution 2048 is 3 million vertices, 20-40 s."""
-    core = _core()
-    uv, faces = surf.tessellation_uv(resolution)
+    (:func:`live.padded_weights`), from one evaluation of the basis
+    (``TCBSurface.tessellate_with_matrix``; they had been evaluated twice). ``callback``
+    hears ``{"points_done", "points"}`` after each chunk of vertices and may return True to
+    stop (CancelledError): resolution 2048 is 3 million vertices, 20-40 s."""
     if not weights:
         return (*surf.tessellate(resolution, callback=callback), None)
-    import scipy.sparse as sp
-
-    chunk = core.surface.CLOSEST_CHUNK
-    coefficients, active = surf.coefficients, surf.active
-    verts = np.empty((len(uv), 3))
-    parts = []
-    for s in range(0, len(uv), chunk):
-        A = surf.space.evaluate(uv[s:s + chunk])
-        v = A @ coefficients
-        v[np.abs(np.asarray(A.sum(axis=1)).ravel() - 1.0) > core.surface._COVER_TOL] = np.nan
-        verts[s:s + chunk] = v
-        parts.append(A[:, active] if len(active) != A.shape[1] else A)
-        if callback is not None and callback({"points_done": min(s + chunk, len(uv)),
-                                              "points": len(uv)}):
-            raise core.CancelledError("the tessellation was cancelled")
-    matrix = sp.vstack(parts, format="csr") if parts else sp.csr_matrix((0, len(active)))
-    return verts, faces.copy(), live.padded_weights(matrix)
+    verts, faces, matrix = surf.tessellate_with_matrix(resolution, callback=callback)
+    return verts, faces, live.padded_weights(matrix)
 
 
 class TCB_OT_retessellate(_EngineOperator, bpy.types.Operator):

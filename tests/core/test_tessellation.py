@@ -111,7 +111,17 @@ def test_tessellate_reports_its_chunks_and_stops_when_asked(long_patch, monkeypa
     np.testing.assert_allclose(verts, long_patch(uv), rtol=0, atol=1e-12)
     # outside where the basis sums to 1: NaN rows, as surf(uv) gives
     far = np.vstack([uv[:3], uv.max(axis=0) + 10.0])
-    np.testing.assert_array_equal(np.isnan(long_patch._points(far)), np.isnan(long_patch(far)))
+    np.testing.assert_array_equal(np.isnan(long_patch._points(far)[0]),
+                                  np.isnan(long_patch(far)))
+    # with the evaluation matrix of the vertices (a live net's weights), from the same chunks
+    heard.clear()
+    v2, t2, M = long_patch.tessellate_with_matrix(64, callback=lambda r: heard.append(r) and False)
+    assert len(heard) == -(-len(uv) // 500)
+    np.testing.assert_allclose(v2, verts, rtol=0, atol=1e-12)  # (the same NaN rows)
+    np.testing.assert_array_equal(t2, tri)
+    assert (M != long_patch.evaluation_matrix(uv)).nnz == 0
+    inside = ~np.isnan(verts).any(axis=1)
+    np.testing.assert_allclose(M[inside] @ long_patch.control_points, verts[inside], atol=1e-12)
     calls = []
     with pytest.raises(CancelledError):
         long_patch.tessellate(64, callback=lambda r: calls.append(r) or len(calls) == 2)
