@@ -53,7 +53,7 @@ def coordinate_order(points: np.ndarray) -> np.ndarray | None:
     step = d[:, 0]
     for j in range(1, p.shape[1]):  # the first column that differs decides
         step = np.where(step == 0, d[:, j], step)
-    if not (step < 0).any():
+    if not (step < 0).any() and not np.isnan(step).any():  # (NaN rows: sorted to the end)
         return None
     order = np.argsort(p[:, 0], kind="stable")
     x = p[order, 0]

@@ -999,8 +999,9 @@ class TCBSurface:
         ``"map"`` (the same data mapped to other parameters)."""
         points = np.asarray(points, dtype=np.float64)
         old = self._param
+        # (NaN rows too: a mesh's loose vertices may be NaN, as the fit allowed: review)
         if (points.ndim != 2 or points.shape != (len(old.uv), 3)
-                or not np.isfinite(points).all() or not self.same_data_set(points)):
+                or not self.same_data_set(points)):
             return None, "points"
         if old.faces is not None:
             if faces is None:

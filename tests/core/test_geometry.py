@@ -4,6 +4,7 @@ import numpy as np
 
 from core.geometry import (
     closest_point_on_triangles,
+    coordinate_order,
     distances_at_vertices,
     point_mesh_distance,
     quad_triangles,
@@ -185,3 +186,20 @@ def test_quads_are_cut_along_their_shorter_diagonal_whatever_corner_they_start_a
     for k in range(4):
         t = quad_triangles(sq, np.roll([0, 1, 2, 3], k)[None])
         assert set(np.intersect1d(t[0], t[1]).tolist()) == {1, 3}
+
+
+def test_coordinate_order_is_the_lexicographic_order_and_takes_nan_rows_alike():
+    """core.geometry.coordinate_order: the order of np.lexsort over the columns (x, then y,
+    then z) for rows with and without ties in x, None for sorted rows; NaN rows go last in any
+    order given (rows that looked sorted around a NaN had been taken as sorted: review)."""
+    rng = np.random.default_rng(0)
+    for p in (rng.random((500, 3)), rng.integers(0, 4, (500, 3)).astype(float)):
+        order = coordinate_order(p)
+        np.testing.assert_array_equal(p[order], p[np.lexsort(p.T[::-1])])
+        assert coordinate_order(p[order]) is None
+    a = np.array([[1.0, 0, 0], [np.nan, 0, 0], [0.0, 0, 0]])
+    b = a[[2, 1, 0]]
+    for x in (a, b):
+        order = coordinate_order(x)
+        assert order is not None
+        np.testing.assert_array_equal(x[order][:2], [[0.0, 0, 0], [1.0, 0, 0]])

@@ -274,6 +274,23 @@ def test_refine_takes_the_same_mesh_stored_in_another_order(tmp_path):
             surf.refine(p, bad, max_iterations=1)
 
 
+def test_refine_takes_a_mesh_with_a_loose_nan_vertex_in_another_order():
+    """A mesh whose loose vertex is NaN (the fit leaves it out) stored in another order: it
+    had been refused with the NaN message though the fit and a refine in its own order take
+    it (review); now refined as in its own order."""
+    points, faces = quad_grid(10)
+    points = np.vstack([points, [np.nan, np.nan, np.nan]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        surf = fit_surface(points, faces, tolerance=1e-3, max_iterations=2)
+        plain = surf.refine(points, faces, max_iterations=1)
+        p, f, perm = shuffled(points, faces, 0)
+        moved = surf.refine(p, f, max_iterations=1)
+    assert moved.report["control_points"] == plain.report["control_points"]
+    assert np.abs(moved.control_points - plain.control_points).max() < 1e-9
+    assert np.isnan(moved.errors[np.flatnonzero(perm == len(points) - 1)]).all()
+
+
 def test_refine_takes_a_cloud_stored_in_another_order_also_with_repeated_points():
     """A cloud's points permuted (some repeated exactly: any matching of those is the same
     data) are refined as in their own order; a point moved is refused."""
