@@ -669,6 +669,29 @@ def test_refine_after_a_loose_fit_grows_the_net_and_says_when_nothing_was_refine
     assert "Warning: TCB:" in out and "nothing was refined" in out and "set a smaller" in out
 
 
+def test_refine_of_a_fit_at_rounding_says_so_and_keeps_the_net(clean_scene, capfd):
+    """A flat grid fits to rounding (RMS 9e-17 of the diagonal): Refine's default, half the
+    current error, had chased the rounding to the budget (1627 control points, RMS 5.8e-10
+    and "the tolerance was not reached": user test; the refit from the stored float32
+    parameters is 5.3e-9 off). The default is at least REFINE_ROUNDING (1e-7 of the
+    diagonal): nothing is refined, and the warning says why."""
+    bpy = clean_scene
+    verts, faces = grid(20, f=lambda x, y: 0.0 * x)
+    plane = add_mesh(bpy, "Plane", verts, faces)
+    assert fit(bpy, plane, tolerance=1e-3, max_control_points=2000) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    st = surface.tcb
+    n0 = st.control_points
+    assert st.rms_rel < 1e-12
+    with bpy.context.temp_override(**select(bpy, surface)):
+        capfd.readouterr()
+        assert bpy.ops.tcb.refine() == {"FINISHED"}
+        out = capfd.readouterr().out
+    assert st.control_points == n0, out
+    assert "nothing was refined: the surface already fits its data to rounding" in out, out
+    assert "not reached" not in out and "set a smaller" not in out, out
+
+
 def test_refine_of_a_max_criterion_fit_halves_the_max(clean_scene):
     """The stored criterion is the settings' enum ("MAX"): Refine's default halves the max
     error (it halved the RMS, 15x too tight) and the panel says the tolerance bounds the max."""
