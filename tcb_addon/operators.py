@@ -1074,7 +1074,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         # refine: half its error had sent Refine to the budget chasing rounding (1627 control
         # points, RMS 5.8e-10: user test); the default stops at REFINE_ROUNDING
         floor = REFINE_ROUNDING * (1.0 if rel else float(rep.get("diagonal", 0.0)))
-        self._at_rounding = not self.tolerance and current <= floor
+        self._at_rounding = not self.tolerance and key in rep and current <= floor
         if not self.tolerance:
             tol = max(tol, floor)
         budget = self.max_control_points or max(st.max_control_points, 2 * st.control_points)
