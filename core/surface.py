@@ -1894,7 +1894,8 @@ def _area_samples(points, faces, count: int, seed: int = 0):
     rng = np.random.default_rng(seed)
     faces = np.asarray(faces)
     rank = np.empty(len(points), dtype=np.int64)
-    rank[np.lexsort(np.asarray(points).T[::-1])] = np.arange(len(points))
+    order = coordinate_order(points)  # (the lexicographic order; None: already in it)
+    rank[np.arange(len(points)) if order is None else order] = np.arange(len(points))
     first = np.argmin(rank[faces], axis=1)
     turn = (first[:, None] + np.arange(3)) % 3  # the corners from the least one on
     rows = np.arange(len(faces))[:, None]
