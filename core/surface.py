@@ -272,7 +272,8 @@ class TCBSurface:
         return self._param.contains(uv)
 
     # ---- meshes ------------------------------------------------------------------------
-    def tessellation_uv(self, resolution: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    def tessellation_uv(self, resolution: int = 64, callback=None
+                        ) -> tuple[np.ndarray, np.ndarray]:
         """Parameters (V, 2) and CCW triangles (F, 3) covering exactly the data's domain.
 
         The domain is the disk polygon for meshes and the convex hull of the parameters for
@@ -297,6 +298,9 @@ class TCBSurface:
         ``stretch`` of their parameterization (3D over uv edge length), clouds (and files
         without it) by the density of the data parameters. The parameters depend only on the
         data, not on the control points (``evaluation_matrix`` of them re-evaluates edits).
+        ``callback({"grid_step": k, "grid_steps": K})`` hears of each of its steps and may
+        return True to stop (CancelledError): resolution 2048 takes 6-8 s before its first
+        vertex is evaluated (user test: Esc was not heard for 8 s).
         """
         given = resolution
         try:  # a number of grid steps: int() of it, as always (2.9 -> 2, "8" -> 8)
@@ -318,6 +322,13 @@ class TCBSurface:
         if cached is not None:  # most recent last
             self._tess_cache[resolution] = cached
             return cached
+        steps = iter(range(1, TESSELLATION_SPLITS + 4))
+
+        def step():
+            k = next(steps)
+            if callback is not None and _cancel_requested(
+                    callback, {"grid_step": k, "grid_steps": TESSELLATION_SPLITS + 3}):
+                raise CancelledError("the tessellation was cancelled")
         poly = np.asarray(self._param.domain_polygon, dtype=np.float64)
         lo, hi = poly.min(axis=0), poly.max(axis=0)
         rot, wlo, whi = grid_frame(self._param)
@@ -347,6 +358,7 @@ class TCBSurface:
         # deep: more than 2 d from the polygon (nearest boundary sample beyond 2.5 d)
         deep = np.zeros(len(grid), dtype=bool)
         deep[idx[gap > 2.5 * d]] = True
+        step()
         uv = np.vstack([boundary, grid[inside]])
         number = np.full(len(grid), -1)
         number[inside] = len(boundary) + np.arange(np.count_nonzero(inside))
@@ -361,6 +373,7 @@ class TCBSurface:
         if self._param.kind == "plane":
             trim = max(self._trim_distance(data, full), 1.5 * d)
         tri = self._domain_triangles(uv, d, full, trim, lattice)
+        step()
         stretch = self._local_stretch(data, full, np.asarray(self._param.stretch)[ok]
                                       if self._param.stretch is not None else None)
         if stretch is not None:
@@ -368,6 +381,7 @@ class TCBSurface:
             # compression resolves): at every edge of every round it took 11 of the 14 s of
             # resolution 1024 on the DEM
             stretch = _gridded(stretch, lo, hi, min(4 * resolution, stretch.cells))
+        step()
         # the rounds split the marked edges in place (red-green): a new Delaunay triangulation
         # per round cost seconds at resolution ~250, and the rounds were skipped above it, so a
         # steep mesh got a coarser surface at 251 than at 250 (three_peaks: longest 3D edge
@@ -378,6 +392,7 @@ class TCBSurface:
                 uv, tri, lambda length, mid: (length * stretch(mid) > 2.0 * d)
                 & (length > d / 2**TESSELLATION_SPLITS))
             done.append(same)
+            step()
             if not len(tri):
                 break
         tri = np.vstack(done + [tri])
@@ -506,8 +521,8 @@ class TCBSurface:
         comes (``SplineSpace.combine``: no sparse matrix of all of them, tens of entries per
         vertex; about the time of ``self(uv)``, and its values to rounding);
         ``callback({"points_done": k, "points": V})`` hears of each chunk and may return True
-        to stop (CancelledError)."""
-        uv, faces = self.tessellation_uv(resolution)
+        to stop (CancelledError); before them, the grid's steps (:meth:`tessellation_uv`)."""
+        uv, faces = self.tessellation_uv(resolution, callback)
         return self._points(uv, callback)[0], faces.copy()
 
     def tessellate_with_matrix(self, resolution: int = 64, callback=None
@@ -515,7 +530,7 @@ class TCBSurface:
         """:meth:`tessellate` and the :meth:`evaluation_matrix` of its vertices (V, n), from
         one evaluation of the basis (a live control net's weights: Blender's Re-tessellate
         had evaluated it twice, once for each)."""
-        uv, faces = self.tessellation_uv(resolution)
+        uv, faces = self.tessellation_uv(resolution, callback)
         verts, matrix = self._points(uv, callback, matrix=True)
         return verts, faces.copy(), matrix
 

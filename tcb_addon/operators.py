@@ -101,10 +101,13 @@ def clear_cache():
 
 
 def progress_text(report: dict | None, what: str = "Fitting") -> str:
-    """The status-bar line of a running job: a fit's iteration report, or the closest
-    points' ``{"points_done", "points"}``."""
+    """The status-bar line of a running job: a fit's iteration report, the closest
+    points' ``{"points_done", "points"}``, or a tessellation's ``{"grid_step", "grid_steps"}``."""
     if not report:
         return f"TCB: {what}... (Esc to cancel)"
+    if "grid_step" in report:  # (Re-tessellate, before its vertices: seconds at 2048)
+        return (f"TCB: {what}, laying out the mesh, step {report['grid_step']} of "
+                f"{report['grid_steps']} (Esc to cancel)")
     if "points_done" in report:
         return (f"TCB: {what}, {progress_percent(report)}% of {report['points']:,} points "
                 "(Esc to cancel)")
@@ -678,8 +681,9 @@ class _Job:
 
 
 def _print_progress(report, what: str = "Fitting"):
-    if "points_done" in report and report["points"] <= _core().surface.CLOSEST_CHUNK:
-        return  # (one chunk: nothing to follow)
+    if "grid_step" in report or ("points_done" in report
+                                 and report["points"] <= _core().surface.CLOSEST_CHUNK):
+        return  # (one chunk, or a tessellation's grid: nothing to follow)
     print(progress_text(report, what).replace(" (Esc to cancel)", ""), flush=True)
 
 
@@ -1172,8 +1176,9 @@ def _tessellation(surf, resolution: int, weights: bool, callback=None):
     at ``resolution`` and, with ``weights``, the live net's padded weights of its vertices
     (:func:`live.padded_weights`), from one evaluation of the basis
     (``TCBSurface.tessellate_with_matrix``; they had been evaluated twice). ``callback``
-    hears ``{"points_done", "points"}`` after each chunk of vertices and may return True to
-    stop (CancelledError): resolution 2048 is 3 million vertices, 20-40 s."""
+    hears the grid's steps, then ``{"points_done", "points"}`` after each chunk of vertices,
+    and may return True to stop (CancelledError): resolution 2048 is 3 million vertices,
+    20-40 s."""
     if not weights:
         return (*surf.tessellate(resolution, callback=callback), None)
     verts, faces, matrix = surf.tessellate_with_matrix(resolution, callback=callback)

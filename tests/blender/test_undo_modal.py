@@ -548,8 +548,9 @@ def test_re_tessellate_runs_on_the_job_thread_with_progress_and_esc_keeps_the_ol
         clean_scene, driver, monkeypatch):
     """Re-tessellate at 2048 took 41 s with no progress and no way out (user test): it runs
     like Fit, on the job's thread, with the share of the vertices done in the status bar and
-    Esc to cancel, which leaves the surface, its live net's weights and the file as they were;
-    run to the end it gives the mesh and weights of the synchronous path."""
+    Esc to cancel, which leaves the surface, its live net's weights and the file as they were
+    (also while the grid is laid out, before the first vertex); run to the end it gives the
+    mesh and weights of the synchronous path."""
     bpy = clean_scene
     ops, core = ops_module(), core_module()
     src = add_mesh(bpy, "Scan", *grid(16, **WAVE))
@@ -573,6 +574,9 @@ def test_re_tessellate_runs_on_the_job_thread_with_progress_and_esc_keeps_the_ol
     assert driver.run()[0] == {"FINISHED"}
     assert any(t and t.startswith("TCB: Re-tessellating, ") and t.endswith(
         " points (Esc to cancel)") for t in statuses), statuses
+    # before the vertices, the grid's steps (6-8 s at 2048, when Esc had not been heard)
+    assert any(t and t.startswith("TCB: Re-tessellating, laying out the mesh, step 1 of ")
+               for t in statuses), statuses
     assert statuses[-1] is None
     s = bpy.data.objects[SURFACE]
     modal = (positions(s), state(s.tcb.weights), s.tcb.resolution)

@@ -105,6 +105,13 @@ def test_tessellate_reports_its_chunks_and_stops_when_asked(long_patch, monkeypa
     heard = []
     verts, tris = long_patch.tessellate(64, callback=lambda r: heard.append(dict(r)) and False)
     uv, tri = long_patch.tessellation_uv(64)
+    # first the grid's steps (when it is not cached), then the vertices' chunks
+    grid = [r for r in heard if "grid_step" in r]
+    if grid:
+        assert heard[: len(grid)] == grid
+        assert [r["grid_step"] for r in grid] == list(range(1, len(grid) + 1))
+        assert 3 <= len(grid) <= grid[0]["grid_steps"] == core.surface.TESSELLATION_SPLITS + 3
+        heard = heard[len(grid):]
     assert [r["points_done"] for r in heard] == list(range(500, len(uv), 500)) + [len(uv)]
     assert all(r["points"] == len(uv) for r in heard)
     np.testing.assert_array_equal(tris, tri)
@@ -126,3 +133,26 @@ def test_tessellate_reports_its_chunks_and_stops_when_asked(long_patch, monkeypa
     with pytest.raises(CancelledError):
         long_patch.tessellate(64, callback=lambda r: calls.append(r) or len(calls) == 2)
     assert len(calls) == 2
+
+
+def test_a_tessellation_can_be_stopped_while_its_grid_is_laid_out(long_patch):
+    """Resolution 2048 takes 6-8 s to lay out its grid before the first vertex is evaluated
+    (user test: Esc in Re-tessellate was not heard for 8 s): the callback hears each of the
+    grid's steps and True stops it there, leaving nothing half made (the next call lays the
+    grid out in full); a callback answering neither True nor False is refused."""
+    from core import CancelledError, InvalidInputError
+
+    for stop_at in (1, 2, 3):
+        calls = []
+        with pytest.raises(CancelledError):
+            long_patch.tessellate(57, callback=lambda r: calls.append(r) or len(calls) == stop_at)
+        assert [r["grid_step"] for r in calls] == list(range(1, stop_at + 1))
+    heard = []
+    uv, tri = long_patch.tessellation_uv(57, callback=lambda r: heard.append(r))
+    assert [r["grid_step"] for r in heard][:3] == [1, 2, 3]
+    # the same grid as a copy of the surface that was never stopped lays out
+    fresh = type(long_patch).from_bytes(long_patch.to_bytes()).tessellation_uv(57)
+    np.testing.assert_array_equal(uv, fresh[0])
+    np.testing.assert_array_equal(tri, fresh[1])
+    with pytest.raises(InvalidInputError, match="callback must return"):
+        long_patch.tessellation_uv(59, callback=lambda r: "no")
