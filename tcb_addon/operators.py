@@ -1396,6 +1396,8 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         st.deviation_max = vmax
         st.deviation_rms = float(np.sqrt(np.mean(fitted_dist**2))) if len(fitted_dist) else 0.0
         st.deviation_data_max = float(fitted_dist.max(initial=0.0))
+        st.deviation_surface_max = (0.0 if data.faces is None
+                                    else float(surf_dist.max(initial=0.0)))
         # relative to the data's bounding-box diagonal, as the fit's numbers are
         fitted_points = data.points[counted]
         diagonal = float(np.linalg.norm(np.ptp(fitted_points, axis=0))) if len(fitted_points) else 0.0
@@ -1413,8 +1415,11 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
                      else "with no data near them")
             note += f"; {no_data} surface vertices {where} are grey"
         note += "".join(f"; {n}" for n in data.notes)  # e.g. a hidden source read without modifiers
+        back = (f"; surface to mesh max {st.deviation_surface_max:.4g}"
+                if data.faces is not None else "")
         self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.deviation_rms:.4g}, max "
-                              f"{st.deviation_data_max:.4g}; color range 0 - {vmax:.4g}{note}")  # fmt: skip
+                              f"{st.deviation_data_max:.4g}{back}; color range 0 - {vmax:.4g}"
+                              f"{note}")  # fmt: skip
         if moved:
             self.report({"WARNING"}, f"TCB: {moved}")
         if changed:

@@ -119,6 +119,8 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
             if st.deviation_data_max_rel > 0:
                 box.label(text=f"({100 * st.deviation_rms_rel:.3g} %, "
                                f"{100 * st.deviation_data_max_rel:.3g} % of the diagonal)")
+            if st.deviation_surface_max > 0:  # (a mesh: the colours' top is the larger)
+                box.label(text=f"Surface to mesh: max {st.deviation_surface_max:.4g}")
             n = len(bridge.RAMP_STOPS)
             for i in reversed(range(n)):
                 lo = st.deviation_max * bridge.RAMP_STOPS[i]
