@@ -26,9 +26,9 @@ Writers: :func:`write_mesh` for ``.obj`` (ASCII) and ``.ply`` (binary little end
 
 Bulk data are parsed with numpy (``np.loadtxt``, structured dtypes on the raw bytes); only OBJ
 files and binary PLY files with mixed polygon sizes use a Python loop over lines / faces.
-Quads are cut along the shorter diagonal (core.geometry.quad_triangles); larger polygons are
-split into triangles by fans from their first vertex, except concave ones (an
-L-shaped n-gon), which are ear-clipped in their plane (a loop over those only).
+Polygons are cut by their shape, whatever corner they start at (core.geometry.polygon_triangles):
+quads along the shorter diagonal, larger polygons by their best ears (concave ones, e.g. an
+L-shaped n-gon, in their plane: a loop over those only).
 Every problem with a file raises :class:`~.errors.FileFormatError` naming the file.
 Text (and PLY headers) may start with a UTF-8 byte-order mark; UTF-16 text is refused.
 """
@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FileFormatError, InvalidInputError
-from .geometry import ear_clipping, float32_rounding, quad_triangles
+from .geometry import float32_rounding, polygon_triangles
 from .parameterize import fill_value_rows
 
 __all__ = ["READ_EXTENSIONS", "WRITE_EXTENSIONS", "read_geometry", "write_mesh"]
@@ -209,39 +209,18 @@ def _fan_groups(groups: list[tuple[np.ndarray, np.ndarray]], verts: np.ndarray |
 
 
 def _concave_split(verts: np.ndarray, polys: np.ndarray) -> np.ndarray:
-    """Triangles ``(m (k-2), 3)`` of ``(m, k)`` polygons of the vertices ``verts``: quads cut
-    along the diagonal their shape gives (:func:`core.geometry.quad_triangles`), larger
-    polygons in fans ``(v0, v_j, v_j+1)``, except for a polygon that is not convex, which is ear-clipped
-    (:func:`core.geometry.ear_clipping`) in the plane of its Newell normal, keeping its
-    winding. A fan from the first vertex of a concave polygon overlaps itself: an L-shaped
+    """Triangles ``(m (k-2), 3)`` of ``(m, k)`` polygons of the vertices ``verts``, cut by
+    their shape whatever corner they start at (:func:`core.geometry.polygon_triangles`: quads
+    along the shorter diagonal, larger polygons by their best ears, concave ones in their
+    plane). A fan from the first vertex of a concave polygon overlaps itself: an L-shaped
     8-gon, as Blender's Dissolve Faces makes and its OBJ export writes, gave a flipped
-    triangle and 575 control points instead of 150 (user test). Convexity: every vertex
-    turns the polygon's way about the normal, to rounding (vectorized over the polygons; a
-    loop over the concave ones only). A polygon that does not clip (it crosses itself)
-    keeps its fan, as do polygons with indices out of range (refused afterwards)."""
+    triangle and 575 control points instead of 150 (user test). Polygons with indices out of
+    range keep their fans (refused afterwards)."""
     polys = np.asarray(polys, dtype=np.int64)
-    tris = _fan(polys)
     m, k = polys.shape
     if k < 4 or m == 0 or polys.min() < 0 or polys.max() >= len(verts):
-        return tris
-    if k == 4:  # quads: the diagonal their shape gives, whatever corner they start at
-        return quad_triangles(verts, polys)
-    P = verts[polys].astype(np.float64)  # (m, k, 3)
-    with np.errstate(invalid="ignore", over="ignore"):  # (NaN or huge vertices: fans)
-        P = P - P.mean(axis=1, keepdims=True)  # (centred: float32 files, offsets; review)
-        normal = np.cross(P, np.roll(P, -1, axis=1)).sum(axis=1)  # (Newell: twice the area)
-        e = np.roll(P, -1, axis=1) - P
-        turn = np.einsum("mkj,mj->mk", np.cross(np.roll(e, 1, axis=1), e), normal)
-        size = np.einsum("mkj,mkj->mk", e, e).max(axis=1) * np.linalg.norm(normal, axis=1)
-        concave = (turn < -1e-9 * size[:, None]).any(axis=1)
-    for i in np.flatnonzero(concave):
-        n = normal[i] / np.linalg.norm(normal[i])
-        e1 = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
-        e1 /= np.linalg.norm(e1)
-        clip = ear_clipping(np.column_stack([P[i] @ e1, P[i] @ np.cross(n, e1)]), P[i])
-        if clip is not None:
-            tris[i * (k - 2) : (i + 1) * (k - 2)] = polys[i][clip]
-    return tris
+        return _fan(polys)
+    return polygon_triangles(verts, polys)
 
 
 def _loadtxt(lines: list[str], what: str, **kw) -> np.ndarray:

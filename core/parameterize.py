@@ -32,7 +32,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from .errors import (
     HolesError, InvalidInputError, OutlierError, ParameterizationError, TCBError, TopologyError,
 )
-from .geometry import (column_bounds, coordinate_order, ear_clipping, quad_triangles,
+from .geometry import (column_bounds, coordinate_order, ear_clipping, polygon_triangles,
                        simple_polygon)
 from .parallel import pmap, row_blocks
 from .simplex import orient2d
@@ -1878,10 +1878,10 @@ def _as_triangles(faces: np.ndarray, n_vertices: int, points: np.ndarray | None 
     """Validate ``faces`` (``(f, k)`` integer, ``k >= 3``, or a sequence of polygons of any
     lengths) and split the polygons into triangles, in the order of the polygons.
 
-    A polygon ``(v0, ..., v_{k-1})`` becomes the triangles ``(v0, v_j, v_{j+1})``,
-    ``j = 1..k-2``; quads, given the ``points``, are cut along a diagonal chosen by their
-    shape (:func:`core.geometry.quad_triangles`: the cut does not depend on the corner they
-    start at), else ``(a, b, c), (a, c, d)``.
+    Given the ``points``, polygons are cut by their shape, whatever corner they start at
+    (:func:`core.geometry.polygon_triangles`: quads along the shorter diagonal, larger ones by
+    their best ears); without them a polygon ``(v0, ..., v_{k-1})`` becomes the fan
+    ``(v0, v_j, v_{j+1})``, ``j = 1..k-2``.
     """
     rows = None
     try:
@@ -1948,9 +1948,9 @@ def _as_triangles(faces: np.ndarray, n_vertices: int, points: np.ndarray | None 
             f"{int(bad.sum())} face indices are out of range (the mesh has {n_vertices} "
             f"vertices, valid indices are 0..{n_vertices - 1}); fix the face list{hint}"
         )
-    def split(polys):  # quads along a diagonal of their shape (with the points), else fans
-        if polys.shape[1] == 4 and points is not None:
-            return quad_triangles(points, polys)
+    def split(polys):  # by their shape (with the points: quads, ears), else fans
+        if polys.shape[1] >= 4 and points is not None:
+            return polygon_triangles(points, polys)
         return _fans(polys)
 
     if rows is None:
@@ -2550,8 +2550,8 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     scanned face 824 (722; benchmarks/mesh_maps.py). Steep peaks (three_peaks.off) keep their
     rectangle.
 
-    Cleaning: quads are cut along their shorter diagonal (:func:`core.geometry.quad_triangles`),
-    larger polygons split into fans; faces with a repeated vertex and repeated faces are
+    Cleaning: quads are cut along their shorter diagonal, larger polygons by their best ears
+    (:func:`core.geometry.polygon_triangles`, whatever corner they start at); faces with a repeated vertex and repeated faces are
     dropped; zero-area caps are flipped away (:func:`_flip_caps`); faces are re-oriented
     consistently (majority orientation kept). Vertices that no
     face references are left out: their ``uv`` rows are NaN and ``used`` is False.

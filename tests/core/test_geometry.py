@@ -7,7 +7,9 @@ from core.geometry import (
     coordinate_order,
     distances_at_vertices,
     point_mesh_distance,
+    polygon_triangles,
     quad_triangles,
+    simple_polygon,
 )
 from core.meshio import read_geometry
 from pathlib import Path
@@ -186,6 +188,69 @@ def test_quads_are_cut_along_their_shorter_diagonal_whatever_corner_they_start_a
     for k in range(4):
         t = quad_triangles(sq, np.roll([0, 1, 2, 3], k)[None])
         assert set(np.intersect1d(t[0], t[1]).tolist()) == {1, 3}
+
+
+def _canon_faces(t):
+    """Triangles as a set: each from its least index (its winding kept), the list sorted."""
+    t = np.array([np.roll(f, -int(np.argmin(f))) for f in t])
+    return t[np.lexsort(t.T[::-1])]
+
+
+def test_polygons_are_cut_by_their_best_ears_whatever_corner_they_start_at():
+    """core.geometry.polygon_triangles: polygons of 5-9 corners (convex, bent out of their
+    plane, concave) give the same triangles for every rotation of their corners, in their
+    winding (none turned against the polygon's normal, unless the polygon crosses itself);
+    quads are quad_triangles'; near ties are told (a regular polygon's ears)."""
+    rng = np.random.default_rng(1)
+    for k in range(5, 10):
+        t = np.sort(rng.uniform(0, 2 * np.pi, (60, k)), axis=1)  # convex, in the xy plane
+        r = rng.uniform(0.5, 1.5, (60, 1))
+        P = np.stack([r * np.cos(t), r * np.sin(t), 0.1 * rng.normal(size=(60, k))], -1)
+        P[:20, ::2, :2] *= 0.4  # concave stars
+        P = P.reshape(-1, 3) + rng.normal(size=(60, 1, 3)).repeat(k, 1).reshape(-1, 3)
+        polys = np.arange(60 * k).reshape(60, k)
+        cut = polygon_triangles(P, polys).reshape(60, k - 2, 3)
+        for turn in range(1, k):
+            again = polygon_triangles(P, np.roll(polys, turn, axis=1)).reshape(60, k - 2, 3)
+            for a, b in zip(cut, again):
+                np.testing.assert_array_equal(_canon_faces(a), _canon_faces(b))
+        # in the polygon's winding, none turned over: each triangle faces its Newell normal
+        # (bent out of its plane, the stars' concave corners are those seen along it)
+        T = P[cut]
+        area = np.cross(T[:, :, 1] - T[:, :, 0], T[:, :, 2] - T[:, :, 0])  # (60, k - 2, 3)
+        Q = P[polys]
+        newell = np.cross(Q, np.roll(Q, -1, axis=1)).sum(axis=1)
+        np.testing.assert_allclose(area.sum(axis=1), newell, atol=1e-9)  # (any triangulation)
+        facing = (np.einsum("mtj,mj->mt", area, newell) > 0).all(axis=1)
+
+        def simple(i):  # seen along its normal (a star whose gap passes pi crosses itself)
+            n = newell[i] / np.linalg.norm(newell[i])
+            e1 = np.cross(n, np.eye(3)[np.argmin(np.abs(n))])
+            e1 /= np.linalg.norm(e1)
+            return simple_polygon(np.c_[Q[i] @ e1, Q[i] @ np.cross(n, e1)])
+
+        crossing = [i for i in range(60) if not simple(i)]
+        assert len(crossing) <= 2 and facing[np.setdiff1d(np.arange(60), crossing)].all()
+    # a regular octagon: its ears alike to rounding, the same cut whatever its first corner
+    # (centred at its mean, summed in its corners' order, its ears had differed in their last
+    # bits with the corner it started at, and so had its cut)
+    a = np.arange(8) * np.pi / 4
+    octagon = np.c_[np.cos(a), np.sin(a), np.zeros(8)] + [1e3, -2e3, 5.0]
+    for turn in range(8):
+        tris = polygon_triangles(octagon, np.roll(np.arange(8), turn)[None])
+        np.testing.assert_array_equal(
+            _canon_faces(tris), _canon_faces(polygon_triangles(octagon, np.arange(8)[None])))
+    quads = np.arange(8).reshape(2, 4)
+    np.testing.assert_array_equal(polygon_triangles(octagon, quads),
+                                  quad_triangles(octagon, quads))
+    # near ties: a regular polygon's ears are all alike (the extension keeps Blender's cut)
+    _, tied = polygon_triangles(octagon, np.arange(8)[None], tie_rtol=1e-2, return_ties=True)
+    assert tied.all()
+    # (on a circle, ears sharing the smallest arc have the same smallest angle: an ellipse)
+    b = np.array([0.0, 0.5, 1.3, 2.0, 2.9, 3.6, 4.5, 5.6])
+    irregular = np.c_[np.cos(b), 0.5 * np.sin(b), np.zeros(8)]
+    _, tied = polygon_triangles(irregular, np.arange(8)[None], tie_rtol=1e-2, return_ties=True)
+    assert not tied.any()
 
 
 def test_coordinate_order_is_the_lexicographic_order_and_takes_nan_rows_alike():
