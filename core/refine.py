@@ -867,6 +867,13 @@ MIN_PROBE_KNOTS = 8
 # model predicts at most this share of its knots (and at least MIN_START_KNOTS)
 SHRINK_FRACTION = 0.7
 MIN_START_KNOTS = 6
+# ... and kept when its max error at the data is at most SHRINK_MAX times the tolerance, or the
+# max of the fit it follows when that is larger. 1 (every point within the tolerance) made
+# loose tolerances useless: a smooth 40 x 30 grid got the probe's 149 control points at 1e-3,
+# 5e-3 and 1e-2 (coarser fits of 79 and 56 with max 1.7x and 1.1x the tolerance thrown away;
+# user test); unbounded, a hemisphere's rim dipped 1.5x the tolerance (RMS 0.4x) below its cut
+# and a crease was rounded by 3x (another user test; /tmp/s34/cmp_*.txt)
+SHRINK_MAX = 2.0
 # ... sized for this share of the tolerance: the insertions stop at the first fit below it,
 # typically 0.5-1x of it; a coarser start aimed at the tolerance itself leaves no room (the
 # RMS of one knot count is not one number: it varies 1.5x with the knots' draws)
@@ -1100,15 +1107,16 @@ def adaptive_fit(
     count as iterations. A fresh start that meets the tolerance with room to spare is followed
     by a coarser fresh start, with the knots :func:`predicted_knots` gives for SHRINK_TARGET
     of the tolerance when that is at most SHRINK_FRACTION of them (at least MIN_START_KNOTS),
-    as long as they meet it, and with a max error within the tolerance or the max of the fit
-    they follow; the first that misses (or swings) ends the run and the last that met it is
+    as long as they meet it, and with a max error within SHRINK_MAX times the tolerance or the
+    max of the fit they follow; the first that misses (or swings) ends the run and the last that met it is
     returned (a plane, a sphere cap, a bump had nets of 140-148 control points, the
-    probe's, whatever the tolerance: now 37-70 at 1e-2 and 1e-3; benchmarks/net_size.py). A
+    probe's, whatever the tolerance: now 37-55 at 1e-2; benchmarks/net_size.py). A
     continued run (``start_knots``) with a tolerance inserts the knots
     :func:`predicted_knots` says are missing, up to doubling them. Reports say whether an
     iteration's knots were placed ``"afresh"``, ``"continued"`` or ``"inserted"``
     (``knots_placed``). The best iteration is the one that meets the tolerance, else the one of
-    lowest RMS within the budget (uneven density: the larger of the two RMS). With ``balance``
+    lowest RMS within the budget (uneven density: the larger of the two RMS; the criterion
+    "max": of lowest max). With ``balance``
     (point clouds), the criterion "rms" and a cloud of uneven density (mean square area weight
     over :data:`UNEVEN_DENSITY`), the tolerance must also be met by the RMS over the area
     (:func:`area_weights`; reports ``rms_area``), and where that one is the larger the knots
@@ -1262,7 +1270,7 @@ def adaptive_fit(
 
     history: list[dict] = []
     estimates: list[float] = []  # new_point_estimate of each fit
-    best: IterationState | None = None  # the lowest RMS (or the fit meeting the tolerance)
+    best: IterationState | None = None  # the lowest error (or the fit meeting the tolerance)
     quiet: IterationState | None = None  # the lowest estimate at new points (for a stall)
     best_rms = quiet_score = np.inf
     n_before, pending = len(interior), np.zeros((0, 2))
@@ -1277,7 +1285,7 @@ def adaptive_fit(
     in_a_row = 0  # insertions taken back since the last fit kept
     settle_restart = False  # the fit is the one a restart that swung was sized from
     shrinking = None  # a coarser fresh start after one that met the tolerance by far
-    shrink_max = np.inf  # ... whose max error is held to this (the tolerance or the finer max)
+    shrink_max = np.inf  # ... whose max error is held to this (SHRINK_MAX)
 
     def insert(knots, triangles, steer, count) -> np.ndarray:
         """New knots (insertion_points), none in the regions where they made it swing."""
@@ -1430,15 +1438,14 @@ def adaptive_fit(
             interior = np.vstack([interior[:n_before], pending])
             continue
         in_a_row = 0
-        # the best: the lowest RMS within the budget, or the fit that meets the tolerance (a
-        # fresh start's knots do not contain the earlier ones: with the criterion "max" a fit
-        # of lower RMS may still miss it). A run that stops because the error stopped falling
+        # the best: the lowest RMS (criterion "max": the lowest max) within the budget, or the
+        # fit that meets the tolerance (a fresh start's knots do not contain the earlier ones:
+        # with the criterion "max" a fit of lower RMS may still miss it). A run that stops because the error stopped falling
         # returns the lowest estimate of the RMS at new points instead: there a larger net
         # lowers the RMS on the data by fitting the noise
         within = n_ctrl <= options.max_control_points
-        # a coarser start meets it with its max error too: within the tolerance, or the max of
-        # the fit it follows when that is larger (a hemisphere at RMS 1e-2 went 50 -> 38
-        # control points and its max 6.5e-3 -> 1.5e-2 of the diagonal, its rim dipping)
+        # a coarser start meets it with its max error too: within SHRINK_MAX times the
+        # tolerance, or the max of the fit it follows when that is larger
         met = value <= tol and not (shrinking and emax > shrink_max)
 
         def better(current, key, current_key):
@@ -1449,6 +1456,9 @@ def adaptive_fit(
 
         held = [best, quiet]
         key = rms if rms_area is None else max(rms, rms_area)  # (uneven density: the larger)
+        if options.criterion == "max":  # (the lowest max: a grid's run to a max of 1e-4 ran
+            key = emax                  # out of budget and returned 1917 control points with
+            # a max of 1.42e-4, of lowest RMS, where 812 had reached 1.06e-4: user test)
         if better(best, key, best_rms):
             best, best_rms = state, key
         # (a noisy mesh: of the errors across the surface)
@@ -1478,7 +1488,7 @@ def adaptive_fit(
                 want = max(int(np.ceil(want)), MIN_START_KNOTS)
                 if want <= SHRINK_FRACTION * len(interior):
                     sized, sizing, shrinking = (len(interior), value), False, True
-                    shrink_max = max(tol, emax)
+                    shrink_max = max(SHRINK_MAX * tol, emax)
                     interior, ring_knots = place(want)
                     n_before, pending, prev = len(interior), np.zeros((0, 2)), None
                     continue

@@ -498,6 +498,18 @@ def _remember_net_rounding(net_obj) -> None:
         bridge.read_world_positions_and_rounding(net_obj)[1].max(initial=0.0))
 
 
+def _returned_why(surf, rep: dict) -> str:
+    """Why the surface returned is an earlier iteration's (core.refine.adaptive_fit's choice):
+    it had said "lowest RMS" also of a smaller net kept after a coarser one missed, and of the
+    criterion "max"'s lowest max (user test)."""
+    if rep.get("stop_reason") == _core().refine.STALLED:
+        return "lowest estimated error"
+    if rep.get("stop_reason") == "tolerance reached":  # (a coarser start missed it after)
+        return "the smallest net that met the tolerance"
+    options = getattr(surf, "options", None)
+    return "lowest max error" if getattr(options, "criterion", "rms") == "max" else "lowest RMS"
+
+
 def _summary(surf, seconds: float | None = None) -> str:
     """The one-line summary; ``seconds``: the operator's own time (reading the selection,
     the fit, the objects made), else the engine's (user test: a 1e6-vertex mesh took 103 s
@@ -521,8 +533,7 @@ def _summary(surf, seconds: float | None = None) -> str:
         + (f", {rep['outliers']} outlier{'s' if rep['outliers'] != 1 else ''} left out"
            if rep.get("outliers") else "")
         + (f", the surface of iteration {rep['returned_iteration']} of {rep['iterations']} "
-           + ("(lowest estimated error)" if rep.get("stop_reason") == _core().refine.STALLED
-              else "(lowest RMS)")
+           f"({_returned_why(surf, rep)})"
            if 0 < rep.get("returned_iteration", 0) < rep.get("iterations", 0) else "")
     )
 
