@@ -372,6 +372,12 @@ class Parameterization:
         holes: ``(h,) int64`` (disk only, ``parameterize_mesh(..., fill_holes=True)``): the
             number of boundary vertices of each hole of the mesh that was filled for the map
             (the surface spans it, held by the fairing); None when there were none.
+        flipped: (disk only) True when the faces given were wound the other way than the
+            canonical winding (:func:`winding_flipped`): the map, and ``faces``, ``boundary``
+            and ``domain_polygon``, are those of the faces reversed, bit for bit, so a mesh
+            and its copy with Flip Normals get the same map; a surface fitted to it turns its
+            tessellation's and control net's triangles back and negates its normals (the
+            given winding's way). False for a point cloud and for files written before it.
     """
 
     uv: np.ndarray
@@ -385,6 +391,7 @@ class Parameterization:
     scale: float | None = None
     stretch: np.ndarray | None = None
     holes: np.ndarray | None = None
+    flipped: bool = False
 
     def contains(self, uv: np.ndarray, tol: float = 1e-12) -> np.ndarray:
         """Mask of parameters inside ``domain_polygon`` (points on its edges count as inside).
@@ -2514,6 +2521,123 @@ def _rectangle_boundary(seg: np.ndarray, corners: np.ndarray) -> np.ndarray:
     return out
 
 
+# winding_flipped: a vector area whose largest component is within this share of the sum of
+# its terms' magnitudes (a bound of its rounding error, ~1e-16 per term) has no sign to trust
+WINDING_RTOL = 1e-9
+
+
+def _half_edges(faces, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """The half-edges ``a -> b`` (int64) of ``faces``, each polygon's corner to its next, of an
+    ``(f, k)`` array or a sequence of polygons; None when they are no integer polygons of at
+    least 3 indices in ``0..n-1`` (:func:`_as_triangles` names what is wrong)."""
+    try:
+        f = np.asarray(faces)
+    except (TypeError, ValueError):
+        f = None
+    if f is not None and f.ndim == 2 and f.dtype != object:
+        a, b = f.reshape(-1), np.roll(f, -1, axis=1).reshape(-1)
+    else:
+        rows = _ragged_polygons(faces)
+        if rows is None:
+            return None
+        size = np.array([len(r) for r in rows])
+        try:
+            a = np.concatenate(rows)
+        except (TypeError, ValueError):
+            return None
+        first = np.repeat(np.cumsum(size) - size, size)
+        last = np.repeat(np.cumsum(size) - 1, size)
+        at = np.arange(len(a))
+        b = a[np.where(at == last, first, at + 1)]
+    if len(a) == 0 or (f is not None and f.ndim == 2 and f.dtype != object and f.shape[1] < 3):
+        return None
+    integral = (a.dtype.kind in "iu") or (a.dtype.kind == "f" and np.isfinite(a).all()
+                                          and (a == np.round(a)).all())
+    if not integral:
+        return None
+    a, b = a.astype(np.int64), b.astype(np.int64)
+    if a.min() < 0 or a.max() >= n:
+        return None
+    return a, b
+
+
+def _reversed_polygons(faces):
+    """``faces`` with every polygon's corners in reverse order (the other winding): ``f[:,
+    ::-1]`` of an ``(f, k)`` array, each row reversed of a sequence of polygons."""
+    try:
+        f = np.asarray(faces)
+    except (TypeError, ValueError):  # (ragged)
+        f = None
+    if f is not None and f.ndim == 2 and f.dtype != object:
+        return f[:, ::-1]
+    return [np.asarray(row)[::-1] for row in faces]  # (a loop over the polygons)
+
+
+def winding_flipped(points: np.ndarray, faces) -> bool:
+    """Whether ``faces`` are wound against the canonical winding of their mesh, which depends
+    on the geometry alone (not in method.md; section 4 maps the boundary "in the direction of
+    the oriented faces", which made a mesh and its copy with Flip Normals two mirrored maps,
+    and every later frame- or seed-dependent choice differed: nefertiti got 496 and 564
+    control points, three_peaks 635 and 647).
+
+    Rule: the vector area ``A = sum over half-edges a -> b of (p_a - c) x (p_b - c)`` (twice
+    the sum of the faces' vector areas; ``c`` the centre of the vertices' bounding box, so
+    that coordinates far from the origin do not cancel), summed edge by edge: each
+    undirected edge ``{i < j}`` counts ``(p_i - c) x (p_j - c)`` times its half-edges ``i ->
+    j`` less its half-edges ``j -> i`` (0 for an interior edge of consistently oriented
+    faces, so ``A`` is the boundary loop's vector area), in the order of the edges. The
+    other winding negates every count, so its ``A`` is exactly ``-A``, bit for bit. The
+    canonical winding has ``A_k > 0`` along the axis ``k`` of the largest ``|A_k|`` (the
+    first of equal ones). When ``|A_k|`` is within WINDING_RTOL of ``sum |terms_k|`` (a
+    boundary whose vector area cancels: a figure of eight, a nearly closed mesh with a
+    pinhole), the rule is instead: of the vertices on edges with a nonzero count, the one of
+    least coordinates (x, then y, then z, then index), and of its such edges the one to the
+    neighbour of least coordinates; the canonical winding runs that edge away from it. A
+    mesh with no such edge (closed; refused later) is left as given.
+
+    Args:
+        points: ``(n, 3)`` vertices.
+        faces: ``(f, k)`` polygons or a sequence of polygons; faces that are no valid polygons
+            are left as given (False) for :func:`parameterize_mesh` to refuse.
+
+    Returns:
+        True when the faces are to be reversed to the canonical winding.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    n = len(p)
+    edges = _half_edges(faces, n)
+    if edges is None:
+        return False
+    a, b = edges
+    a, b = a[a != b], b[a != b]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key, inverse = np.unique(lo * n + hi, return_inverse=True)
+    count = np.bincount(inverse.reshape(-1), weights=np.where(a < b, 1.0, -1.0),
+                        minlength=len(key))
+    on = count != 0.0
+    if not on.any():
+        return False
+    key, count = key[on], count[on]
+    i, j = key // n, key % n
+    ends = np.concatenate([i, j])
+    if not np.isfinite(p[ends]).all():
+        return False
+    c = 0.5 * (p[ends].min(axis=0) + p[ends].max(axis=0))
+    terms = count[:, None] * np.cross(p[i] - c, p[j] - c)
+    area = terms.sum(axis=0)
+    k = int(np.argmax(np.abs(area)))
+    if abs(area[k]) > WINDING_RTOL * float(np.abs(terms[:, k]).sum()):
+        return bool(area[k] < 0.0)
+    # no sign to trust: the edge from the vertex of least coordinates to its least neighbour
+    verts = np.unique(ends)
+    v = verts[np.lexsort((verts, *p[verts].T[::-1]))[0]]
+    at = np.flatnonzero((i == v) | (j == v))
+    other = np.where(i[at] == v, j[at], i[at])
+    e = at[np.lexsort((other, *p[other].T[::-1]))[0]]
+    away = (count[e] > 0.0) == (i[e] == v)  # (count > 0: more half-edges i -> j)
+    return bool(not away)
+
+
 def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
                       fill_holes: bool = False, _fill_from: int | None = None
                       ) -> Parameterization:
@@ -2556,6 +2680,14 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     consistently (majority orientation kept). Vertices that no
     face references are left out: their ``uv`` rows are NaN and ``used`` is False.
 
+    Winding (not in method.md): faces wound against the canonical winding of their geometry
+    (:func:`winding_flipped`) are reversed first, so the map is bit for bit that of the mesh
+    with its normals flipped (Blender's Flip Normals, an OBJ written with the other winding;
+    they had mirrored maps, and nefertiti got 496 and 564 control points), and ``flipped``
+    records it: a surface fitted to it faces the given winding's way
+    (:class:`core.surface.TCBSurface`). ``_fill_from`` (the mesh with its holes closed,
+    :func:`_with_holes_filled`): canonical already, taken as given.
+
     Args:
         points: ``(n, 3)`` vertex coordinates.
         faces: ``(f, 3)`` triangles or ``(f, k)`` polygons (e.g. quads) of vertex indices.
@@ -2569,6 +2701,19 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
             several boundary loops, or not a disk (handles).
         ParameterizationError: a uv triangle came out flipped or degenerate.
     """
+    flipped = False
+    if _fill_from is None:
+        flipped = winding_flipped(_as_points(points, what="vertices"), faces)
+        if flipped:
+            faces = _reversed_polygons(faces)
+    param = _parameterize_mesh(points, faces, fill_holes, _fill_from)
+    return replace(param, flipped=True) if flipped else param
+
+
+def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
+                       fill_holes: bool = False, _fill_from: int | None = None
+                       ) -> Parameterization:
+    """:func:`parameterize_mesh` of faces taken in the winding given (the map itself)."""
     p = _as_points(points, what="vertices")
     n = len(p)
     tris = _as_triangles(faces, n, p)

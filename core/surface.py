@@ -56,7 +56,10 @@ __all__ = ["TCBSurface", "fit_surface", "FORMAT_VERSION"]
 # add-on" instead of failing in refine()); files without it are still written as 1.
 # 3: compact (``to_bytes(compact=True)``): the data's parameters and errors in float32, which
 # older readers would hand on as such; files without either are written as before
-FORMAT_VERSION = 3
+# 4: a surface fitted to a mesh wound against its canonical winding (``param_flipped``,
+# Parameterization.flipped): older readers would tessellate it facing the other way, so such
+# files are refused by them ("update the add-on"); other files are written as before
+FORMAT_VERSION = 4
 # compact files: these arrays are stored as float32 (the data's parameters and fitted errors, a
 # mesh's vertex stretch) and read back as float64; a mesh's faces as "param_faces_delta"
 _COMPACT_FLOAT = ("param_uv", "param_stretch", "errors")
@@ -235,9 +238,14 @@ class TCBSurface:
         return self._evaluate(uv, [derivative])[0]
 
     def normals(self, uv) -> np.ndarray:
-        """Unit normals ``S_u x S_v / |S_u x S_v|`` (m, 3); NaN rows outside :meth:`covers`."""
+        """Unit normals ``S_u x S_v / |S_u x S_v|`` (m, 3), negated for a mesh wound against
+        its canonical winding (``parameterization.flipped``: the map is the reversed faces',
+        and the normals face the given faces' way, as they do for the other winding); NaN
+        rows outside :meth:`covers`."""
         su, sv = self._evaluate(uv, [(1, 0), (0, 1)])
         n = np.cross(su, sv)
+        if self._param.flipped:
+            n = -n
         return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
     def covers(self, uv) -> np.ndarray:
@@ -274,7 +282,11 @@ class TCBSurface:
     # ---- meshes ------------------------------------------------------------------------
     def tessellation_uv(self, resolution: int = 64, callback=None
                         ) -> tuple[np.ndarray, np.ndarray]:
-        """Parameters (V, 2) and CCW triangles (F, 3) covering exactly the data's domain.
+        """Parameters (V, 2) and triangles (F, 3) covering exactly the data's domain; the
+        triangles are counter-clockwise in uv, and clockwise for a mesh wound against its
+        canonical winding (``parameterization.flipped``), so that the surface mesh faces the
+        way of the faces given (a mesh and its copy with Flip Normals get the same vertices
+        and reversed triangles).
 
         The domain is the disk polygon for meshes and the convex hull of the parameters for
         clouds, trimmed to where data is (triangles farther than a few data spacings from any
@@ -396,6 +408,8 @@ class TCBSurface:
             if not len(tri):
                 break
         tri = np.vstack(done + [tri])
+        if self._param.flipped:  # (the given winding's way: the map is the reversed faces')
+            tri = tri[:, ::-1]
         used = np.unique(tri)
         remap = np.full(len(uv), -1)
         remap[used] = np.arange(len(used))
@@ -566,12 +580,14 @@ class TCBSurface:
         the triangles of the centroid triangulation whose three vertices are control points).
 
         For DCB surfaces the net is ambiguous (several control points share a Greville point)
-        and no faces are returned.
+        and no faces are returned. The triangles are reversed for a mesh wound against its
+        canonical winding (``parameterization.flipped``), as the tessellation's are.
         """
         where = np.full(self._space.n_basis, -1)
         where[self._active] = np.arange(len(self._active))
         faces = where[self._space.net_faces]
-        return self._ctrl.copy(), faces[(faces >= 0).all(axis=1)]
+        faces = faces[(faces >= 0).all(axis=1)]
+        return self._ctrl.copy(), (faces[:, ::-1].copy() if self._param.flipped else faces)
 
     # ---- editing -----------------------------------------------------------------------
     def with_control_points(self, control_points) -> "TCBSurface":
@@ -1139,7 +1155,7 @@ class TCBSurface:
         Format 3: readers before it refuse compact bytes with "update the add-on".
         """
         arrays = {
-            "format_version": np.array(3 if compact else
+            "format_version": np.array(4 if self._param.flipped else 3 if compact else
                                        2 if self._options.smoothness == "auto" else 1),
             "degree": np.array(self.degree),
             "mode": np.array(self.mode),
@@ -1164,6 +1180,8 @@ class TCBSurface:
             value = getattr(self._param, name)
             if value is not None:
                 arrays[f"param_{name}"] = value
+        if self._param.flipped:  # (files without it: the faces' winding was the canonical one)
+            arrays["param_flipped"] = np.array(True)
         if not np.array_equal(self._c, self._fitted_c):
             # an edited surface (with_control_points) keeps the fit's control points: refine()
             # says it replaces the edits, and fitted_to() and the errors measure the fit (they
@@ -1248,6 +1266,7 @@ class TCBSurface:
             param = Parameterization(
                 kind=str(arrays["param_kind"]),
                 scale=None if np.isnan(scale) else scale,
+                flipped=bool(arrays.get("param_flipped", False)),
                 **{name: arrays.get(f"param_{name}") for name in _PARAM_FIELDS},
             )
             fields = json.loads(str(arrays["options"]))
@@ -1379,8 +1398,8 @@ def _same_map(new: Parameterization, old: Parameterization) -> bool:
     """Whether ``new`` (the data parameterized again, in another order) gives the parameters of
     ``old`` as a set: the same kind and counts, and each column of the used points' ``uv`` and
     of the domain polygon, sorted, within :data:`REORDERED_UV_TOL`."""
-    if new.kind != old.kind or len(new.uv) != len(old.uv):
-        return False
+    if new.kind != old.kind or len(new.uv) != len(old.uv) or new.flipped != old.flipped:
+        return False  # (the other canonical winding: the mirrored map)
     if int(np.count_nonzero(new.used)) != int(np.count_nonzero(old.used)):
         return False
     for a, b in ((new.faces, old.faces), (new.boundary, old.boundary), (new.holes, old.holes)):

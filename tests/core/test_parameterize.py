@@ -1910,3 +1910,50 @@ def test_a_slit_keeps_the_circle(monkeypatch) -> None:
         assert not np.array_equal(parameterize_mesh(pts2, split).uv, par.uv, equal_nan=True)
     whole = parameterize_mesh(pts, faces)
     assert not np.array_equal(whole.uv, fixed_boundary_map(pts, faces).uv)
+
+
+def test_a_mesh_and_its_flipped_copy_get_the_same_map() -> None:
+    """Faces wound either way (Blender's Flip Normals, an OBJ with the other winding) give the
+    same map, bit for bit, and ``flipped`` says which one was reversed to the canonical
+    winding (pz.winding_flipped; the map had been mirrored, and the fits differed: nefertiti
+    496 and 564 control points). Quads, and a list of polygons with a hexagon; the canonical
+    winding of a patch facing +z is the counter-clockwise one seen from above."""
+    n = 9
+    t = np.linspace(-1, 1, n)
+    x, y = np.meshgrid(t, t, indexing="ij")
+    pts = np.c_[x.ravel(), y.ravel(), 0.3 * (x**2 - 0.5 * y**2).ravel()]
+    at = np.arange(n * n).reshape(n, n)
+    quads = np.c_[at[:-1, :-1].ravel(), at[1:, :-1].ravel(), at[1:, 1:].ravel(),
+                  at[:-1, 1:].ravel()]  # counter-clockwise seen from +z
+    hexagon = [at[0, 0], at[1, 0], at[1, 1], at[1, 2], at[0, 2], at[0, 1]]
+    polygons = [hexagon] + [list(q) for q in quads[2:]]  # (quads 0 and 1: the hexagon)
+    assert set(quads[0]) | set(quads[1]) == set(hexagon)
+    for faces, given in ((quads, quads), (quads[:, ::-1], quads),
+                         (polygons, polygons), ([f[::-1] for f in polygons], polygons)):
+        ref, par = parameterize_mesh(pts, given), parameterize_mesh(pts, faces)
+        assert not ref.flipped and par.flipped == (faces is not given)
+        for name in ("uv", "faces", "boundary", "domain_polygon", "used", "stretch"):
+            np.testing.assert_array_equal(getattr(par, name), getattr(ref, name))
+        assert pz.winding_flipped(pts, faces) == par.flipped
+    # a cloud has no winding
+    assert not parameterize(pts).flipped
+
+
+def test_the_canonical_winding_of_a_vector_area_without_sign_is_decided_by_an_edge() -> None:
+    """Two mirrored triangles of integer corners: the vector area is exactly 0, and the rule
+    falls back to the edge from the vertex of least coordinates (-2, 0, 0) to its least
+    neighbour (-1, 0, 0), which the canonical winding runs away from it; the other winding
+    is the other answer, as it is whenever the vector area has a sign (it is negated bit for
+    bit)."""
+    pts = np.array([[1, 0, 0], [2, 0, 0], [1, 1, 0], [-1, 0, 0], [-2, 0, 0], [-1, 1, 0]], float)
+    faces = np.array([[0, 1, 2], [3, 4, 5]])  # the second runs 3 -> 4: into the least vertex
+    assert pz.winding_flipped(pts, faces)
+    assert not pz.winding_flipped(pts, faces[:, ::-1])
+    rng = np.random.default_rng(0)
+    for _ in range(20):  # random triangles far from the origin: always opposite answers
+        p = 1e6 + rng.random((30, 3))
+        f = rng.integers(0, 30, (40, 3))
+        assert pz.winding_flipped(p, f) != pz.winding_flipped(p, f[:, ::-1])
+    # faces the parameterization refuses are left as given (it names what is wrong)
+    assert not pz.winding_flipped(pts, np.array([[0, 1, 9]]))
+    assert not pz.winding_flipped(pts, np.array([[0.5, 1, 2]]))

@@ -647,7 +647,7 @@ def test_compact_bytes_keep_the_spline_and_round_only_the_data_arrays_to_32_bits
         assert back.fitted_to(points)
         assert len(back.refine(points, faces, max_iterations=1).control_points) > 0
         with zipfile.ZipFile(io.BytesIO(compact)) as z, z.open("format_version.npy") as fh:
-            assert int(np.lib.format.read_array(fh)) == 3 == FORMAT_VERSION
+            assert int(np.lib.format.read_array(fh)) == 3  # (4: a flipped mesh's, below)
     # damaged compact faces: a specific error (they were dropped: review)
     arrays = dict(np.load(io.BytesIO(nefertiti[2].to_bytes(compact=True))))
     for bad in (arrays["param_faces_delta"][:, :2], arrays["param_faces_delta"].ravel()):
@@ -659,6 +659,66 @@ def test_compact_bytes_keep_the_spline_and_round_only_the_data_arrays_to_32_bits
     surf.save(path, compact=True)
     assert path.stat().st_size < len(full)
     np.testing.assert_array_equal(TCBSurface.load(path).errors, back.errors)
+
+
+def test_a_mesh_and_its_flipped_copy_get_the_same_surface_facing_their_ways(nefertiti, tmp_path):
+    """The scan and its copy with every face's winding reversed (Blender's Flip Normals, an OBJ
+    written the other way) get the same surface: the same control points and values at the
+    same parameters, bit for bit (they had 496 and 564 control points), the tessellation's and
+    the control net's triangles reversed and the normals negated, each facing the way of its
+    faces. The flag survives files (format 4; readers before it refuse them) and refine() with
+    each mesh's own faces; the other file has no flag, as files written before it."""
+    points, faces, surf = nefertiti
+    back = fit_surface(points, faces[:, ::-1], tolerance=1e-3)
+    assert surf.parameterization.flipped != back.parameterization.flipped
+    np.testing.assert_array_equal(back.control_points, surf.control_points)
+    np.testing.assert_array_equal(back.knots, surf.knots)
+    assert back.report["control_points"] == surf.report["control_points"]
+    v1, f1 = surf.tessellate(40)
+    v2, f2 = back.tessellate(40)
+    np.testing.assert_array_equal(v2, v1)
+    np.testing.assert_array_equal(f2, f1[:, ::-1])
+    uv, tri = back.tessellation_uv(40)
+    np.testing.assert_array_equal(back(uv), surf(uv))
+    np.testing.assert_array_equal(back.normals(uv), -surf.normals(uv))
+    n1, n2 = surf.control_net(), back.control_net()
+    np.testing.assert_array_equal(n2[0], n1[0])
+    np.testing.assert_array_equal(n2[1], n1[1][:, ::-1])
+
+    def vector_area(p, f):
+        return np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]).sum(axis=0)
+
+    for s, f, (v, t) in ((surf, faces, (v1, f1)), (back, faces[:, ::-1], (v2, f2))):
+        given = vector_area(points, f)
+        assert vector_area(v, t) @ given > 0.99 * np.linalg.norm(vector_area(v, t)) * np.linalg.norm(given)
+        normal = s.normals(uv[tri].mean(axis=1))  # (the tessellation's normals face its way)
+        facing = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+        assert np.mean(np.einsum("ij,ij->i", normal, facing) > 0) > 0.99
+    for s in (surf, back):
+        for compact in (False, True):
+            data = s.to_bytes(compact=compact)
+            with zipfile.ZipFile(io.BytesIO(data)) as z:
+                assert ("param_flipped.npy" in z.namelist()) == s.parameterization.flipped
+                with z.open("format_version.npy") as fh:
+                    version = int(np.lib.format.read_array(fh))
+            assert (version == 4 == FORMAT_VERSION) == s.parameterization.flipped
+            loaded = TCBSurface.from_bytes(data)
+            assert loaded.parameterization.flipped == s.parameterization.flipped
+            np.testing.assert_array_equal(loaded.tessellate(40)[1], s.tessellate(40)[1])
+    path = tmp_path / "back.npz"
+    back.save(path)
+    assert TCBSurface.load(path).parameterization.flipped
+    for s, f in ((surf, faces), (back, faces[:, ::-1])):
+        refined = s.refine(points, f, max_iterations=1)
+        assert refined.parameterization.flipped == s.parameterization.flipped
+        # the faces in another order, renumbered into another map (TCBSurface.reordered)
+        order = np.random.default_rng(0).permutation(len(f))
+        again = s.refine(points, np.roll(f[order], 1, axis=1), max_iterations=1)
+        assert again.parameterization.flipped == s.parameterization.flipped
+        for r in (refined, again):
+            assert vector_area(*r.tessellate(24)) @ vector_area(points, f) > 0
+    with pytest.raises(InvalidInputError, match="needs the faces this surface was fitted to"):
+        surf.refine(points, faces[:, ::-1], max_iterations=1)  # (the other winding: another mesh)
 
 
 def test_save_names_what_is_wrong_and_gives_the_file_the_umask_permissions(nefertiti, tmp_path):
