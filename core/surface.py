@@ -2610,7 +2610,10 @@ def fit_surface(
         then the mesh is parameterized over the unit disk,
         or a rectangle when its boundary has four corners, or its own boundary flattened
         when that distorts the triangles less;
-        otherwise the cloud is projected on its best-fit plane).
+        otherwise the cloud is projected on its best-fit plane). Either winding of the faces
+        gives the same surface: the map is made in a winding the geometry chooses
+        (``core.parameterize.winding_flipped``), and the tessellation, control net and
+        normals face the way of the faces given.
     degree : 2 (C^1, default) or 3 (C^2)
     mode : "tcb" (feature-sensitive configurations) or "dcb" (Delaunay configurations); any case
     tolerance : float

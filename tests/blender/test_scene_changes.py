@@ -193,6 +193,41 @@ def test_a_mirrored_source_gives_a_surface_facing_its_way(clean_scene):
     assert facing["Plain"] > 0.9 and facing["Mirrored"] > 0.9, facing
 
 
+@pytest.mark.parametrize("triangles", [True, False])
+def test_a_source_with_its_normals_flipped_gets_the_same_surface_facing_its_way(
+        clean_scene, triangles):
+    """Flip Normals (each face's corners reversed, its first kept, as Blender does) had given
+    another map, mirrored, and another surface (core.parameterize.winding_flipped): now the
+    same spline, the surface's and the net's triangles reversed, each facing its source's
+    way. Triangles and quads (cut by their shape, bridge._quads_by_shape)."""
+    bpy = clean_scene
+    verts, faces = grid(20, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(2 * y),
+                        triangles=triangles)
+    out = {}
+    for name, f in (("Plain", faces), ("Flipped", np.c_[faces[:, :1], faces[:, :0:-1]])):
+        src = add_mesh(bpy, name, verts, f)
+        assert fit(bpy, src) == {"FINISHED"}
+        surface = bpy.context.view_layer.objects.active
+        tris = np.array([p.vertices[:] for p in surface.data.polygons])
+        net = surface.tcb.net
+        net_tris = np.array([p.vertices[:] for p in net.data.polygons])
+        assert _mean_normal(positions(surface), tris) @ _mean_normal(verts, f) > 0.9
+        out[name] = (spline_of(surface), positions(surface), tris, positions(net), net_tris)
+    (a, pa, ta, na, fa), (b, pb, tb, nb, fb) = out["Plain"], out["Flipped"]
+    assert a.parameterization.flipped != b.parameterization.flipped
+    np.testing.assert_array_equal(b.control_points, a.control_points)
+    np.testing.assert_array_equal(pb, pa)
+    np.testing.assert_array_equal(nb, na)
+    # (Blender may start a polygon at another corner: the triangles as sets of turns)
+    def turned(t):
+        k = np.argmin(t, axis=1)[:, None]
+        t = np.take_along_axis(t, (k + np.arange(3)) % 3, axis=1)
+        return t[np.lexsort(t.T[::-1])]
+
+    np.testing.assert_array_equal(turned(tb), turned(ta[:, ::-1]))
+    np.testing.assert_array_equal(turned(fb), turned(fa[:, ::-1]))
+
+
 def test_fit_again_shows_a_hidden_result_and_toggle_shows_a_disabled_net(clean_scene):
     """Fit with Replace into a surface hidden by the user (H) had left the new one hidden, its
     net shown; Show/Hide Net flipped the hide state of a net disabled in viewports (the
