@@ -1152,7 +1152,9 @@ class TCBSurface:
         most scan files, hold anyway; a mesh's boundary rows are set back to its domain
         polygon), so a compact archive of a compact archive's surface is the same; otherwise
         the round trip is bit-exact.
-        Format 3: readers before it refuse compact bytes with "update the add-on".
+        Format 3: readers before it refuse compact bytes with "update the add-on". Format 4:
+        a surface of a mesh wound against its canonical winding (``param_flipped``), which
+        readers before it would tessellate facing the other way, refused by them alike.
         """
         arrays = {
             "format_version": np.array(4 if self._param.flipped else 3 if compact else
