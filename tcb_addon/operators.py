@@ -822,6 +822,21 @@ def previous_result(context, sources, linked: list | None = None):
     return max(found, key=lambda ob: (float(ob.get(FITTED_KEY, 0.0)), ob.name))
 
 
+def stale_nets(context, sources) -> list:
+    """The control nets in the view layer whose surface was deleted (X: the net's pointer
+    keeps it in the file, in no collection) and was fitted to exactly the objects
+    ``sources``: what Replace Previous Result replaces when there is no surface to replace
+    (the old net had stayed beside the new result, which went to a second collection: user
+    test). Nets linked from another file are left alone."""
+    want = sorted(o.as_pointer() for o in sources)
+    return [ob for ob in context.view_layer.objects
+            if ob.tcb.role == "NET" and ob.library is None and ob.tcb.surface is not None
+            and live.deleted(ob.tcb.surface)
+            and sorted(s.object.as_pointer() for s in ob.tcb.surface.tcb.sources
+                       if s.object is not None) == want
+            and len(ob.tcb.surface.tcb.sources) == len(want)]
+
+
 def _new_net(coll, name: str, surf, origin):
     """A new control-net object of ``surf`` in ``coll``, placed at ``origin`` (the surface's:
     the live net needs no transform)."""
@@ -944,8 +959,18 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         previous = previous_result(context, data.sources, kept) if self.replace else None
         replaced = [f"'{kept[0]}' is linked from another file and was kept: this result is a "
                     "new one"] if kept and previous is None else []
+        stale = stale_nets(context, data.sources) if self.replace and previous is None else []
+        coll = next((c for n in stale for c in n.users_collection), None)
+        for old in stale:
+            replaced.append(f"replaced the control net '{old.name}' of the previous result, "
+                            "whose surface was deleted (Ctrl+Z brings it back)")
+            live._remove(old)
+        if stale:  # (their deleted surfaces, used by nothing now: the new ones take the names)
+            live.drop_orphaned_weights()
+            live.drop_deleted_results()
         if previous is None:
-            coll = bridge.result_collection(context, f"TCB {name}")
+            if coll is None:
+                coll = bridge.result_collection(context, f"TCB {name}")
             verts, faces = surf.tessellate(self.resolution)
             origin = bridge.local_origin(verts)  # (0, 0, 0) unless far from the world origin
             smesh = bridge.new_mesh(f"{name} TCB Surface", verts - origin, faces)
@@ -996,8 +1021,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             obj.select_set(False)
         surface.select_set(True)
         context.view_layer.objects.active = surface
-        if live.drop_orphaned_weights():  # (of surfaces deleted with X; the view layer
-            context.view_layer.update()  # lists a removed object as None until updated)
+        if live.drop_orphaned_weights() or stale:  # (of surfaces deleted with X; the view
+            context.view_layer.update()  # layer lists a removed object as None until updated)
         reused = ["the same input and settings as the last fit: its result was reused (the "
                   "seconds are that fit's)"] if getattr(self, "_reused", False) else []
         holes = int((surf.report or {}).get("holes_filled", 0))

@@ -1100,6 +1100,56 @@ def test_fitting_the_same_source_again_replaces_its_result_in_place(clean_scene,
     assert snapshot(obj) == before
 
 
+def test_replace_takes_the_net_of_a_deleted_surface_with_it(clean_scene, addon, capfd):
+    """The user deletes the surface (X) and fits the source again with Replace Previous
+    Result: the old net had stayed in the scene beside the new result, which went to a second
+    collection (user test). The stale net is replaced (the new result goes to its collection)
+    and the deleted surface leaves the file; with Replace off, or for another source, such a
+    net stays."""
+    bpy = clean_scene
+    verts, faces = grid(12, f=lambda x, y: 0.2 * np.sin(2 * x) * np.cos(y))
+    obj = add_mesh(bpy, "Scan", verts, faces)
+    other = add_mesh(bpy, "Other", verts + [3.0, 0, 0], faces)
+    assert fit(bpy, other, tolerance=5e-3, resolution=8) == {"FINISHED"}
+    foreign = bpy.context.view_layer.objects.active
+    foreign_net = foreign.tcb.net
+    assert fit(bpy, obj, tolerance=5e-3, resolution=8) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net, coll = surface.tcb.net, surface.users_collection[0]
+    for ob in (surface, foreign):
+        with bpy.context.temp_override(**select(bpy, ob)):
+            assert bpy.ops.object.delete() == {"FINISHED"}
+    assert net.tcb.surface is not None and not net.tcb.surface.users_collection  # (held)
+    n_colls = len(bpy.data.collections)
+    capfd.readouterr()
+    assert fit(bpy, obj, tolerance=2e-3, resolution=8, replace=False) == {"FINISHED"}
+    beside = bpy.context.view_layer.objects.active
+    assert net.name in bpy.context.view_layer.objects  # (Replace off: it stays)
+    assert len(bpy.data.collections) == n_colls + 1
+    with bpy.context.temp_override(**select(bpy, beside)):
+        assert bpy.ops.object.delete() == {"FINISHED"}
+    names = (net.name, beside.tcb.net.name)
+    colls = {coll.name, beside.tcb.net.users_collection[0].name}
+    gone = {surface.name, beside.name}
+    capfd.readouterr()
+    assert fit(bpy, obj, tolerance=2e-3, resolution=8) == {"FINISHED"}
+    out = capfd.readouterr().out
+    new = bpy.context.view_layer.objects.active
+    assert all(f"replaced the control net '{n}' of the previous result, whose surface was "
+               "deleted" in out for n in names), out
+    roles = [(o.tcb.role, o.tcb.surface) for o in bpy.context.view_layer.objects
+             if o.tcb.role == "NET"]
+    assert sorted(r for r, _ in roles) == ["NET", "NET"]  # the new one and the other source's
+    assert {s for _, s in roles} == {new, foreign}
+    assert new.users_collection[0].name in colls  # (a stale net's: no third collection)
+    assert len(bpy.data.collections) == n_colls + 1
+    assert foreign_net.name in bpy.context.view_layer.objects  # (another source's: kept)
+    # the deleted surfaces left the file (the new one has the first one's name)
+    assert new.name == "Scan TCB Surface" and gone - {new.name} == {"Scan TCB Surface.001"}
+    assert "Scan TCB Surface.001" not in bpy.data.objects
+    assert foreign.name in bpy.data.objects  # (still held by its net)
+
+
 def test_background_invoke_runs_synchronously(clean_scene, addon):
     bpy = clean_scene
     assert bpy.app.background
