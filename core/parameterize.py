@@ -153,6 +153,31 @@ def fill_value_rows(points: np.ndarray):
     return None
 
 
+# coordinates of at least this size are no data (not in method.md): float32's largest value
+# (3.4e38, where Blender stores an infinity typed into a vertex), a fill value above the data;
+# one such vertex made all others one point at the scale of the mesh, and the map failed with
+# "113 of 200 triangles came out flipped or degenerate" (user test)
+HUGE_COORDINATE = 1e30
+
+
+def huge_rows(points: np.ndarray) -> np.ndarray:
+    """Mask (n,) of the finite rows of ``points`` with a coordinate of at least
+    HUGE_COORDINATE in size."""
+    p = np.asarray(points, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(p).all(axis=1) & (np.abs(p) >= HUGE_COORDINATE).any(axis=1)
+
+
+def huge_words(rows: np.ndarray, points: np.ndarray, what: str = "points") -> str:
+    """How :func:`huge_rows`' find is told: how many, the first, and what it may be."""
+    k, first = int(rows.sum()), int(np.flatnonzero(rows)[0])
+    x, y, z = (float(v) for v in np.asarray(points, dtype=np.float64)[first, :3])
+    return (f"{k} of the {len(rows)} {what} {'has' if k == 1 else 'have'} coordinates of "
+            f"1e{int(np.log10(HUGE_COORDINATE))} or more in size (the first: #{first}, ({x:.4g}, {y:.4g}, {z:.4g})): "
+            "float32's largest value (an infinity stored in 32 bits) or a fill value, which "
+            "would be fitted as data")
+
+
 def fill_value_words(found, total: int, what: str = "points") -> str:
     """How :func:`fill_value_rows`' find is told: the rows, the value, and what it is."""
     rows, j, value, lowest = found

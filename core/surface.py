@@ -40,8 +40,8 @@ from .geometry import column_bounds, coordinate_order, float32_rounding
 from .parallel import background
 from .parameterize import (
     Parameterization, _as_points, _check_finite, _edge_pairs, _local_planes, box_normalization,
-    corner_angles, fill_value_rows, fill_value_words, local_noise, local_scatter, normalize,
-    parameterize, spike_points,
+    corner_angles, fill_value_rows, fill_value_words, huge_rows, huge_words, local_noise,
+    local_scatter, normalize, parameterize, spike_points,
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
                      check_callback, prefetch_swing_triangles, swing_places)
@@ -2722,6 +2722,13 @@ def fit_surface(
         # (a mesh's vertices in faces: NaN or dropped rows would break it; review)
         raise InvalidInputError(fill_value_words(fill, len(fill[0]), "vertices in faces")
                                 + "; repair those vertices or cut them out of the mesh")
+    held = points if faces is None else points[_in_faces(faces, len(points))]
+    huge = huge_rows(held)
+    if huge.any():
+        raise InvalidInputError(
+            huge_words(huge, held, "points" if faces is None else "vertices in faces")
+            + ("; leave those rows out" if faces is None
+               else "; repair those vertices or cut them out of the mesh"))
     try:
         param = parameterize(points, faces, drop_outliers=drop_outliers, projection=projection,
                              fill_holes=bool(fill_holes))

@@ -360,8 +360,11 @@ def _rounding_note(obj, pts: np.ndarray, notes: list) -> None:
     if len(pts) < 2 or any(n.startswith(f"'{obj.name}': its vertex coordinates") for n in notes):
         return
     p = np.asarray(pts, dtype=np.float32)
-    extent = float(np.ptp(p, axis=0).max())
-    step = float(np.spacing(np.abs(p).max()))
+    with np.errstate(over="ignore", invalid="ignore"):  # (float32's largest value: named by
+        extent = float(np.ptp(p, axis=0).max())  # the fit, core.parameterize.huge_rows)
+        step = float(np.spacing(np.abs(p).max()))
+    if not (np.isfinite(step) and np.isfinite(extent)):
+        return
     if extent > 0 and step > ROUNDED * extent:
         notes.append(
             f"'{obj.name}': its vertex coordinates are stored {step:.3g} apart (32-bit floats "

@@ -905,6 +905,12 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             raise bridge.SelectionError(
                 f"'{data.name}': {words}; delete those vertices (in Edit Mode, e.g. box-select "
                 "them in a side view) and fit again")
+        huge = _core().parameterize.huge_rows(held)
+        if huge.any():  # (it had failed as "triangles came out flipped": user test)
+            words = _core().parameterize.huge_words(
+                huge, held, "points" if data.faces is None else "vertices in faces")
+            raise bridge.SelectionError(f"'{data.name}': {words}; delete or fix them (in Edit "
+                                        "Mode) and fit again")
         self._key = (data.digest(), tuple(sorted(kwargs.items())))
         cached = _cache_get(self._key)
         self._reused = cached is not None

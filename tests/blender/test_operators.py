@@ -2089,6 +2089,16 @@ def test_a_curve_without_geometry_is_refused_with_what_to_do(clean_scene):
     bad = add_mesh(bpy, "Bad", verts, faces)
     with pytest.raises(RuntimeError, match=r"'Bad': 1 of its 64 vertices has NaN or infinite"):
         fit(bpy, bad)
+    # an infinity typed into a vertex is stored as float32's largest value: named as such
+    # (it had failed as "113 of 200 triangles came out flipped or degenerate": user test)
+    verts[5] = [0.5, 0.5, float(np.finfo(np.float32).max)]
+    huge = add_mesh(bpy, "Huge", verts, faces)
+    n_objects = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match=r"'Huge': 1 of the 64 vertices in faces has "
+                       r"coordinates of 1e30 or more in size \(the first: #5, \(0.5, 0.5, "
+                       r"3.403e\+38\)\): float32's largest value .*delete or fix them"):
+        fit(bpy, huge)
+    assert len(bpy.data.objects) == n_objects
 
 
 def test_the_surface_operators_say_what_to_select(clean_scene):

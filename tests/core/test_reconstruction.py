@@ -1877,6 +1877,13 @@ def test_a_slot_whose_fan_bulges_away_along_a_bend_is_clipped(monkeypatch):
         ("mesh fill", InvalidInputError, r"3 of the 36 vertices in faces have z = -32768, "
                                          r"far below .*; repair those vertices or cut them out"),
         ("loose fill", TopologyError, "boundary loops"),  # (a loose vertex is left out)
+        # float32's largest value (Blender's stored infinity), above the data: the map had
+        # failed as "triangles came out flipped or degenerate" (user test)
+        ("huge", InvalidInputError, r"1 of the 200 points has coordinates of 1e30 or more in "
+                                    r"size \(the first: #7, \(.*, 3\.403e\+38\)\): float32's "
+                                    r"largest value .*; leave those rows out"),
+        ("mesh huge", InvalidInputError, r"1 of the 36 vertices in faces has coordinates of 1e30 "
+                                         r"or more in size \(the first: #4, .*repair those"),
         ("masked", InvalidInputError, r"3 of the points are masked.*points\[~points.mask.any"),
         # (refused as non-manifold edges: user test)
         ("transposed faces", InvalidInputError, r"got shape \(3, 48\), 3 polygons of 48 "
@@ -1926,6 +1933,11 @@ def test_bad_input_raises_a_specific_error(case, error, words):
     elif case == "loose fill":
         points, faces = grid_with_hole()
         points = np.vstack([points, [0.0, 0.0, -9999.0]])
+    elif case == "huge":
+        points[7, 2] = float(np.finfo(np.float32).max)
+    elif case == "mesh huge":
+        points, faces = grid_with_hole()
+        points[4, 0] = -3e38
     elif case == "transposed faces":
         points, faces = grid_with_hole(6)
         faces = faces.T
