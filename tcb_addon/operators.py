@@ -357,12 +357,18 @@ def store_spline(surface_obj, surf) -> None:
     surface_obj[SPLINE_KEY] = text if text is not None else _encoded(surf)
 
 
-def _as_stored(fn, resolution: int):
+# the resolution (and its sag, core's TCBSurface.tessellation_sag) that :func:`_as_stored`
+# chose for a surface with Auto Resolution
+_CHOSEN_RESOLUTION: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _as_stored(fn, resolution: int, auto: bool = False):
     """``fn``, returning the spline as :func:`store_spline` keeps it (compact: the data's
     parameters and errors rounded to float32) instead of the engine's, so that the mesh written
     now is the one a later Re-tessellate or Refine makes from the stored spline; its text and
     its tessellation at ``resolution`` are made here too, on the job's thread (for 1e6 points
-    the archive took 1.2 s of Blender's main thread)."""
+    the archive took 1.2 s of Blender's main thread). ``auto``: the resolution is chosen
+    (``TCBSurface.auto_resolution``, 0.1-2 s), see :func:`chosen_resolution`."""
     def run(**kw):
         result = fn(**kw)
         if (result.report or {}).get("stop_reason") == "cancelled":
@@ -370,9 +376,34 @@ def _as_stored(fn, resolution: int):
         data = result.to_bytes(compact=True)
         surf = _core().TCBSurface.from_bytes(data)
         _STORED_TEXT[surf] = base64.b64encode(data).decode("ascii")
-        surf.tessellation_uv(resolution)
+        if auto:
+            _CHOSEN_RESOLUTION[surf] = surf.auto_resolution()
+        surf.tessellation_uv(chosen_resolution(surf, resolution))
         return surf
     return run
+
+
+def chosen_resolution(surf, resolution: int) -> int:
+    """The resolution :func:`_as_stored` chose for ``surf`` (Auto Resolution), else
+    ``resolution``."""
+    return _CHOSEN_RESOLUTION.get(surf, (resolution,))[0]
+
+
+def resolution_note(surf) -> str | None:
+    """A warning when Auto Resolution's finest mesh still strays from the spline by more than
+    the fit's max error (the mesh is what the user sees and measures), else None."""
+    chosen = _CHOSEN_RESOLUTION.get(surf)
+    if chosen is None:
+        return None
+    resolution, sag = chosen
+    rep = dict(surf.report or {})
+    worst = float(rep.get("max", 0.0))
+    if not sag > max(worst, _core().surface.AUTO_RESOLUTION_FLOOR
+                     * float(rep.get("diagonal", 0.0))):
+        return None
+    return (f"the surface mesh (Resolution {resolution}, the finest Auto Resolution takes) "
+            f"strays up to {sag:.4g} from the spline, more than the fit's max error "
+            f"{worst:.4g}: Re-tessellate finer to see the fit as it is")
 
 
 def folded_over(tcb) -> bool:
@@ -569,6 +600,12 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
         # loose vertices (in no face) left out"; user test)
         warnings = list(warnings) + [f"{loose} loose vert{'ex' if loose == 1 else 'ices'} (in "
                                      "no face) left out"]
+    chosen = _CHOSEN_RESOLUTION.get(surf)  # (Auto Resolution: finer than its first, said)
+    if chosen is not None and chosen[0] > _core().surface.AUTO_RESOLUTIONS[0]:
+        notes = list(notes) + [f"mesh Resolution {chosen[0]} (Auto Resolution: within the "
+                               "fit's max error of the spline)"]
+    if resolution_note(surf):
+        warnings = list(warnings) + [resolution_note(surf)]
     text = _summary(surf, seconds) + "".join(f"; {n}" for n in list(notes) + list(warnings))
     if reason.startswith("tolerance reached") and "misses" not in reason:
         op.report({"WARNING"} if warnings else {"INFO"}, text)
@@ -955,12 +992,25 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 raise ex from None
 
         self._engine = []
-        return ("run", _as_stored(_recording(fit, self._engine), self.resolution),
+        return ("run", _as_stored(_recording(fit, self._engine), self.resolution,
+                                  self._auto_resolution()),
                 dict(points=data.points, faces=data.faces, **kwargs))
+
+    def _auto_resolution(self) -> bool:
+        """Auto Resolution, unless a script gave a Resolution and not it (the panel gives
+        both)."""
+        props = self.properties
+        if props.is_property_set("resolution") and not props.is_property_set("auto_resolution"):
+            return False
+        return bool(self.auto_resolution)
 
     def finish(self, context, surf):
         data = self._data
         name = data.name
+        auto = self._auto_resolution()
+        if auto and surf not in _CHOSEN_RESOLUTION:  # (a fit reused from the cache)
+            _CHOSEN_RESOLUTION[surf] = surf.auto_resolution()
+        resolution = chosen_resolution(surf, self.resolution) if auto else self.resolution
         kept = []
         previous = previous_result(context, data.sources, kept) if self.replace else None
         replaced = [f"'{kept[0]}' is linked from another file and was kept: this result is a "
@@ -977,7 +1027,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         if previous is None:
             if coll is None:
                 coll = bridge.result_collection(context, f"TCB {name}")
-            verts, faces = surf.tessellate(self.resolution)
+            verts, faces = surf.tessellate(resolution)
             origin = bridge.local_origin(verts)  # (0, 0, 0) unless far from the world origin
             smesh = bridge.new_mesh(f"{name} TCB Surface", verts - origin, faces)
             smesh.shade_smooth()
@@ -986,10 +1036,10 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             net = _new_net(coll, f"{name} TCB Net", surf, origin)
         else:  # the same objects, rewritten (as Refine does), at the data
             surface = previous
-            write_surface_mesh(surface, surf, self.resolution)
+            write_surface_mesh(surface, surf, resolution)
             net = live.own_net(surface)
             if net is None or net.type != "MESH" or not net.users_collection:  # deleted
-                live.relink(surface, surf, self.resolution)  # (drops a deleted net's link)
+                live.relink(surface, surf, resolution)  # (drops a deleted net's link)
                 coll = (surface.users_collection[0] if surface.users_collection
                         else context.scene.collection)
                 net = _new_net(coll, f"{name} TCB Net", surf, np.zeros(3))
@@ -1017,9 +1067,10 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         st.net = net
         net.tcb.role = "NET"
         net.tcb.surface = surface
-        store_stats(st, surf, {k: getattr(self, k) for k in FIT_KEYS})
+        store_stats(st, surf, {k: getattr(self, k) for k in FIT_KEYS}
+                    | {"resolution": resolution, "auto_resolution": auto})
         if self.live_net:
-            live.attach(surface, net, surf, self.resolution)
+            live.attach(surface, net, surf, resolution)
         else:
             live.detach(surface)  # (a replaced result's live link)
 
@@ -1174,7 +1225,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                           "replaced (Refine fits the data again; Ctrl+Z brings the edits back)"
                           ] if edited else []
         self._engine = []
-        return ("run", _as_stored(_recording(surf.refine, self._engine), st.resolution),
+        return ("run", _as_stored(_recording(surf.refine, self._engine), st.resolution,
+                                  st.auto_resolution),
                 dict(points=data.points, faces=faces, rounding=data.rounding,
                      **self._settings))
 
@@ -1182,6 +1234,9 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         surface = self._surface
         st = surface.tcb
         moved = moved_note(surface)
+        # (Auto Resolution: chosen again for the refined fit; its mesh needs a finer one)
+        st.resolution = chosen_resolution(surf, st.resolution) if st.auto_resolution \
+            else st.resolution
         write_surface_mesh(surface, surf, st.resolution)
         if st.net is not None:
             write_net_mesh(live.own_net(surface), surf)

@@ -154,11 +154,22 @@ class FitSettings:
         # (4096: 12 million vertices, about 4 minutes and 7 GiB with Blender waiting: user test)
         default=64, soft_min=2, soft_max=512,
     )  # fmt: skip
+    auto_resolution: BoolProperty(
+        name="Auto Resolution",
+        description=(
+            "Choose the Resolution of the surface mesh: the coarsest of 64, 128, 256 and 512 "
+            "whose flat triangles stay within the fit's max error of the spline (a tight fit "
+            "needs a fine mesh: at 64 one fitted to 0.01% strayed 9 times its error). Off: "
+            "the Resolution given. A script that gives a Resolution (and not this) gets it"
+        ),
+        default=True,
+    )  # fmt: skip
 
 
 FIT_KEYS = (
     "tolerance", "relative", "criterion", "max_control_points", "max_iterations", "degree", "mode",
     "smoothness", "auto_smoothness", "drop_outliers", "fill_holes", "projection", "resolution",
+    "auto_resolution",
 )  # fmt: skip
 
 
@@ -243,6 +254,7 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     smoothness_cross_validated: BoolProperty()
     smoothness_smoother: BoolProperty()
     resolution: IntProperty()
+    auto_resolution: BoolProperty()  # (Refine chooses the resolution again)
     # deviation map (distance of the surface vertices to the data)
     has_deviation: BoolProperty()
     deviation_max: FloatProperty(precision=6)  # top of the color range
@@ -283,11 +295,11 @@ def draw_fit_settings(layout, owner, short_labels: bool = False) -> None:
                 *RESULT_KEYS):
         if short_labels and key == "max_control_points":
             col.prop(owner, key, text="Max Control Pts")
-        elif key == "smoothness":
+        elif key in ("smoothness", "resolution"):
             row = col.row(align=True)
             sub = row.row(align=True)
-            sub.active = not owner.auto_smoothness
+            sub.active = not getattr(owner, f"auto_{key}")
             sub.prop(owner, key)
-            row.prop(owner, "auto_smoothness", text="", icon="AUTO")
+            row.prop(owner, f"auto_{key}", text="", icon="AUTO")
         else:
             col.prop(owner, key)

@@ -2286,3 +2286,48 @@ def test_the_summary_says_why_an_earlier_iteration_is_returned(addon):
                             max_control_points=600)
     assert surf.report["returned_iteration"] < 5
     assert "of 5 (lowest max error)" in ops._summary(surf)
+
+
+def test_auto_resolution_makes_the_mesh_as_close_to_the_spline_as_the_fit_is_to_the_data(
+        clean_scene, addon, capfd):
+    """At the default Resolution 64 the surface mesh of a tight fit strayed from the spline by
+    several times the fit's own max error (user test: 6.4e-3 against 2.0e-3; F7 fitted to
+    1e-4, 9x): Auto Resolution (on by default) takes the coarsest of 64-512 whose mesh keeps
+    within that error, says so in the summary, and Refine chooses again. A script that gives a
+    Resolution gets it; the panel gives both settings, and its Auto Resolution counts."""
+    bpy = clean_scene
+    core = core_module()
+    q = np.random.default_rng(0).random((6000, 2))
+    points = np.c_[q, 0.25 * np.sin(10 * q[:, 0]) * np.cos(8 * q[:, 1])]  # (883 control points)
+    cloud = add_mesh(bpy, "Waves", points)
+    capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, cloud)):
+        assert bpy.ops.tcb.fit_surface(tolerance=2e-4, max_control_points=1500) == {"FINISHED"}
+    out = capfd.readouterr().out
+    surface = bpy.context.view_layer.objects.active
+    st, surf = surface.tcb, spline_of(surface)
+    assert st.auto_resolution and st.resolution in core.surface.AUTO_RESOLUTIONS[1:]
+    assert f"mesh Resolution {st.resolution} (Auto Resolution" in out
+    worst = surf.report["max"]
+    assert surf.tessellation_sag(st.resolution) <= worst < surf.tessellation_sag(64)
+    assert len(surface.data.vertices) == len(surf.tessellation_uv(st.resolution)[0])
+    assert np.allclose(positions(surface), surf.tessellate(st.resolution)[0], atol=1e-5)
+    chosen = st.resolution
+    # Refine: a finer fit, chosen again (at least as fine)
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.refine() == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    surf = spline_of(surface)
+    assert surface.tcb.resolution >= chosen
+    assert surf.tessellation_sag(surface.tcb.resolution) <= max(
+        surf.report["max"], surf.tessellation_sag(core.surface.AUTO_RESOLUTIONS[-1]))
+    # a script's Resolution is kept; the panel's Auto Resolution (both given) chooses
+    for props, auto in ((dict(resolution=24), False),
+                        (dict(resolution=24, auto_resolution=True), True),
+                        (dict(resolution=24, auto_resolution=False), False)):
+        with bpy.context.temp_override(**select(bpy, cloud)):
+            assert bpy.ops.tcb.fit_surface(tolerance=2e-4, max_control_points=1500,
+                                           replace=False, **props) == {"FINISHED"}
+        st = bpy.context.view_layer.objects.active.tcb
+        assert st.auto_resolution == auto and (st.resolution == chosen if auto
+                                               else st.resolution == 24)

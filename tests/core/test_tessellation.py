@@ -156,3 +156,35 @@ def test_a_tessellation_can_be_stopped_while_its_grid_is_laid_out(long_patch):
     np.testing.assert_array_equal(tri, fresh[1])
     with pytest.raises(InvalidInputError, match="callback must return"):
         long_patch.tessellation_uv(59, callback=lambda r: "no")
+
+
+def test_the_tessellation_sag_falls_with_the_resolution_and_auto_resolution_meets_the_fit():
+    """TCBSurface.tessellation_sag: the distance between the spline and the flat triangles at
+    their edges' midpoints and centroids; 0 (to rounding) for a plane, falling with the
+    resolution (quadratic pieces: 4x per doubling where the grid resolves the net). A tight fit
+    strays from its mesh at the default 64 by more than from its data (user test): Auto
+    Resolution takes the coarsest of AUTO_RESOLUTIONS within the fit's max error."""
+    from core.surface import AUTO_RESOLUTIONS
+
+    q = np.random.default_rng(0).random((6000, 2))
+    plane = fit_surface(np.c_[q, 0.3 * q[:, 0] - 0.2 * q[:, 1]], tolerance=1e-3)
+    assert plane.tessellation_sag(64) < 1e-12 and plane.auto_resolution()[0] == 64
+    waves = fit_surface(np.c_[q, 0.25 * np.sin(10 * q[:, 0]) * np.cos(8 * q[:, 1])],
+                        tolerance=2e-4, max_control_points=1500)
+    sags = [waves.tessellation_sag(r) for r in (64, 512)]
+    # (not 4x per doubling throughout: 2.6e-3, 9.7e-4, 1.07e-3, 3.8e-4 of all triangles, the
+    # largest near the domain's border)
+    assert sags[0] > 4 * sags[1]
+    assert sags[0] > waves.report["max"]  # (the user test's case: the mesh the worse)
+    resolution, sag = waves.auto_resolution()
+    k = AUTO_RESOLUTIONS.index(resolution)
+    assert k > 0 and sag <= waves.report["max"] < waves.tessellation_sag(AUTO_RESOLUTIONS[k - 1])
+    # the midpoint sag measures the mesh: a dense probe of its triangles finds no more than
+    # 1.2x of it (the largest gap of a quadratic over a triangle is at most 4/3 of its
+    # largest at the edges' midpoints and centroid)
+    uv, tri = waves.tessellation_uv(64)
+    w = np.random.default_rng(1).dirichlet(np.ones(3), size=(len(tri), 8))  # (t, 8, 3)
+    at = np.einsum("tsk,tkj->tsj", w, uv[tri]).reshape(-1, 2)
+    flat = np.einsum("tsk,tkj->tsj", w, waves(uv)[tri]).reshape(-1, 3)
+    probe = np.nanmax(np.linalg.norm(waves(at) - flat, axis=1))
+    assert sags[0] <= probe * 1.0001 and probe <= 1.4 * sags[0]
