@@ -752,8 +752,10 @@ def test_the_corners_of_a_grid_mesh_are_fitted_as_well_as_the_same_points_as_a_c
     corners were 0.029-0.049 off the surface (max error 0.049, 272 control points), against
     0.0017 for the same vertices as a cloud (152). On a rectangle: 0.0014 with 153. Since a
     start that meets the tolerance by far is followed by coarser ones (core.refine
-    SHRINK_TARGET) both nets are smaller (55 and 66 control points, max 0.0069 and 0.0070):
-    the corners stay within the fit's max error (0.0047), far from the circle's 0.029."""
+    SHRINK_TARGET, held to SHRINK_MAX times the tolerance in max) the mesh's net is smaller
+    (74 control points, max 0.0042; the cloud's coarser start, 66 with 0.0070, missed the
+    max, so it keeps 151 with 0.0013): the corners stay within the fit's max error (up to
+    0.0026), far from the circle's 0.029."""
     from core import fit_surface
 
     g = np.linspace(-1, 1, 41)
@@ -764,7 +766,7 @@ def test_the_corners_of_a_grid_mesh_are_fitted_as_well_as_the_same_points_as_a_c
     faces = np.concatenate([np.column_stack([a, a + 1, a + 42]),
                             np.column_stack([a, a + 42, a + 41])])
     mesh, cloud = fit_surface(pts, faces), fit_surface(pts)
-    assert mesh.report["max"] < 2 * cloud.report["max"] < 0.02
+    assert max(mesh.report["max"], cloud.report["max"]) < 0.006  # (the circle's: 0.049)
     assert mesh.report["control_points"] < 1.2 * cloud.report["control_points"]
     corners = pts[[0, 40, 41 * 40, 41 * 41 - 1]]
     assert mesh.distances(corners).max() < min(mesh.report["max"], 0.01)
