@@ -132,3 +132,18 @@ def test_coarse_meshes_quick():
         flat, pn, c1 = r[1:5], r[5:9], r[9:13]
         assert int(c1[0]) <= 1.02 * int(flat[0]) and 2.5 * float(c1[2]) < float(flat[2]), r
         assert float(c1[2]) < float(pn[2]), r
+
+
+def test_tessellation_sag_quick():
+    """``benchmarks/tessellation_sag.py --quick`` prints its row: the sag falls from 64 to 512
+    grid steps, and Auto Resolution's pick is the coarsest within the fit's max error (or 512)."""
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "tessellation_sag.py"),
+                          "--quick"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = [r.split("|")[1:-1] for r in res.stdout.splitlines()
+            if r.startswith("| ") and not r.startswith("| data")]
+    assert [r[0].strip() for r in rows] == ["saddle, 5 x 5 quads"]
+    worst, sags, auto = float(rows[0][3]), [float(x) for x in rows[0][4:8]], int(rows[0][8])
+    assert sags[0] > 4 * sags[-1]
+    within = [r for r, s in zip((64, 128, 256, 512), sags) if s <= worst]
+    assert auto == (within[0] if within else 512)
