@@ -6,10 +6,10 @@ Blender users measure the mesh, not the spline: at the fixed default of 64 grid 
 fit's mesh strayed several times the fit's own max error from it (user test of the
 thirty-fourth session). Per dataset and tolerance (defaults otherwise): the fit's control points
 and max error at the data, ``TCBSurface.tessellation_sag`` at 64 / 128 / 256 / 512 (the largest
-distance between the spline and the flat triangles at their edges' midpoints and centroids, over
-a sample of 5000 triangles), all over the bounding-box diagonal, and the resolution
-``auto_resolution`` picks (the coarsest whose sag is within the fit's max error), with its
-seconds (the sags it measured and the grids it laid out).
+distance between the spline and the flat triangles at the midpoints of all the mesh's edges),
+all over the bounding-box diagonal, and the resolution ``auto_resolution`` picks (the coarsest
+of 64 / 128 / 256 whose sag is within the fit's max error, else 256), with its seconds (the
+sags it measured and the grids it laid out).
 """
 
 from __future__ import annotations

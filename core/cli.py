@@ -22,7 +22,8 @@ from .errors import HolesError, InvalidInputError, OutlierError, TCBError
 from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
 from .parameterize import fill_value_rows, fill_value_words, projection_direction
-from .refine import STALLED, SWINGS_LEFT, mostly_taken_back, replaced_default_reason
+from .refine import (SWINGS_LEFT, mostly_taken_back, replaced_default_reason,
+                     returned_why)
 from .surface import (FOLDED_SHARE, MAX_RESOLUTION, default_swung, grid_frame,
                       tessellation_fill,
                       noise_near_tolerance, stopped_at_noise)
@@ -124,11 +125,12 @@ def _smoothness(text: str):
             f"expected a nonnegative number or 'auto', got {text!r}") from None
 
 
-def _returned(report: dict) -> str:
-    """Which iteration's fit was returned, when it is not the last one."""
+def _returned(report: dict, criterion: str = "rms") -> str:
+    """Which iteration's fit was returned, when it is not the last one, and why
+    (core.refine.returned_why)."""
     k = report.get("returned_iteration", report["iterations"])
-    how = "lowest estimated error" if report["stop_reason"] == STALLED else "lowest RMS"
-    return f"; the surface is iteration {k}'s, of {how}" if 0 < k < report["iterations"] else ""
+    how = returned_why(report, criterion)
+    return f"; the surface is iteration {k}'s ({how})" if 0 < k < report["iterations"] else ""
 
 
 def _smoothness_text(report: dict) -> str:
@@ -374,7 +376,8 @@ def _fit(args) -> int:
     rows += [
         ("knots (interior)", f"{r['knots']} ({r['interior_knots']})"),
         ("control points", f"{r['control_points']}"),
-        ("iterations", f"{r['iterations']} ({r['stop_reason']})" + _returned(r)),
+        ("iterations", f"{r['iterations']} ({r['stop_reason']})"
+         + _returned(r, surf.options.criterion)),
         ("smoothness", _smoothness_text(r)),
     ]
     if "refit" in r:

@@ -108,38 +108,29 @@ def quad_triangles(points: np.ndarray, quads: np.ndarray, tie_rtol: float = 0.0,
     return np.stack([first, second], axis=1).reshape(-1, 3)
 
 
-def polygon_triangles(points: np.ndarray, polys: np.ndarray, tie_rtol: float = 0.0,
-                      return_ties: bool = False):
+def polygon_triangles(points: np.ndarray, polys: np.ndarray) -> np.ndarray:
     """Triangles ``(m (k - 2), 3)`` of the polygons ``polys`` (m, k) of ``points`` (n, 3),
     polygon by polygon, each in its winding, whatever corner it starts at (not in method.md;
     the engine's own reading of a mesh's faces): triangles as given, quads by
     :func:`quad_triangles`, and larger polygons by clipping ears: each step cuts off, of the
     corners left, the one whose triangle with its two neighbours has the largest smallest-angle
     sine (:func:`_min_sine`, in 3D), of those alike to rounding the one with the shorter
-    diagonal, then the corner of least coordinates (x, then y, then z). A convex polygon (every corner turns its way about its Newell normal, to
-    rounding; corners in a row included) has every corner as an ear: its steps run for all
+    diagonal, then the corner of least coordinates (x, then y, then z): the same triangles
+    for either winding. A convex polygon (every corner turns its way about its Newell normal,
+    to rounding; corners in a row included) has every corner as an ear: its steps run for all
     such polygons at once. Others are cut by :func:`ear_clipping` in the plane across their
     normal (the same choice among their ears), and one that does not clip (it crosses
     itself) as the fan from its corner of least coordinates; NaN corners: the fan from the
     first. Fans from the first corner (what was done before) made a height field of 140
     convex pentagons to heptagons fit with 107-146 control points as the polygons' first
     corners were turned, 2.4-4.8e-4 of the diagonal (RMS) from the true surface; now 143
-    every time, 2.1e-4 (/tmp/s34/ngon.py).
-
-    ``tie_rtol``, ``return_ties``: also returns the (m,) mask of the polygons of five or more
-    corners where a step's best ear was within this share of another's quality (or, when
-    ``tie_rtol`` is given, that are not convex): where a coordinate's rounding could change
-    the cut (the extension keeps Blender's there, as for quads; :func:`quad_triangles`'s
-    ``tie_rtol``)."""
+    every time, 2.1e-4 (/tmp/s34/ngon.py)."""
     q = np.asarray(polys, dtype=np.int64)
     m, k = q.shape if q.ndim == 2 else (0, 0)
-    tied = np.zeros(m, dtype=bool)
     if k == 3 or m == 0:
-        tris = q.reshape(-1, 3) if k == 3 else np.zeros((0, 3), dtype=np.int64)
-        return (tris, tied) if return_ties else tris
+        return q.reshape(-1, 3) if k == 3 else np.zeros((0, 3), dtype=np.int64)
     if k == 4:
-        tris = quad_triangles(points, q, tie_rtol=tie_rtol, tie_first=tie_rtol > 0)
-        return (tris, tied) if return_ties else tris
+        return quad_triangles(points, q)
     points = np.asarray(points, dtype=np.float64)
     rank = np.empty(len(points), dtype=np.int64)
     rank[np.lexsort(points.T[::-1])] = np.arange(len(points))
@@ -177,14 +168,6 @@ def polygon_triangles(points: np.ndarray, polys: np.ndarray, tie_rtol: float = 0
         alike &= diagonal <= diagonal.min(axis=1, keepdims=True) * (1.0 + 1e-9)
         tip = np.where(alike, corner_rank[c[:, None], ring],
                        np.iinfo(np.int64).max).argmin(axis=1)
-        if tie_rtol > 0:
-            # another ear nearly as good, that cuts another diagonal (of four corners left,
-            # the opposite corner's ear cuts the same one)
-            same = np.arange(r) == tip[:, None]
-            if r == 4:
-                same |= np.arange(r) == (tip[:, None] + 2) % 4
-            others = np.where(same, -1.0, quality).max(axis=1)
-            tied[c] |= others >= (1.0 - tie_rtol) * best
         at = (rows[:, 0], tip)
         tris[c, step] = q[c[:, None], np.stack([prv[at], ring[at], nxt[at]], axis=1)]
         ring = ring[np.arange(r) != tip[:, None]].reshape(len(c), r - 1)
@@ -192,7 +175,6 @@ def polygon_triangles(points: np.ndarray, polys: np.ndarray, tie_rtol: float = 0
         tris[c, k - 3] = q[c[:, None], ring]
     # the others one by one (a concave polygon clipped in its plane; else a fan)
     for i in np.flatnonzero(~convex):
-        tied[i] = tie_rtol > 0
         clip = None
         if finite[i]:
             n = normal[i] / np.linalg.norm(normal[i])
@@ -204,8 +186,7 @@ def polygon_triangles(points: np.ndarray, polys: np.ndarray, tie_rtol: float = 0
             j = (least[i] if finite[i] else 0) + np.arange(k)
             clip = np.c_[j[:1].repeat(k - 2), j[1:-1], j[2:]] % k
         tris[i] = q[i][clip]
-    tris = tris.reshape(-1, 3)
-    return (tris, tied) if return_ties else tris
+    return tris.reshape(-1, 3)
 
 
 def float32_rounding(points, advice: str, columns=None) -> str | None:
@@ -446,8 +427,9 @@ def ear_clipping(xy: np.ndarray, shape: np.ndarray | None = None,
     rotated grid's C-shaped hole did: review). The triangles are counter-clockwise,
     ``(previous, tip, next)`` in the polygon's order. Only vertices
     that are not strictly convex can lie in an ear's triangle, so only those are tested (a
-    vertex never turns reflex as its neighbours are clipped). ``rank`` (m,): of ears of
-    equal quality, the one of least rank is clipped (else the first in the polygon's order)."""
+    vertex never turns reflex as its neighbours are clipped). ``rank`` (m,): of ears alike
+    in quality to rounding, the one with the shorter diagonal, then of least rank, is clipped
+    (:func:`polygon_triangles`' rule; else the first in the polygon's order)."""
     xy = np.asarray(xy, dtype=np.float64)
     m = len(xy)
     if m < 3:
@@ -490,8 +472,12 @@ def ear_clipping(xy: np.ndarray, shape: np.ndarray | None = None,
         tip = int(np.argmax(q))
         if q[tip] < 0:
             return None
-        if rank is not None:
-            tip = int(np.flatnonzero(q == q[tip])[np.argmin(rank[q == q[tip]])])
+        if rank is not None:  # (polygon_triangles' rule: whatever corner or winding)
+            alike = np.flatnonzero(q >= q[tip] * (1.0 - 1e-9))
+            d = S[nxt[alike]] - S[prv[alike]]
+            d2 = np.einsum("ij,ij->i", d, d)
+            alike = alike[d2 <= d2.min() * (1.0 + 1e-9)]
+            tip = int(alike[np.argmin(rank[alike])])
         a, b = int(prv[tip]), int(nxt[tip])
         tris[step] = (a, tip, b)
         alive[tip] = False

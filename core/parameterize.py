@@ -399,8 +399,10 @@ class Parameterization:
             (the surface spans it, held by the fairing); None when there were none.
         flipped: (disk only) True when the faces given were wound the other way than the
             canonical winding (:func:`winding_flipped`): the map, and ``faces``, ``boundary``
-            and ``domain_polygon``, are those of the faces reversed, bit for bit, so a mesh
-            and its copy with Flip Normals get the same map; a surface fitted to it turns its
+            and ``domain_polygon``, are those of the faces reversed (bit for bit for faces
+            reversed as ``f[:, ::-1]``, to rounding for Blender's Flip Normals, which keeps
+            each face's first corner), so a mesh and its copy with Flip Normals get the same
+            map; a surface fitted to it turns its
             tessellation's and control net's triangles back and negates its normals (the
             given winding's way). False for a point cloud and for files written before it.
     """
@@ -2706,8 +2708,9 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     face references are left out: their ``uv`` rows are NaN and ``used`` is False.
 
     Winding (not in method.md): faces wound against the canonical winding of their geometry
-    (:func:`winding_flipped`) are reversed first, so the map is bit for bit that of the mesh
-    with its normals flipped (Blender's Flip Normals, an OBJ written with the other winding;
+    (:func:`winding_flipped`) are reversed first, so the map is that of the mesh with its
+    normals flipped (bit for bit for ``f[:, ::-1]``, to rounding for Blender's Flip Normals,
+    which keeps each face's first corner; an OBJ written with the other winding;
     they had mirrored maps, and nefertiti got 496 and 564 control points), and ``flipped``
     records it: a surface fitted to it faces the given winding's way
     (:class:`core.surface.TCBSurface`). ``_fill_from`` (the mesh with its holes closed,

@@ -155,6 +155,18 @@ def check_callback(callback) -> None:
                 f"-> bool); {getattr(callback, '__name__', callback)!r} cannot") from None
 
 
+def returned_why(report: dict, criterion: str = "rms") -> str:
+    """Why the surface returned is an earlier iteration's fit (adaptive_fit's choice), in
+    words for the command line and Blender: they had said "lowest RMS" also of a smaller net
+    kept after a coarser start missed the tolerance and of the criterion "max"'s lowest max
+    (review, user test)."""
+    if report.get("stop_reason") == STALLED:
+        return "lowest estimated error"
+    if report.get("stop_reason") == "tolerance reached":  # (a coarser start missed it after)
+        return "the smallest net that met the tolerance"
+    return "lowest max error" if criterion == "max" else "lowest RMS"
+
+
 def _cancel_requested(callback, report: dict) -> bool:
     """Call ``callback`` with (a copy of) an iteration's report; True means cancel."""
     answer = callback(copy.deepcopy(report))

@@ -40,8 +40,8 @@ from .geometry import column_bounds, coordinate_order, float32_rounding
 from .parallel import background
 from .parameterize import (
     Parameterization, _as_points, _check_finite, _edge_pairs, _local_planes, box_normalization,
-    corner_angles, fill_value_rows, fill_value_words, huge_rows, huge_words, local_noise,
-    local_scatter, normalize, parameterize, spike_points,
+    _parameterize_mesh, corner_angles, fill_value_rows, fill_value_words, huge_rows, huge_words,
+    local_noise, local_scatter, normalize, parameterize, spike_points,
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
                      check_callback, prefetch_swing_triangles, swing_places)
@@ -88,8 +88,10 @@ CLOSEST_EDGE_SAMPLES = 8
 MAX_RESOLUTION = 4096
 # tessellation: rounds of edge splits where the data parameters are denser than on average
 TESSELLATION_SPLITS = 4
-# auto_resolution's candidates, coarsest first (512: about 0.2 million vertices, 1-2 s)
-AUTO_RESOLUTIONS = (64, 128, 256, 512)
+# auto_resolution's candidates, coarsest first: each costs its grid and a sag over all its
+# edges (64: 0.2 s, 128: 0.7 s, 256: 2.5 s, 512: 7.5 s on a loaded machine, /tmp/s34/sag_check.py),
+# so 512 is left to Re-tessellate (Blender's warning says so)
+AUTO_RESOLUTIONS = (64, 128, 256)
 AUTO_RESOLUTION_FLOOR = 1e-6  # ... and a mesh within this share of the diagonal is taken
 # the edge-split rounds look a mesh's compression up on a grid of at most this many cells along
 # the longer side (4x finer than the tessellation's grid up to resolution 128)
@@ -570,27 +572,27 @@ class TCBSurface:
                 break
         return resolution, sag
 
-    def tessellation_sag(self, resolution: int = 64, sample: int = 5000) -> float:
+    def tessellation_sag(self, resolution: int = 64) -> float:
         """How far the flat triangles of :meth:`tessellate` ``(resolution)`` stray from the
         spline (model units; not in method.md): the largest distance between the spline and
-        the triangles' linear interpolation of it at their edges' midpoints and centroids, in
-        uv (where a quadratic piece's sag peaks), over up to ``sample`` triangles (seeded; all
-        when fewer). The mesh, not the spline, is what a user sees and measures: a net of 709
-        control points fitted to 2.0e-3 of the diagonal showed 6.4e-3 at resolution 64 and
-        2.3e-3 at 256 (user test). NaN when no triangle has all its points on the domain."""
+        the mesh at the midpoints (in uv) of all its edges, where a quadratic piece's sag
+        along an edge peaks. The mesh, not the spline, is what a user sees and measures: a net
+        of 709 control points fitted to 2.0e-3 of the diagonal showed 6.4e-3 at resolution 64
+        and 2.3e-3 at 256 (user test). Every edge: a sample of 5000 triangles had found 3.7e-4
+        at 256 where all edges have 1.07e-3, at a spot of a few triangles (review). About two
+        evaluations per triangle: 0.1 s at 64, 1 s at 256, 4 s at 512. NaN when no edge has
+        both ends on the domain."""
         uv, tri = self.tessellation_uv(resolution)
-        if len(tri) > sample:
-            tri = tri[np.random.default_rng(0).choice(len(tri), sample, replace=False)]
-        corners = uv[tri]  # (t, 3, 2)
-        at = np.concatenate([0.5 * (corners + np.roll(corners, -1, axis=1)),
-                             corners.mean(axis=1, keepdims=True)], axis=1)  # (t, 4, 2)
-        weights = np.array([[0.5, 0.5, 0.0], [0.0, 0.5, 0.5], [0.5, 0.0, 0.5], [1, 1, 1]])
-        weights[3] /= 3.0
-        values = self._points(np.vstack([uv[np.unique(tri)], at.reshape(-1, 2)]))[0]
+        if len(tri) == 0:
+            return float("nan")
+        e = np.sort(np.stack([tri, np.roll(tri, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+        key = np.unique(e[:, 0].astype(np.int64) * len(uv) + e[:, 1])
+        a, b = key // len(uv), key % len(uv)
+        used = np.unique(tri)
+        values = self._points(np.vstack([uv[used], 0.5 * (uv[a] + uv[b])]))[0]
         vertex = np.full((len(uv), 3), np.nan)
-        vertex[np.unique(tri)] = values[: len(np.unique(tri))]
-        flat = np.einsum("pk,tkj->tpj", weights, vertex[tri])  # (t, 4, 3)
-        gap = np.linalg.norm(values[len(np.unique(tri)):].reshape(-1, 4, 3) - flat, axis=2)
+        vertex[used] = values[: len(used)]
+        gap = np.linalg.norm(values[len(used):] - 0.5 * (vertex[a] + vertex[b]), axis=1)
         return float(np.nanmax(gap)) if np.isfinite(gap).any() else float("nan")
 
     def _points(self, uv, callback=None, matrix: bool = False):
@@ -1094,9 +1096,14 @@ class TCBSurface:
             if old.axes is not None:  # (a projection given to the fit: its direction)
                 tries.append(dict(drop_outliers=drop,
                                   projection=tuple(float(x) for x in old.axes[2])))
+        # a mesh fitted before the canonical winding (no "canonical_winding" in its report)
+        # was mapped as its faces were given: mapped so again (a reordered copy of a mesh
+        # wound against it was refused as "values both reordered and rounded": review)
+        given = old.faces is not None and not self._report.get("canonical_winding", False)
         for options in tries:
             try:
-                new = parameterize(points, faces, **options)
+                new = (_parameterize_mesh(points, faces, **options) if given
+                       else parameterize(points, faces, **options))
             except TCBError:
                 continue
             if _same_map(new, old):
@@ -1111,8 +1118,8 @@ class TCBSurface:
         values in the same order (a digest of them is kept in ``report["data_digest"]``), or
         values within rounding of them (see :meth:`fitted_to` and its ``rounding``), or the
         same values in another order with the same faces renumbered, in any order of the faces
-        (Blender's Sort Elements; a triangle's or a quad's corners may be turned, a larger
-        polygon's not; the faces must then be given): these are parameterized again
+        (Blender's Sort Elements; a polygon's corners may be turned; the faces must then be
+        given): these are parameterized again
         (:meth:`reordered`, which costs a parameterization), and the refined surface is the
         one of the data in their new order.
         ``changes`` override settings (the fields of :class:`RefineOptions`), e.g.
@@ -1537,13 +1544,13 @@ def point_labels(points) -> np.ndarray:
 def faces_set_digest(faces, points) -> str | None:
     """A digest (BLAKE2b, 128 bits, hex) of ``faces`` (f, k) on ``points`` as a set of
     polygons of labelled vertices: each index ``i`` replaced by the :func:`point_labels` of
-    ``points`` (which follow the vertices' coordinates), a triangle or a quad turned to its
-    least rotation (a reversed winding is another face) and the rows sorted. The same mesh
-    stored in another order (its vertices, its faces: Blender's Sort Elements; a triangle's or
-    a quad's corners turned: the fit cuts a quad by its shape, core.geometry.quad_triangles)
-    has the same digest; ``refine()`` compares it when :func:`faces_digest` differs. A polygon
-    of more corners that starts at another corner is another face: the fit splits it into a
-    fan from its first corner.
+    ``points`` (which follow the vertices' coordinates), each polygon turned to its least
+    rotation (a reversed winding is another face) and the rows sorted. The same mesh stored in
+    another order (its vertices, its faces: Blender's Sort Elements; a polygon's corners
+    turned: the fit cuts polygons by their shape, core.geometry.polygon_triangles) has the
+    same digest; ``refine()`` compares it when :func:`faces_digest` differs. (Until the
+    thirty-fourth session only triangles and quads were turned: polygons of more corners
+    were split into fans from their first corner.)
     None when the faces are no integer (f, k) array of indices into ``points``."""
     f = _int_faces(faces)
     n = len(points)
@@ -1551,7 +1558,7 @@ def faces_set_digest(faces, points) -> str | None:
         return None
     lab = point_labels(points)[f]
     k = lab.shape[1]
-    if len(lab) and k in (3, 4):
+    if len(lab) and k >= 3:
         turns = lab[:, (np.arange(k)[:, None] + np.arange(k)) % k]  # (f, k rotations, k)
         least = np.ones(turns.shape[:2], dtype=bool)
         for c in range(k):  # the lexicographically least rotation
@@ -2257,6 +2264,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         report["faces_digest"] = faces_key
     if faces_set_key is not None:  # (or the same stored in another order: faces_set_digest)
         report["faces_set_digest"] = faces_set_key
+    if param.faces is not None:  # (the map is of the canonical winding: reordered() maps a
+        report["canonical_winding"] = True  # file's without it as its faces were given)
     if noise is not None:  # a mesh's noise (local_noise), in the user's units (a cloud's: below)
         report["noise"] = noise * norm.scale
         report["noise_rel"] = noise / diag_norm
@@ -2653,7 +2662,8 @@ def fit_surface(
         Scanned points, or mesh vertices.
     faces : (F, 3) int, optional
         Triangles of a disk-topology mesh ((F, k) polygons, or a list of polygons of any
-        lengths, are split: quads along their shorter diagonal, larger polygons into fans;
+        lengths, are split by their shape, whatever corner they start at: quads along their
+        shorter diagonal, larger polygons by their best ears;
         then the mesh is parameterized over the unit disk,
         or a rectangle when its boundary has four corners, or its own boundary flattened
         when that distorts the triangles less;

@@ -403,7 +403,7 @@ def resolution_note(surf) -> str | None:
         return None
     return (f"the surface mesh (Resolution {resolution}, the finest Auto Resolution takes) "
             f"strays up to {sag:.4g} from the spline, more than the fit's max error "
-            f"{worst:.4g}: Re-tessellate finer to see the fit as it is")
+            f"{worst:.4g}: Re-tessellate finer (e.g. {2 * resolution}) to see the fit as it is")
 
 
 def folded_over(tcb) -> bool:
@@ -529,18 +529,6 @@ def _remember_net_rounding(net_obj) -> None:
         bridge.read_world_positions_and_rounding(net_obj)[1].max(initial=0.0))
 
 
-def _returned_why(surf, rep: dict) -> str:
-    """Why the surface returned is an earlier iteration's (core.refine.adaptive_fit's choice):
-    it had said "lowest RMS" also of a smaller net kept after a coarser one missed, and of the
-    criterion "max"'s lowest max (user test)."""
-    if rep.get("stop_reason") == _core().refine.STALLED:
-        return "lowest estimated error"
-    if rep.get("stop_reason") == "tolerance reached":  # (a coarser start missed it after)
-        return "the smallest net that met the tolerance"
-    options = getattr(surf, "options", None)
-    return "lowest max error" if getattr(options, "criterion", "rms") == "max" else "lowest RMS"
-
-
 def _summary(surf, seconds: float | None = None) -> str:
     """The one-line summary; ``seconds``: the operator's own time (reading the selection,
     the fit, the objects made), else the engine's (user test: a 1e6-vertex mesh took 103 s
@@ -564,7 +552,7 @@ def _summary(surf, seconds: float | None = None) -> str:
         + (f", {rep['outliers']} outlier{'s' if rep['outliers'] != 1 else ''} left out"
            if rep.get("outliers") else "")
         + (f", the surface of iteration {rep['returned_iteration']} of {rep['iterations']} "
-           f"({_returned_why(surf, rep)})"
+           f"({_core().refine.returned_why(rep, getattr(surf.options, 'criterion', 'rms'))})"
            if 0 < rep.get("returned_iteration", 0) < rep.get("iterations", 0) else "")
     )
 
@@ -577,10 +565,12 @@ def _scatter(surf) -> str:
             f"({100 * rep['noise_rel']:.3g}% of the diagonal) across a smooth surface")
 
 
-def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None) -> None:
+def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None,
+                  auto: bool = False) -> None:
     """The summary of a fit or refine: INFO, or WARNING when the tolerance was not reached
     (the budget or the iteration limit stopped the loop first), with what to change, or when
-    there are ``warnings``."""
+    there are ``warnings``. ``auto``: the mesh's resolution is Auto Resolution's choice
+    (said when finer than its first, or warned of when even its finest strays)."""
     rep = dict(getattr(surf, "report", {}) or {})
     reason = str(rep.get("stop_reason", ""))
     if (rep.get("swings") or {}).get("places"):  # core.surface.data_swings
@@ -600,12 +590,12 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None)
         # loose vertices (in no face) left out"; user test)
         warnings = list(warnings) + [f"{loose} loose vert{'ex' if loose == 1 else 'ices'} (in "
                                      "no face) left out"]
-    chosen = _CHOSEN_RESOLUTION.get(surf)  # (Auto Resolution: finer than its first, said)
-    if chosen is not None and chosen[0] > _core().surface.AUTO_RESOLUTIONS[0]:
+    chosen = _CHOSEN_RESOLUTION.get(surf) if auto else None
+    if chosen is not None and resolution_note(surf):
+        warnings = list(warnings) + [resolution_note(surf)]
+    elif chosen is not None and chosen[0] > _core().surface.AUTO_RESOLUTIONS[0]:
         notes = list(notes) + [f"mesh Resolution {chosen[0]} (Auto Resolution: within the "
                                "fit's max error of the spline)"]
-    if resolution_note(surf):
-        warnings = list(warnings) + [resolution_note(surf)]
     text = _summary(surf, seconds) + "".join(f"; {n}" for n in list(notes) + list(warnings))
     if reason.startswith("tolerance reached") and "misses" not in reason:
         op.report({"WARNING"} if warnings else {"INFO"}, text)
@@ -1017,13 +1007,6 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                     "new one"] if kept and previous is None else []
         stale = stale_nets(context, data.sources) if self.replace and previous is None else []
         coll = next((c for n in stale for c in n.users_collection), None)
-        for old in stale:
-            replaced.append(f"replaced the control net '{old.name}' of the previous result, "
-                            "whose surface was deleted (Ctrl+Z brings it back)")
-            live._remove(old)
-        if stale:  # (their deleted surfaces, used by nothing now: the new ones take the names)
-            live.drop_orphaned_weights()
-            live.drop_deleted_results()
         if previous is None:
             if coll is None:
                 coll = bridge.result_collection(context, f"TCB {name}")
@@ -1058,6 +1041,17 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             except RuntimeError:  # a replaced result's object outside the current view layer
                 pass
         surface[FITTED_KEY] = time.time()  # (the latest of several results is replaced)
+        # the stale nets go once the new result exists (an error before would have left
+        # neither: review); their deleted surfaces, used by nothing then, go with them, and
+        # the new objects take the names
+        for old in stale:
+            replaced.append(f"replaced the control net '{old.name}' of the previous result, "
+                            "whose surface was deleted (Ctrl+Z brings it back)")
+            live._remove(old)
+        if stale:
+            live.drop_orphaned_weights()
+            live.drop_deleted_results()
+            surface.name, net.name = f"{name} TCB Surface", f"{name} TCB Net"
 
         store_spline(surface, surf)
         st = surface.tcb
@@ -1097,7 +1091,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 f"{'vertices' if data.faces is not None else 'points'}"] if mods else []
         report_result(self, surf,
                       read + list(data.notes) + self._ignored + reused + replaced + spanned,
-                      _engine_notes(self), seconds=seconds)
+                      _engine_notes(self), seconds=seconds, auto=auto)
         return {"FINISHED"}
 
     def draw(self, context):
@@ -1261,7 +1255,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                 warnings.append(f"nothing was refined: the surface already meets the "
                                 f"tolerance {self._settings['tolerance']:.4g}{unit} ({what} "
                                 f"{self._before[0]:.4g}{unit}); set a smaller Tolerance")
-        report_result(self, surf, notes, warnings)
+        report_result(self, surf, notes, warnings, auto=st.auto_resolution)
         return {"FINISHED"}
 
 
@@ -1326,6 +1320,7 @@ class TCB_OT_retessellate(_EngineOperator, bpy.types.Operator):
         if live.relink(surface, surf, self.resolution, self.report, weights=weights):
             store_spline(surface, surf)  # the net was dropped: its edits are kept
         surface.tcb.resolution = self.resolution
+        surface.tcb.auto_resolution = False  # (the user's choice: Refine keeps it; review)
         for problem in (moved, net_vertex_problem(surface)):
             if problem:
                 self.report({"WARNING"}, f"TCB: {problem}")

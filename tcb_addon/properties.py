@@ -157,10 +157,11 @@ class FitSettings:
     auto_resolution: BoolProperty(
         name="Auto Resolution",
         description=(
-            "Choose the Resolution of the surface mesh: the coarsest of 64, 128, 256 and 512 "
-            "whose flat triangles stay within the fit's max error of the spline (a tight fit "
-            "needs a fine mesh: at 64 one fitted to 0.01% strayed 9 times its error). Off: "
-            "the Resolution given. A script that gives a Resolution (and not this) gets it"
+            "Choose the Resolution of the surface mesh: the coarsest of 64, 128 and 256 whose "
+            "flat triangles stay within the fit's max error of the spline, else 256 with a "
+            "warning (a tight fit needs a fine mesh: at 64 one fitted to 0.01% strayed 9 times "
+            "its error). Off: the Resolution given. A script that gives a Resolution (and not "
+            "this) gets it"
         ),
         default=True,
     )  # fmt: skip

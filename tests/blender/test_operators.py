@@ -2322,12 +2322,23 @@ def test_auto_resolution_makes_the_mesh_as_close_to_the_spline_as_the_fit_is_to_
     assert surf.tessellation_sag(surface.tcb.resolution) <= max(
         surf.report["max"], surf.tessellation_sag(core.surface.AUTO_RESOLUTIONS[-1]))
     # a script's Resolution is kept; the panel's Auto Resolution (both given) chooses
+    # (the fit itself is reused from the cache: the summary speaks of Auto Resolution only
+    # when it chose; review)
     for props, auto in ((dict(resolution=24), False),
                         (dict(resolution=24, auto_resolution=True), True),
                         (dict(resolution=24, auto_resolution=False), False)):
+        capfd.readouterr()
         with bpy.context.temp_override(**select(bpy, cloud)):
             assert bpy.ops.tcb.fit_surface(tolerance=2e-4, max_control_points=1500,
                                            replace=False, **props) == {"FINISHED"}
         st = bpy.context.view_layer.objects.active.tcb
         assert st.auto_resolution == auto and (st.resolution == chosen if auto
                                                else st.resolution == 24)
+        assert ("Auto Resolution" in capfd.readouterr().out) == auto
+    # Re-tessellate's resolution is the user's: Refine keeps it (review: it chose again)
+    surface = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.retessellate(resolution=40) == {"FINISHED"}
+        assert bpy.ops.tcb.refine() == {"FINISHED"}
+    st = bpy.context.view_layer.objects.active.tcb
+    assert st.resolution == 40 and not st.auto_resolution

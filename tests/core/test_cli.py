@@ -390,7 +390,7 @@ def test_a_stalled_fit_says_which_iteration_and_why_the_smoothness_was_chosen(tm
     r = run("fit", cloud, "-o", tmp_path / "s.obj", "--tolerance", "1e-4")
     assert r.returncode == 0, r.stderr
     assert "(the error stopped falling)" in r.stdout, r.stdout
-    assert re.search(r"the surface is iteration \d+'s, of lowest estimated error", r.stdout)
+    assert re.search(r"the surface is iteration \d+'s \(lowest estimated error\)", r.stdout)
     assert "(cross-validated: the error stopped falling)" in r.stdout, r.stdout
     # the error stopped at the points' noise (0.01 on the heights: 0.0094 across the surface)
     row = re.search(r"^noise\s+(\S+) \(", r.stdout, re.M)

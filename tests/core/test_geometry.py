@@ -200,7 +200,7 @@ def test_polygons_are_cut_by_their_best_ears_whatever_corner_they_start_at():
     """core.geometry.polygon_triangles: polygons of 5-9 corners (convex, bent out of their
     plane, concave) give the same triangles for every rotation of their corners, in their
     winding (none turned against the polygon's normal, unless the polygon crosses itself);
-    quads are quad_triangles'; near ties are told (a regular polygon's ears)."""
+    quads are quad_triangles'; either winding gives the same triangles."""
     rng = np.random.default_rng(1)
     for k in range(5, 10):
         t = np.sort(rng.uniform(0, 2 * np.pi, (60, k)), axis=1)  # convex, in the xy plane
@@ -243,14 +243,16 @@ def test_polygons_are_cut_by_their_best_ears_whatever_corner_they_start_at():
     quads = np.arange(8).reshape(2, 4)
     np.testing.assert_array_equal(polygon_triangles(octagon, quads),
                                   quad_triangles(octagon, quads))
-    # near ties: a regular polygon's ears are all alike (the extension keeps Blender's cut)
-    _, tied = polygon_triangles(octagon, np.arange(8)[None], tie_rtol=1e-2, return_ties=True)
-    assert tied.all()
-    # (on a circle, ears sharing the smallest arc have the same smallest angle: an ellipse)
-    b = np.array([0.0, 0.5, 1.3, 2.0, 2.9, 3.6, 4.5, 5.6])
-    irregular = np.c_[np.cos(b), 0.5 * np.sin(b), np.zeros(8)]
-    _, tied = polygon_triangles(irregular, np.arange(8)[None], tie_rtol=1e-2, return_ties=True)
-    assert not tied.any()
+    # either winding, the same triangles (a 7-pointed star, concave; review: reversed, its
+    # ears alike in quality had been taken in the other order)
+    a7 = 2 * np.pi * np.arange(7) / 7
+    star = np.c_[np.where(np.arange(7) % 2 == 0, 1.0, 0.45)[:, None]
+                 * np.c_[np.cos(a7), np.sin(a7)], np.zeros(7)]
+    for poly in (np.arange(7), np.arange(7)[::-1], np.r_[0, np.arange(6, 0, -1)]):
+        np.testing.assert_array_equal(
+            np.sort(_canon_faces(np.sort(polygon_triangles(star, poly[None]), axis=1)), axis=0),
+            np.sort(_canon_faces(np.sort(polygon_triangles(star, np.arange(7)[None]), axis=1)),
+                    axis=0))
 
 
 def test_coordinate_order_is_the_lexicographic_order_and_takes_nan_rows_alike():

@@ -259,6 +259,11 @@ def test_the_max_criterion_returns_the_fit_of_lowest_max_when_it_misses_the_tole
         assert rep["returned_iteration"] == best["iteration"] and rep[key] == best[key]
         if criterion == "max":
             assert best is not h[-1] and h[-1]["rms_rel"] < best["rms_rel"]
+            # the command line says why (it said "of lowest RMS": review)
+            from core.cli import _returned
+
+            assert _returned(rep, "max") == (f"; the surface is iteration {best['iteration']}'s "
+                                             "(lowest max error)")
 
 
 def test_a_tolerance_below_the_noise_stops_when_the_error_stops_falling():

@@ -342,6 +342,47 @@ def test_a_surface_saved_before_the_set_digests_takes_another_order_after_one_re
         assert new.refine(p, f, max_iterations=1).report["iterations"] == 3
 
 
+def test_a_mesh_saved_before_the_canonical_winding_takes_another_order():
+    """A mesh fitted before its faces were mapped in a canonical winding (no
+    "canonical_winding" in its report; a file's map is of its faces as given) and wound
+    against it: refine() of its data in another order maps them as given again, so the map is
+    the file's (it was refused as "values both reordered and rounded": review). A file made
+    now (canonical map) refuses the other winding, as it did."""
+    import io
+    import json
+
+    from core.parameterize import _parameterize_mesh
+
+    points, faces = quad_grid(10)
+    faces = np.asarray(faces)[:, ::-1]  # (against the canonical winding)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        surf = fit_surface(points, faces, tolerance=1e-3, max_control_points=80,
+                           max_iterations=1)
+    assert surf.parameterization.flipped and surf.report["canonical_winding"]
+    arrays = dict(np.load(io.BytesIO(surf.to_bytes())))
+    raw = _parameterize_mesh(points, faces)  # (the map as the old code made it)
+    for name in ("uv", "faces", "boundary", "domain_polygon", "used", "stretch"):
+        if f"param_{name}" in arrays and getattr(raw, name) is not None:
+            arrays[f"param_{name}"] = getattr(raw, name)
+    del arrays["param_flipped"]
+    arrays["format_version"] = np.array(1)
+    report = json.loads(str(arrays["report"]))
+    del report["canonical_winding"]
+    arrays["report"] = np.array(json.dumps(report))
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    old = TCBSurface.from_bytes(buf.getvalue())
+    assert not old.parameterization.flipped
+    p, f, _ = shuffled(points, faces, 5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        assert old.reordered(p, f) is not None
+        assert old.refine(p, f, max_iterations=1).report["control_points"] > 0
+        assert surf.reordered(p, f) is not None  # (the same winding: canonical again)
+        assert surf.reordered(p, np.asarray(f)[:, ::-1]) is None
+
+
 def test_refine_of_a_cloud_in_another_order_maps_it_as_the_fit_did():
     """The cloud in another order is parameterized again with the fit's options: the outliers
     Drop Outliers left out are left out in their new places (NaN errors there), and a

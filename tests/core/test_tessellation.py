@@ -160,7 +160,7 @@ def test_a_tessellation_can_be_stopped_while_its_grid_is_laid_out(long_patch):
 
 def test_the_tessellation_sag_falls_with_the_resolution_and_auto_resolution_meets_the_fit():
     """TCBSurface.tessellation_sag: the distance between the spline and the flat triangles at
-    their edges' midpoints and centroids; 0 (to rounding) for a plane, falling with the
+    their edges' midpoints; 0 (to rounding) for a plane, falling with the
     resolution (quadratic pieces: 4x per doubling where the grid resolves the net). A tight fit
     strays from its mesh at the default 64 by more than from its data (user test): Auto
     Resolution takes the coarsest of AUTO_RESOLUTIONS within the fit's max error."""
@@ -179,12 +179,12 @@ def test_the_tessellation_sag_falls_with_the_resolution_and_auto_resolution_meet
     resolution, sag = waves.auto_resolution()
     k = AUTO_RESOLUTIONS.index(resolution)
     assert k > 0 and sag <= waves.report["max"] < waves.tessellation_sag(AUTO_RESOLUTIONS[k - 1])
-    # the midpoint sag measures the mesh: a dense probe of its triangles finds no more than
-    # 1.2x of it (the largest gap of a quadratic over a triangle is at most 4/3 of its
-    # largest at the edges' midpoints and centroid)
+    # the midpoint sag measures the mesh: a dense probe of its triangles finds about as much,
+    # and no more than 1.4x of it (the largest gap of a quadratic over a triangle is at most
+    # 4/3 of its largest at the edges' midpoints)
     uv, tri = waves.tessellation_uv(64)
     w = np.random.default_rng(1).dirichlet(np.ones(3), size=(len(tri), 8))  # (t, 8, 3)
     at = np.einsum("tsk,tkj->tsj", w, uv[tri]).reshape(-1, 2)
     flat = np.einsum("tsk,tkj->tsj", w, waves(uv)[tri]).reshape(-1, 3)
     probe = np.nanmax(np.linalg.norm(waves(at) - flat, axis=1))
-    assert sags[0] <= probe * 1.0001 and probe <= 1.4 * sags[0]
+    assert 0.7 * sags[0] <= probe <= 1.4 * sags[0]
