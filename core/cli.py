@@ -83,7 +83,8 @@ def _parser() -> argparse.ArgumentParser:
                    "no-data fill value (such as -9999) far below all others (point clouds)")
     f.add_argument("--drop-outliers", action="store_true",
                    help="leave out points far from all others instead of refusing the cloud, "
-                   "and spikes and pits inside it (point clouds only: refused for a mesh)")
+                   "and spikes and pits inside it; on a mesh, dissolve its spike vertices "
+                   "(raised far out of their neighbours' surface) instead of refusing it")
     f.add_argument("--fill-holes", action="store_true",
                    help="meshes with holes (boundary loops besides the outer one): map them as "
                    "if the holes were filled, so that the surface spans them, instead of "
@@ -264,7 +265,7 @@ def _progress(quiet: bool):
 
 
 def _fit(args) -> int:
-    from .parameterize import holes_error, outlier_error
+    from .parameterize import holes_error, outlier_error, spike_error
     from .surface import fit_surface
 
     _check_output(args.output, "surface")
@@ -287,11 +288,6 @@ def _fit(args) -> int:
         raise TCBError(
             f"--fill-holes applies to meshes; {args.input} is a point cloud, whose surface is "
             "trimmed to where its points are: leave the option out"
-        )
-    if faces is not None and args.drop_outliers:
-        raise TCBError(
-            f"--drop-outliers applies to point clouds; {args.input} is a mesh, whose faces "
-            "hold its vertices: leave the option out"
         )
     given = points
     bad = ~np.isfinite(points).all(axis=1)
@@ -347,6 +343,11 @@ def _fit(args) -> int:
     except HolesError as exc:
         raise holes_error(exc.loops, advice="pass --fill-holes") from None
     except OutlierError as exc:
+        if faces is not None:  # a mesh's spike vertices (its rows are the file's)
+            raise spike_error(given, exc.indices, exc.heights,
+                              advice="pass --drop-outliers, which dissolves them (each vertex "
+                              "and its faces removed, the hole filled by triangles of its "
+                              "neighbours)") from None
         # number the outliers as in the file (not among the points left after --drop-invalid),
         # with this command's option
         raise outlier_error(given, np.flatnonzero(~bad)[exc.indices],

@@ -39,13 +39,15 @@ class ParameterizationError(InvalidInputError):
 
 
 class OutlierError(InvalidInputError):
-    """A cloud with points far from all others. ``indices`` are their rows in the points given
-    (callers that merged or filtered the input re-number them with
-    :func:`core.parameterize.outlier_error`)."""
+    """A cloud with points far from all others, or a mesh with spike vertices. ``indices`` are
+    their rows in the points given (callers that merged or filtered the input re-number them
+    with :func:`core.parameterize.outlier_error`, or for a mesh's spikes, whose ``heights``
+    above their neighbours' plane are given, :func:`core.parameterize.spike_error`)."""
 
-    def __init__(self, message: str, indices=()):
+    def __init__(self, message: str, indices=(), heights=None):
         super().__init__(message)
         self.indices = indices
+        self.heights = heights
 
 
 class FileFormatError(InvalidInputError):

@@ -43,12 +43,14 @@ __all__ = [
     "Parameterization",
     "count_duplicates",
     "isolated_points",
+    "mesh_spikes",
     "normalize",
     "outlier_error",
     "parameterize",
     "parameterize_mesh",
     "parameterize_points",
     "projection_direction",
+    "spike_error",
 ]
 
 MIN_POINTS = 10
@@ -405,6 +407,10 @@ class Parameterization:
             map; a surface fitted to it turns its
             tessellation's and control net's triangles back and negates its normals (the
             given winding's way). False for a point cloud and for files written before it.
+        outliers: ``(k,) int64`` (disk only, ``drop_outliers=True``): the spike vertices
+            (:func:`mesh_spikes`) dissolved out of the mesh before its map (``used`` False,
+            ``uv`` NaN, as loose vertices); None when there were none (and in files: the
+            report's ``outliers`` counts them).
     """
 
     uv: np.ndarray
@@ -419,6 +425,7 @@ class Parameterization:
     stretch: np.ndarray | None = None
     holes: np.ndarray | None = None
     flipped: bool = False
+    outliers: np.ndarray | None = None
 
     def contains(self, uv: np.ndarray, tol: float = 1e-12) -> np.ndarray:
         """Mask of parameters inside ``domain_polygon`` (points on its edges count as inside).
@@ -1315,6 +1322,9 @@ def _without_cellmate(x: np.ndarray, ref: np.ndarray, cell: float) -> np.ndarray
 
 _DROP_ADVICE = ("fit_surface(..., drop_outliers=True), on the command line --drop-outliers, in "
                 "Blender the Drop Outliers option")
+_SPIKE_ADVICE = ("fit_surface(..., drop_outliers=True) dissolves them (each vertex and its "
+                 "faces removed, the hole filled by triangles of its neighbours), on the "
+                 "command line --drop-outliers, in Blender the Drop Outliers option")
 
 
 # spikes (spike_points): neighbours of the local quadratic and how many of them it leaves
@@ -1611,6 +1621,34 @@ def outlier_error(points: np.ndarray, isolated, label=None, advice: str = _DROP_
         f"{show}{more}); they would stretch the surface's domain and pull it away from the "
         f"data. Remove them, or let the fit leave them out: {advice}",
         isolated,
+    )
+
+
+def spike_error(points: np.ndarray, spikes, heights=None, label=None,
+                advice: str = _SPIKE_ADVICE) -> OutlierError:
+    """The error for the spike vertices ``spikes`` (indices, :func:`mesh_spikes`) of a mesh
+    of the vertices ``points`` (N, 3), naming the first three by ``label(i)`` (default ``#i``)
+    and their coordinates, how far the first sticks out (``heights``, above its neighbours'
+    plane) and how to leave them out (``advice``), in the words of :func:`outlier_error`."""
+    label = label or (lambda i: f"#{i}")
+    spikes = np.asarray(spikes, dtype=np.int64)
+    show = ", ".join(
+        f"{label(int(i))} ({', '.join(f'{c:.6g}' for c in points[i])})" for i in spikes[:3]
+    )
+    more = f" and {len(spikes) - 3} more" if len(spikes) > 3 else ""
+    one = len(spikes) == 1
+    high = ("" if heights is None or not len(heights) else
+            f", {'it' if one else 'the first'} {float(heights[0]):.4g} above the plane of its "
+            "neighbours")
+    return OutlierError(
+        f"{len(spikes)} of the {len(points)} vertices of the mesh {'sticks' if one else 'stick'}"
+        f" out of it as {'a spike' if one else 'spikes'} (outliers: {show}{more}{high}), far "
+        "more steeply than any surface the fit follows; the mesh's faces hold "
+        f"{'it' if one else 'them'} in the fit, and {'it' if one else 'they'} would pull the "
+        f"surface away from the other vertices. Move or delete the "
+        f"{'vertex' if one else 'vertices'}, or let the fit leave {'it' if one else 'them'} "
+        f"out: {advice}",
+        spikes, None if heights is None else np.asarray(heights, dtype=np.float64),
     )
 
 
@@ -2665,9 +2703,113 @@ def winding_flipped(points: np.ndarray, faces) -> bool:
     return bool(not away)
 
 
+# Spike vertices of a mesh (mesh_spikes): a vertex far above the plane of its 1-ring, steeper
+# than any surface feature a smooth spline fits, over a ring that is itself nearly flat.
+# Measured d / r (below): at most 0.92 on the bundled meshes and coarse test meshes, 5.7 at the
+# apex of a cone of half-angle 10 degrees (8.1 at 7, 11 at 5: a needle); a vertex raised by 10
+# on a grid of spacing 0.05 has 143 (on the border 180), its neighbours 0.02
+_MESH_SPIKE_SLOPE = 10.0  # height above the ring's plane over the ring's size (84 degrees)
+# ... and over the ring's own scatter off that plane: the raised vertex's ring scatters with the
+# surface's curvature (d / s 2e5 there); at the most steeply raised vertex of each bundled mesh
+# and coarse test mesh d / s is 2-14 and d / r below 1, and a ring bent round its vertex (a
+# vertex beside a spike, a fin's edge) scatters about as far as the vertex is high
+_MESH_SPIKE_FLAT = 10.0
+_MESH_SPIKE_MAX_SHARE = 0.05  # more spikes than this share of the vertices: a rough mesh
+
+
+def mesh_spikes(p: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The spike vertices of the mesh ``(p, tris)`` (sorted indices) and their heights above
+    the plane of their neighbours: a stray vertex raised out of the surface (a scan's spike, a
+    vertex moved by mistake), which a mesh's faces hold in the fit as much as any other: a
+    2-unit grid mesh of a smooth function with one vertex raised by 10 got 635 control points
+    instead of 144 and missed its other vertices by up to 1.7e-2 (8.2e-4 without it); raised
+    by 1e4, 178 control points and 0.151 (user test).
+
+    At each vertex with at least 3 neighbours: the plane of its neighbours (PCA of the ring,
+    the vertex itself not in it), the vertex's height ``d`` above it, the ring's size ``r``
+    (the mean distance of the neighbours from their centroid) and the ring's own scatter ``s``
+    off its plane (RMS). A spike has ``d > _MESH_SPIKE_SLOPE r`` (steeper than 84 degrees all
+    round: a cone of half-angle below 5.7 degrees) and ``d > _MESH_SPIKE_FLAT s`` (its ring
+    flat: at a crease, a ridge or a vertex beside a spike the ring is bent). Measured
+    (/tmp/h86_measure.py of helper-86): the largest ``d / r`` is 0.65 on nefertiti.off, 0.92
+    on patch-01.off, 0.52 on three_peaks.off, 0.79 on a grid folded along a 90-degree crease,
+    at most 0.38 on sphere caps of 17-223 vertices, 0.69 on a half UV sphere of 13 vertices,
+    0.58 on a half cylinder of 3 segments, 5.7 at the apex of a cone of half-angle 10 degrees;
+    a vertex of a 40 x 30 grid (spacing 0.05) raised by 10 has 143 (on the border 180, by 1e4
+    1.4e5), the vertices beside it 0.02. More than ``_MESH_SPIKE_MAX_SHARE`` of the vertices:
+    a rough mesh, none is a spike. The vertex beside a spike sees it in its ring (bent: not
+    flagged); two adjacent spikes see each other, and neither may be found; a corner vertex of
+    fewer than 3 neighbours (one triangle) is not checked. Vectorized: sums over the
+    edges (bincount) and one batched 3 x 3 eigendecomposition; O(n)."""
+    n = len(p)
+    none = np.zeros(0, dtype=np.int64), np.zeros(0)
+    e = np.unique(np.sort(np.vstack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]),
+                          axis=1), axis=0)
+    i, j = np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]]  # i's neighbour j
+    deg = np.bincount(i, minlength=n)
+    at = np.flatnonzero(deg >= 3)
+    if len(at) == 0:
+        return none
+    # offsets from the vertex itself first (no cancellation at coordinates of 1e6 and more)
+    rel = p[j] - p[i]
+    c = (np.column_stack([np.bincount(i, rel[:, k], n) for k in range(3)])
+         / np.maximum(deg, 1)[:, None])
+    x = rel - c[i]  # the neighbours from their centroid
+    cov = np.empty((n, 3, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            cov[:, a, b] = cov[:, b, a] = np.bincount(i, x[:, a] * x[:, b], n)
+    cov /= np.maximum(deg, 1)[:, None, None]
+    r = np.bincount(i, np.linalg.norm(x, axis=1), n) / np.maximum(deg, 1)
+    w, v = np.linalg.eigh(cov[at])
+    s = np.sqrt(np.maximum(w[:, 0], 0.0))
+    d = np.abs(np.einsum("ij,ij->i", c[at], v[:, :, 0]))  # (the vertex is at 0: -c off)
+    spike = (d > _MESH_SPIKE_SLOPE * r[at]) & (d > _MESH_SPIKE_FLAT * s)
+    if not spike.any() or spike.sum() > _MESH_SPIKE_MAX_SHARE * len(at):
+        return none
+    return at[spike].astype(np.int64), d[spike]
+
+
+def _dissolved(p: np.ndarray, tris: np.ndarray, spikes: np.ndarray) -> np.ndarray:
+    """``tris`` (consistently oriented) without the vertices ``spikes`` and their faces, the
+    polygon of each one's ring triangulated in its plane instead (its neighbours in the order
+    of its faces: a cycle inside, a chain closed by the edge between its two boundary
+    neighbours on the border), with the faces' orientation. A loop over the spikes (a few)."""
+    for v in spikes:
+        mine = (tris == v).any(axis=1)
+        around = tris[mine]
+        k = np.argmax(around == v, axis=1)
+        a = around[np.arange(len(around)), (k + 1) % 3]  # (v, a, b): the edge a -> b opposite
+        b = around[np.arange(len(around)), (k + 2) % 3]
+        after = dict(zip(a.tolist(), b.tolist()))
+        starts = set(after) - set(b.tolist())  # a chain's first vertex (on the border)
+        if len(starts) > 1:  # (a ring that is no single cycle or chain: left as it is)
+            continue
+        ring = [next(iter(starts)) if starts else int(a[0])]
+        while ring[-1] in after and len(ring) <= len(around):
+            ring.append(after[ring[-1]])
+        if not starts:
+            ring.pop()  # (the cycle back at its first vertex)
+        ring = np.asarray(ring, dtype=np.int64)
+        tris = tris[~mine]
+        if len(ring) < 3:
+            continue
+        q = p[ring] - p[ring].mean(axis=0)
+        normal = np.cross(q, np.roll(q, -1, axis=0)).sum(axis=0)  # (the ring's vector area)
+        u = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
+        u /= np.linalg.norm(u)
+        xy = np.column_stack([q @ u, q @ np.cross(normal / np.linalg.norm(normal), u)])
+        new = ear_clipping(xy, shape=p[ring])
+        if new is None:  # (not simple in the plane: a fan from its first vertex)
+            new = np.column_stack([np.zeros(len(ring) - 2, dtype=np.int64),
+                                   np.arange(1, len(ring) - 1), np.arange(2, len(ring))])
+        tris = np.vstack([tris, ring[new]])
+    return tris
+
+
 def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
-                      fill_holes: bool = False, _fill_from: int | None = None
-                      ) -> Parameterization:
+                      fill_holes: bool = False, _fill_from: int | None = None,
+                      drop_outliers: bool | None = False) -> Parameterization:
     """Parameterize a triangle (or quad) mesh of disk topology over the unit disk (or a
     rectangle, or its own boundary flattened: below).
 
@@ -2707,6 +2849,12 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     consistently (majority orientation kept). Vertices that no
     face references are left out: their ``uv`` rows are NaN and ``used`` is False.
 
+    Spikes (not in method.md): a vertex that sticks out of its neighbours' plane far more
+    steeply than any surface feature (:func:`mesh_spikes`) is refused (OutlierError, naming
+    it), or with ``drop_outliers`` dissolved (:func:`_dissolved`: removed with its faces, the
+    polygon of its neighbours triangulated in its plane) before the map, and left out as a
+    loose vertex is (``outliers`` lists them). ``drop_outliers=None``: not checked.
+
     Winding (not in method.md): faces wound against the canonical winding of their geometry
     (:func:`winding_flipped`) are reversed first, so the map is that of the mesh with its
     normals flipped (bit for bit for ``f[:, ::-1]``, to rounding for Blender's Flip Normals,
@@ -2728,19 +2876,20 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
         TopologyError: non-manifold edges or vertices, several pieces, non-orientable, closed,
             several boundary loops, or not a disk (handles).
         ParameterizationError: a uv triangle came out flipped or degenerate.
+        OutlierError: spike vertices (:func:`mesh_spikes`), unless ``drop_outliers``.
     """
     flipped = False
     if _fill_from is None:
         flipped = winding_flipped(_as_points(points, what="vertices"), faces)
         if flipped:
             faces = _reversed_polygons(faces)
-    param = _parameterize_mesh(points, faces, fill_holes, _fill_from)
+    param = _parameterize_mesh(points, faces, fill_holes, _fill_from, drop_outliers)
     return replace(param, flipped=True) if flipped else param
 
 
 def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
-                       fill_holes: bool = False, _fill_from: int | None = None
-                       ) -> Parameterization:
+                       fill_holes: bool = False, _fill_from: int | None = None,
+                       drop_outliers: bool | None = False) -> Parameterization:
     """:func:`parameterize_mesh` of faces taken in the winding given (the map itself)."""
     p = _as_points(points, what="vertices")
     n = len(p)
@@ -2841,6 +2990,14 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
             + ("" if len(pinched) == 1 else "the first ")
             + f"at ({where})); a disk-like patch is needed: {advice}"
         )
+    if _fill_from is None and drop_outliers is not None:
+        # spike vertices: refused, or dissolved and the mesh without them mapped (once)
+        spikes, heights = mesh_spikes(p, tris)
+        if len(spikes) and not drop_outliers:
+            raise spike_error(p, spikes, heights)
+        if len(spikes):
+            param = _parameterize_mesh(p, _dissolved(p, tris, spikes), fill_holes, None, None)
+            return replace(param, outliers=_readonly(spikes))
     bgraph = sp.coo_matrix((np.ones(len(bf)), (bf, bt)), shape=(n, n)).tocsr()
     _, blabel = connected_components(bgraph, directed=False)
     n_loops = len(np.unique(blabel[bf]))
@@ -3164,7 +3321,8 @@ def parameterize(
 
     Dispatches to :func:`parameterize_points` (best-fit plane; outliers are refused, or left
     out with ``drop_outliers``) or :func:`parameterize_mesh` (mean-value map onto the unit
-    disk; a mesh's vertices are held by its faces and are not checked for outliers).
+    disk; spike vertices, :func:`mesh_spikes`, are refused, or with ``drop_outliers``
+    dissolved out of the mesh and left out as loose vertices are).
     """
     if faces is None:
         return parameterize_points(points, bool(drop_outliers), projection)
@@ -3173,4 +3331,5 @@ def parameterize(
             "a projection direction applies to point clouds; a mesh is parameterized by its "
             "faces (flattened): leave the projection automatic (in Blender: Auto)"
         )
-    return parameterize_mesh(points, faces, fill_holes=fill_holes)
+    return parameterize_mesh(points, faces, fill_holes=fill_holes,
+                             drop_outliers=bool(drop_outliers))

@@ -120,7 +120,7 @@ TESSELLATION_CACHE = 4
 _COVER_TOL = 1e-9
 _OPTION_NAMES = tuple(f.name for f in dataclasses.fields(RefineOptions))
 _PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes", "stretch",
-                 "holes")
+                 "holes", "outliers")
 
 
 def _readonly(a):
@@ -1087,7 +1087,9 @@ class TCBSurface:
             # (the set digest, even when the faces are the fit's rows: on other points)
             if faces_set_digest(faces, points) != self._report.get("faces_set_digest", ""):
                 return None, "faces"
-            tries = [dict(fill_holes=bool(self._report.get("holes_filled", 0)))]
+            # (spike vertices dissolved by drop_outliers: again, else refused)
+            tries = [dict(fill_holes=bool(self._report.get("holes_filled", 0)),
+                          drop_outliers=bool(self._report.get("outliers", 0)))]
         else:
             if faces is not None:
                 return None, "faces"
@@ -2226,14 +2228,18 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     if checks is None:
         checks = data_checks(best, errors[kept])
     diagonal = 2.0 * norm.scale
+    # a mesh's spike vertices dissolved by drop_outliers (unused, as its loose vertices are)
+    dissolved = 0 if param.outliers is None else int(len(param.outliers))
     report = {
         "mode": options.mode,
         "degree": options.degree,
         "points": int(used.sum()),
-        # points of a cloud left out as outliers (drop_outliers=True); NaN in ``errors``
-        "outliers": int(len(used) - used.sum()) if param.faces is None else 0,
+        # points of a cloud left out as outliers, spike vertices dissolved out of a mesh
+        # (drop_outliers=True); NaN in ``errors``
+        "outliers": int(len(used) - used.sum()) if param.faces is None else dissolved,
         # vertices of a mesh that are in no face: a mesh is fitted through its faces
-        "loose_vertices": int(len(used) - used.sum()) if param.faces is not None else 0,
+        "loose_vertices": int(len(used) - used.sum()) - dissolved if param.faces is not None
+        else 0,
         # holes of a mesh that the surface spans (fill_holes=True)
         "holes_filled": 0 if param.holes is None else int(len(param.holes)),
         "knots": int(len(best.knots)),
@@ -2723,13 +2729,16 @@ def fit_surface(
     seed : int >= 0
         Seed of the random choices (knot sampling, jitter): same input, same surface.
     drop_outliers : bool
-        Point clouds only (a mesh's vertices are held by its faces: True gives a
-        RuntimeWarning and drops none). Points far from all others (stray returns, spikes; see
+        Points far from all others (stray returns, spikes; see
         ``core.parameterize.isolated_points``) are refused with an error that names them
         (default), or, with True, left out of the fit, and so are spikes and pits inside the
         cloud (``core.parameterize.spike_points``) and up to 5% of points over the surface
         that the fold check sees as another layer (a power line over terrain): their
-        ``errors`` are NaN and ``report["outliers"]`` counts them.
+        ``errors`` are NaN and ``report["outliers"]`` counts them. A mesh's spike vertices
+        (``core.parameterize.mesh_spikes``: one raised far out of its neighbours' plane) are
+        refused the same way (OutlierError), or with True dissolved out of the mesh (each
+        with its faces, the hole filled by triangles of its neighbours) and left out like
+        loose vertices: NaN in ``errors``, counted in ``report["outliers"]``.
     projection : None, "x", "y", "z" or three numbers
         Point clouds only: the direction to project the cloud along (a height field over the
         plane across it). None (default) chooses it (the best-fit plane, or a direction over
@@ -2794,10 +2803,6 @@ def fit_surface(
         raise exc from None  # an OutlierError's indices, stay; review)
     if coarse is not None:
         warnings.warn(coarse, RuntimeWarning, stacklevel=2)
-    if faces is not None and drop_outliers:  # (the CLI refuses the option for a mesh)
-        warnings.warn("drop_outliers applies to point clouds: a mesh's vertices are held by its "
-                      "faces, so none were left out (leave the option out for meshes)",
-                      RuntimeWarning, stacklevel=2)
     if faces is None and fill_holes:
         warnings.warn("fill_holes applies to meshes: a point cloud's surface is trimmed to "
                       "where its data are, so gaps in it stay open (leave the option out for "

@@ -910,10 +910,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         self._data = data
         kwargs = self._fit_kwargs()
         self._ignored = []
-        if data.faces is not None and kwargs.get("drop_outliers"):  # (a setting left on)
-            kwargs["drop_outliers"] = False
-            self._ignored = [f"Drop Outliers applies to point clouds: '{data.name}' is a mesh, "
-                             "whose faces hold its vertices, so none were left out"]
+        # (Drop Outliers applies to meshes too: it dissolves their spike vertices)
         if data.faces is None and kwargs.get("fill_holes"):  # (a setting left on)
             kwargs["fill_holes"] = False
             self._ignored.append(f"Fill Holes applies to meshes: '{data.name}' is fitted as a "
@@ -953,6 +950,12 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             try:
                 return core.fit_surface(**kw)
             except core.OutlierError as ex:
+                if data.faces is not None:  # a mesh's spike vertices
+                    raise core.parameterize.spike_error(
+                        data.points, ex.indices, ex.heights, data.label,
+                        advice="turn on Drop Outliers in the fit settings, which dissolves "
+                        "them (each vertex and its faces removed, the hole filled by "
+                        "triangles of its neighbours)") from None
                 raise core.parameterize.outlier_error(
                     data.points, ex.indices, data.label,
                     advice="turn on Drop Outliers in the fit settings") from None
@@ -1499,9 +1502,16 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         no_data = int(len(has_data) - has_data.sum())
         surface[NO_DATA_KEY] = no_data  # the panel's legend shows grey when there are any
         _show_attribute_colors(context)
-        what = ((f"loose vert{'ex' if left_out == 1 else 'ices'} (in no face)")
-                if data.faces is not None else f"outlier{'' if left_out == 1 else 's'}")
-        note = f" ({left_out} {what} left out of the fit not counted)" if left_out else ""
+        # a mesh's left out: its spike vertices dissolved by Drop Outliers, the others loose
+        spikes = min(left_out, int((surf.report or {}).get("outliers", 0))) if (
+            data.faces is not None) else 0
+        loose = left_out - spikes
+        what = ", ".join(
+            ([f"{loose} loose vert{'ex' if loose == 1 else 'ices'} (in no face)"] if loose else [])
+            + ([f"{spikes} spike vert{'ex' if spikes == 1 else 'ices'} (Drop Outliers)"]
+               if spikes else [])) if data.faces is not None else (
+            f"{left_out} outlier{'' if left_out == 1 else 's'}")
+        note = f" ({what} left out of the fit not counted)" if left_out else ""
         if no_data:
             where = ("over the mesh's filled holes (no data there)" if data.faces is not None
                      else "with no data near them")

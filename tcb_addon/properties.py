@@ -113,8 +113,8 @@ class FitSettings:
         name="Drop Outliers",
         description=(
             "Leave out points far from all others (stray scan returns) instead of stopping "
-            "with an error that names them, and spikes and pits inside the cloud (point "
-            "clouds; mesh faces hold their vertices)"
+            "with an error that names them, and spikes and pits inside the cloud; on a mesh, "
+            "dissolve its spike vertices (a vertex raised far out of its neighbours' surface)"
         ),
         default=False,
     )  # fmt: skip

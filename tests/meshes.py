@@ -40,3 +40,15 @@ def noisy_grid(n: int = 41, noise: float = 0.01) -> tuple[np.ndarray, np.ndarray
     a = (j * n + i).ravel()
     return pts, np.concatenate([np.column_stack([a, a + 1, a + n + 1]),
                                 np.column_stack([a, a + n + 1, a + n])])
+
+
+def spiky_grid(raise_by=(), nx: int = 40, ny: int = 30):
+    """A quad grid mesh of ``0.3 sin 2x cos y`` over [-1, 1] x [-0.74, 0.74] (spacing 0.051),
+    with the vertices ``raise_by`` ({row: dz}) raised: spikes (the user test's 2-unit grid)."""
+    x, y = np.meshgrid(np.linspace(-1, 1, nx), np.linspace(-1, 1, ny) * (ny - 1) / (nx - 1))
+    points = np.c_[x.ravel(), y.ravel(), 0.3 * np.sin(2 * x.ravel()) * np.cos(y.ravel())]
+    for row, dz in dict(raise_by).items():
+        points[row, 2] += dz
+    i, j = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1))
+    a = (j * nx + i).ravel()
+    return points, np.c_[a, a + 1, a + nx + 1, a + nx]

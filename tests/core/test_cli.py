@@ -445,15 +445,24 @@ def test_an_output_path_that_cannot_be_written_is_refused_before_the_fit(tmp_pat
     assert list(tmp_path.iterdir()) == [tmp_path / "x.obj"]  # no probe file left behind
 
 
-def test_drop_outliers_on_a_mesh_is_refused(tmp_path):
-    """--drop-outliers applies to point clouds (a mesh's faces hold its vertices): given for a
-    mesh it is refused with one line instead of being ignored."""
-    r = run("fit", ROOT / "data" / "nefertiti.off", "-o", tmp_path / "s.obj", "--quiet",
-            "--drop-outliers", "--max-iterations", "1", "--max-control-points", "100")
-    assert r.returncode == 2, r.stderr
-    assert r.stderr.strip().count("\n") == 0
-    assert "--drop-outliers applies to point clouds" in r.stderr and "is a mesh" in r.stderr
-    assert not (tmp_path / "s.obj").exists()
+def test_a_mesh_s_spike_vertex_names_drop_outliers_which_dissolves_it(tmp_path):
+    """A grid mesh with a vertex raised by 10: one line naming it (its row in the file) and
+    --drop-outliers; with the option (it had been refused for meshes) it is fitted without
+    the vertex and the table says so."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from meshes import spiky_grid
+
+    src = tmp_path / "grid.obj"
+    write_mesh(src, *spiky_grid({620: 10.0}))
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--quiet")
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0, r.stderr
+    assert "1 of the 1200 vertices of the mesh sticks out of it as a spike (outliers: #620 (" \
+        in r.stderr and "pass --drop-outliers, which dissolves" in r.stderr, r.stderr
+    assert "fit_surface" not in r.stderr and not (tmp_path / "s.obj").exists()
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--quiet", "--drop-outliers",
+            "--max-iterations", "1", "--max-control-points", "100")
+    assert r.returncode == 0, r.stderr
+    assert "1199 points, 1 outliers left out" in r.stdout, r.stdout
 
 
 def test_a_mesh_with_holes_names_fill_holes_and_is_fitted_with_it(tmp_path):

@@ -1961,3 +1961,73 @@ def test_the_canonical_winding_of_a_vector_area_without_sign_is_decided_by_an_ed
     # faces the parameterization refuses are left as given (it names what is wrong)
     assert not pz.winding_flipped(pts, np.array([[0, 1, 9]]))
     assert not pz.winding_flipped(pts, np.array([[0.5, 1, 2]]))
+
+
+# ---------------------------------------------------------------------------------------------
+# spike vertices of a mesh (mesh_spikes)
+# ---------------------------------------------------------------------------------------------
+
+
+def _cone(half_angle_deg: float, m: int = 12):
+    """Two rings round an apex: a cone of the half-angle given, its apex vertex 0."""
+    t = np.linspace(0, 2 * np.pi, m + 1)[:-1]
+    h = 1.0 / np.tan(np.radians(half_angle_deg))
+    pts = np.vstack([[0, 0, h], np.c_[np.cos(t), np.sin(t), 0 * t],
+                     np.c_[2 * np.cos(t), 2 * np.sin(t), -h + 0 * t]])
+    k = np.arange(m)
+    a, b = 1 + k, 1 + (k + 1) % m
+    faces = np.vstack([np.c_[0 * k, a, b], np.c_[a, a + m, b + m], np.c_[a, b + m, b]])
+    return pts, faces
+
+
+def test_mesh_spikes_finds_raised_vertices_and_no_feature_of_a_real_mesh() -> None:
+    """core.parameterize.mesh_spikes: a vertex of a grid mesh raised by 10 or 1e4, lowered by
+    10, on the border, two at once: found (and nothing else); the bundled meshes, a 90-degree
+    crease, coarse sphere caps and a cone of half-angle 15 degrees: none."""
+    from meshes import spiky_grid
+    import sys
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    import coarse_meshes as cm
+
+    for raised, found in (({620: 10.0}, [620]), ({620: 1e4}, [620]), ({620: -10.0}, [620]),
+                          ({20: 10.0}, [20]), ({620: 10.0, 100: 1e4}, [100, 620]),
+                          ({}, [])):
+        p, f = spiky_grid(raised)
+        spikes, heights = pz.mesh_spikes(p, pz._as_triangles(f, len(p), p))
+        assert spikes.tolist() == found, raised
+        assert np.all(heights > 8.0)
+    data = Path(__file__).resolve().parents[2] / "data"
+    meshes = [read_geometry(data / name) for name in
+              ("nefertiti.off", "patch-01.off", "three_peaks.off")]
+    meshes += [cm.sphere_cap(s)[0] for s in (1, 2)] + [cm.grid(21, cm.crease)[0],
+                                                       cm.half_cylinder(3)[0], _cone(15)]
+    for p, f in meshes:
+        assert len(pz.mesh_spikes(p, pz._as_triangles(f, len(p), p))[0]) == 0
+        parameterize(p, f)  # (no OutlierError)
+    assert pz.mesh_spikes(*_cone(4))[0].tolist() == [0]  # (a needle of half-angle 4 degrees: 14 r high)
+
+
+def test_a_mesh_s_spike_is_refused_or_dissolved_keeping_a_disk() -> None:
+    """parameterize of a grid mesh with a spike: an OutlierError naming the vertex (its row,
+    coordinates, height) and drop_outliers; with drop_outliers=True the vertex is left out as
+    a loose vertex (``used`` False, ``uv`` NaN, in no face, listed in ``outliers``), the
+    hole of its faces filled by triangles of its neighbours (the m faces round an inner
+    vertex by m - 2, the m - 1 of a border vertex by m - 2, the boundary a vertex shorter)."""
+    from core.errors import OutlierError
+    from meshes import spiky_grid
+
+    clean = parameterize(*spiky_grid())
+    for row in (620, 20):
+        p, f = spiky_grid({row: 10.0})
+        with pytest.raises(OutlierError, match=rf"1 of the 1200 vertices of the mesh sticks out "
+                           rf"of it as a spike \(outliers: #{row} \(.*, 1\d\.\d+\), it \d\.\d+ "
+                           r"above the plane of its neighbours\).*drop_outliers=True") as err:
+            parameterize(p, f)
+        assert list(err.value.indices) == [row]
+        par = parameterize(p, f, drop_outliers=True)
+        assert par.outliers.tolist() == [row] and not par.used[row]
+        assert np.isnan(par.uv[row]).all() and par.used.sum() == len(p) - 1
+        assert not (par.faces == row).any()
+        inside = row == 620
+        assert len(par.faces) == len(clean.faces) - (2 if inside else 1)
+        assert len(par.boundary) == len(clean.boundary) - (0 if inside else 1)
