@@ -175,9 +175,9 @@ def huge_words(rows: np.ndarray, points: np.ndarray, what: str = "points") -> st
     k, first = int(rows.sum()), int(np.flatnonzero(rows)[0])
     x, y, z = (float(v) for v in np.asarray(points, dtype=np.float64)[first, :3])
     return (f"{k} of the {len(rows)} {what} {'has' if k == 1 else 'have'} coordinates of "
-            f"1e{int(np.log10(HUGE_COORDINATE))} or more in size (the first: #{first}, ({x:.4g}, {y:.4g}, {z:.4g})): "
-            "float32's largest value (an infinity stored in 32 bits) or a fill value, which "
-            "would be fitted as data")
+            f"1e{int(np.log10(HUGE_COORDINATE))} or more in size (the first: #{first}, "
+            f"({x:.4g}, {y:.4g}, {z:.4g})): float32's largest value (an infinity stored in "
+            "32 bits) or a fill value, which would be fitted as data")
 
 
 def fill_value_words(found, total: int, what: str = "points") -> str:
@@ -2777,9 +2777,10 @@ def mesh_spikes(p: np.ndarray, tris: np.ndarray, edges=None) -> tuple[np.ndarray
 
 def _dissolved(p: np.ndarray, tris: np.ndarray, spikes: np.ndarray) -> np.ndarray:
     """``tris`` (consistently oriented) without the vertices ``spikes`` and their faces, the
-    polygon of each one's ring triangulated in its plane instead (its neighbours in the order
-    of its faces: a cycle inside, a chain closed by the edge between its two boundary
-    neighbours on the border), with the faces' orientation. A loop over the spikes (a few)."""
+    polygon of each one's ring cut as a mesh's polygons are (core.geometry.polygon_triangles)
+    instead (its neighbours in the order of its faces: a cycle inside, a chain closed by the
+    edge between its two boundary neighbours on the border), with the faces' orientation. A
+    loop over the spikes (a few)."""
     for v in spikes:
         mine = (tris == v).any(axis=1)
         around = tris[mine]
@@ -2797,18 +2798,8 @@ def _dissolved(p: np.ndarray, tris: np.ndarray, spikes: np.ndarray) -> np.ndarra
             ring.pop()  # (the cycle back at its first vertex)
         ring = np.asarray(ring, dtype=np.int64)
         tris = tris[~mine]
-        if len(ring) < 3:
-            continue
-        q = p[ring] - p[ring].mean(axis=0)
-        normal = np.cross(q, np.roll(q, -1, axis=0)).sum(axis=0)  # (the ring's vector area)
-        u = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
-        u /= np.linalg.norm(u)
-        xy = np.column_stack([q @ u, q @ np.cross(normal / np.linalg.norm(normal), u)])
-        new = ear_clipping(xy, shape=p[ring])
-        if new is None:  # (not simple in the plane: a fan from its first vertex)
-            new = np.column_stack([np.zeros(len(ring) - 2, dtype=np.int64),
-                                   np.arange(1, len(ring) - 1), np.arange(2, len(ring))])
-        tris = np.vstack([tris, ring[new]])
+        if len(ring) >= 3:  # (by the rule of a mesh's polygons: in its plane, its best ears)
+            tris = np.vstack([tris, polygon_triangles(p, ring[None])])
     return tris
 
 
@@ -2849,10 +2840,11 @@ def parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     rectangle.
 
     Cleaning: quads are cut along their shorter diagonal, larger polygons by their best ears
-    (:func:`core.geometry.polygon_triangles`, whatever corner they start at); faces with a repeated vertex and repeated faces are
-    dropped; zero-area caps are flipped away (:func:`_flip_caps`); faces are re-oriented
-    consistently (majority orientation kept). Vertices that no
-    face references are left out: their ``uv`` rows are NaN and ``used`` is False.
+    (:func:`core.geometry.polygon_triangles`, whatever corner they start at); faces with a
+    repeated vertex and repeated faces are dropped; zero-area caps are flipped away
+    (:func:`_flip_caps`); faces are re-oriented consistently (majority orientation kept).
+    Vertices that no face references are left out: their ``uv`` rows are NaN and ``used`` is
+    False.
 
     Spikes (not in method.md): a vertex that sticks out of its neighbours' plane far more
     steeply than any surface feature (:func:`mesh_spikes`) is refused (OutlierError, naming

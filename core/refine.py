@@ -1120,9 +1120,9 @@ def adaptive_fit(
     by a coarser fresh start, with the knots :func:`predicted_knots` gives for SHRINK_TARGET
     of the tolerance when that is at most SHRINK_FRACTION of them (at least MIN_START_KNOTS),
     as long as they meet it, and with a max error within SHRINK_MAX times the tolerance or the
-    max of the fit they follow; the first that misses (or swings) ends the run and the last that met it is
-    returned (a plane, a sphere cap, a bump had nets of 140-148 control points, the
-    probe's, whatever the tolerance: now 37-55 at 1e-2; benchmarks/net_size.py). A
+    max of the fit they follow; the first that misses (or swings) ends the run and the last
+    that met it is returned (a plane, a sphere cap, a bump had nets of 140-148 control points,
+    the probe's, whatever the tolerance: now 37-55 at 1e-2; benchmarks/net_size.py). A
     continued run (``start_knots``) with a tolerance inserts the knots
     :func:`predicted_knots` says are missing, up to doubling them. Reports say whether an
     iteration's knots were placed ``"afresh"``, ``"continued"`` or ``"inserted"``
@@ -1452,9 +1452,9 @@ def adaptive_fit(
         in_a_row = 0
         # the best: the lowest RMS (criterion "max": the lowest max) within the budget, or the
         # fit that meets the tolerance (a fresh start's knots do not contain the earlier ones:
-        # with the criterion "max" a fit of lower RMS may still miss it). A run that stops because the error stopped falling
-        # returns the lowest estimate of the RMS at new points instead: there a larger net
-        # lowers the RMS on the data by fitting the noise
+        # with the criterion "max" a fit of lower RMS may still miss it). A run that stops
+        # because the error stopped falling returns the lowest estimate of the RMS at new
+        # points instead: there a larger net lowers the RMS on the data by fitting the noise
         within = n_ctrl <= options.max_control_points
         # a coarser start meets it with its max error too: within SHRINK_MAX times the
         # tolerance, or the max of the fit it follows when that is larger
@@ -1468,9 +1468,11 @@ def adaptive_fit(
 
         held = [best, quiet]
         key = rms if rms_area is None else max(rms, rms_area)  # (uneven density: the larger)
-        if options.criterion == "max":  # (the lowest max: a grid's run to a max of 1e-4 ran
-            key = emax                  # out of budget and returned 1917 control points with
-            # a max of 1.42e-4, of lowest RMS, where 812 had reached 1.06e-4: user test)
+        # (criterion "max": the lowest max; a grid's run to a max of 1e-4 ran out of budget
+        # and returned 1917 control points with a max of 1.42e-4, of lowest RMS, where 812 had
+        # reached 1.06e-4: user test)
+        if options.criterion == "max":
+            key = emax
         if better(best, key, best_rms):
             best, best_rms = state, key
         # (a noisy mesh: of the errors across the surface)

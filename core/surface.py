@@ -89,8 +89,8 @@ MAX_RESOLUTION = 4096
 # tessellation: rounds of edge splits where the data parameters are denser than on average
 TESSELLATION_SPLITS = 4
 # auto_resolution's candidates, coarsest first: each costs its grid and a sag over all its
-# edges (64: 0.2 s, 128: 0.7 s, 256: 2.5 s, 512: 7.5 s on a loaded machine, /tmp/s34/sag_check.py),
-# so 512 is left to Re-tessellate (Blender's warning says so)
+# edges (883 control points: 0.2 / 0.7 / 2.5 / 7.5 s at 64 / 128 / 256 / 512 on a loaded
+# machine, /tmp/s34/sag_check.py), so 512 is left to Re-tessellate (Blender's warning says so)
 AUTO_RESOLUTIONS = (64, 128, 256)
 AUTO_RESOLUTION_FLOOR = 1e-6  # ... and a mesh within this share of the diagonal is taken
 # the edge-split rounds look a mesh's compression up on a grid of at most this many cells along
@@ -554,14 +554,15 @@ class TCBSurface:
         return verts, faces.copy(), matrix
 
     def auto_resolution(self, target: float | None = None) -> tuple[int, float]:
-        """The coarsest of AUTO_RESOLUTIONS whose tessellation strays from the spline by at
-        most ``target`` (model units; default: the fit's max error at its data, ``report["max"]``,
-        or AUTO_RESOLUTION_FLOOR of the data's diagonal if larger) by :meth:`tessellation_sag`,
-        else the finest: ``(resolution, its sag)`` (not in
-        method.md). A tight fit needs a fine mesh: at the default 64, the mesh of F7 fitted to
-        1e-4 (1992 control points, max 8.8e-4 of the diagonal) strayed 7.9e-3 from the spline
-        (512: 2.0e-4), nefertiti's at 1e-3 6.6e-3 against the fit's 6.2e-3 (128: 2.2e-3;
-        /tmp/s34/sag.py); a user measured the mesh, not the spline (user test)."""
+        """The coarsest of AUTO_RESOLUTIONS whose tessellation strays from the spline
+        (:meth:`tessellation_sag`) by at most ``target`` (model units; default: the fit's max
+        error at its data, ``report["max"]``, or AUTO_RESOLUTION_FLOOR of the data's diagonal
+        if larger), else the finest: ``(resolution, its sag)`` (not in method.md). A tight fit
+        needs a fine mesh: at the default 64, the mesh of F7 fitted to 1e-4 (1992 control
+        points, max 8.8e-4 of the diagonal) strayed 7.9e-3 from the spline (256: 8.1e-4),
+        nefertiti's at 1e-3 6.6e-3 against the fit's 6.2e-3 (128: 2.2e-3;
+        benchmarks/tessellation_sag.py); a user measured the mesh, not the spline (user
+        test)."""
         if target is None:  # (at least AUTO_RESOLUTION_FLOOR of the diagonal: a plane's max
             rep = self._report or {}  # error is rounding, which no mesh is within)
             target = max(float(rep.get("max", np.nan)),
@@ -580,8 +581,8 @@ class TCBSurface:
         of 709 control points fitted to 2.0e-3 of the diagonal showed 6.4e-3 at resolution 64
         and 2.3e-3 at 256 (user test). Every edge: a sample of 5000 triangles had found 3.7e-4
         at 256 where all edges have 1.07e-3, at a spot of a few triangles (review). About two
-        evaluations per triangle: 0.1 s at 64, 1 s at 256, 4 s at 512. NaN when no edge has
-        both ends on the domain."""
+        evaluations per triangle (see AUTO_RESOLUTIONS for seconds). NaN when no edge has both
+        ends on the domain."""
         uv, tri = self.tessellation_uv(resolution)
         if len(tri) == 0:
             return float("nan")

@@ -591,8 +591,9 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None,
         warnings = list(warnings) + [f"{loose} loose vert{'ex' if loose == 1 else 'ices'} (in "
                                      "no face) left out"]
     chosen = _CHOSEN_RESOLUTION.get(surf) if auto else None
-    if chosen is not None and resolution_note(surf):
-        warnings = list(warnings) + [resolution_note(surf)]
+    stray = resolution_note(surf) if chosen is not None else None
+    if stray:
+        warnings = list(warnings) + [stray]
     elif chosen is not None and chosen[0] > _core().surface.AUTO_RESOLUTIONS[0]:
         notes = list(notes) + [f"mesh Resolution {chosen[0]} (Auto Resolution: within the "
                                "fit's max error of the spline)"]
@@ -1231,9 +1232,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         surface = self._surface
         st = surface.tcb
         moved = moved_note(surface)
-        # (Auto Resolution: chosen again for the refined fit; its mesh needs a finer one)
-        st.resolution = chosen_resolution(surf, st.resolution) if st.auto_resolution \
-            else st.resolution
+        if st.auto_resolution:  # (chosen again: a refined fit's mesh needs a finer one)
+            st.resolution = chosen_resolution(surf, st.resolution)
         write_surface_mesh(surface, surf, st.resolution)
         if st.net is not None:
             write_net_mesh(live.own_net(surface), surf)
