@@ -21,7 +21,8 @@ import numpy as np
 from .errors import HolesError, InvalidInputError, OutlierError, TCBError
 from .fit import DEFAULT_SMOOTHNESS
 from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
-from .parameterize import fill_value_rows, fill_value_words, projection_direction
+from .parameterize import (SPIKES_DISSOLVED, fill_value_rows, fill_value_words,
+                          projection_direction)
 from .refine import (SWINGS_LEFT, mostly_taken_back, replaced_default_reason,
                      returned_why)
 from .surface import (FOLDED_SHARE, MAX_RESOLUTION, default_swung, grid_frame,
@@ -345,9 +346,8 @@ def _fit(args) -> int:
     except OutlierError as exc:
         if faces is not None:  # a mesh's spike vertices (its rows are the file's)
             raise spike_error(given, exc.indices, exc.heights,
-                              advice="pass --drop-outliers, which dissolves them (each vertex "
-                              "and its faces removed, the hole filled by triangles of its "
-                              "neighbours)") from None
+                              advice=f"pass --drop-outliers, which {SPIKES_DISSOLVED}"
+                              ) from None
         # number the outliers as in the file (not among the points left after --drop-invalid),
         # with this command's option
         raise outlier_error(given, np.flatnonzero(~bad)[exc.indices],

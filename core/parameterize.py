@@ -1323,9 +1323,11 @@ def _without_cellmate(x: np.ndarray, ref: np.ndarray, cell: float) -> np.ndarray
 
 _DROP_ADVICE = ("fit_surface(..., drop_outliers=True), on the command line --drop-outliers, in "
                 "Blender the Drop Outliers option")
-_SPIKE_ADVICE = ("fit_surface(..., drop_outliers=True) dissolves them (each vertex and its "
-                 "faces removed, the hole filled by triangles of its neighbours), on the "
-                 "command line --drop-outliers, in Blender the Drop Outliers option")
+# what drop_outliers does to a mesh's spike vertices, in the advice of each caller's words
+SPIKES_DISSOLVED = ("dissolves them (each vertex and its faces removed, the hole filled by "
+                    "triangles of its neighbours)")
+_SPIKE_ADVICE = (f"fit_surface(..., drop_outliers=True) {SPIKES_DISSOLVED}, on the command "
+                 "line --drop-outliers, in Blender the Drop Outliers option")
 
 
 # spikes (spike_points): neighbours of the local quadratic and how many of them it leaves

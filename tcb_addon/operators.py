@@ -954,9 +954,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 if data.faces is not None:  # a mesh's spike vertices
                     raise core.parameterize.spike_error(
                         data.points, ex.indices, ex.heights, data.label,
-                        advice="turn on Drop Outliers in the fit settings, which dissolves "
-                        "them (each vertex and its faces removed, the hole filled by "
-                        "triangles of its neighbours)") from None
+                        advice="turn on Drop Outliers in the fit settings, which "
+                        + core.parameterize.SPIKES_DISSOLVED) from None
                 raise core.parameterize.outlier_error(
                     data.points, ex.indices, data.label,
                     advice="turn on Drop Outliers in the fit settings") from None
