@@ -1984,10 +1984,15 @@ def test_mesh_spikes_finds_raised_vertices_and_no_feature_of_a_real_mesh() -> No
     """core.parameterize.mesh_spikes: a vertex of a grid mesh raised by 10 or 1e4, lowered by
     10, on the border, two at once: found (and nothing else); the bundled meshes, a 90-degree
     crease, coarse sphere caps and a cone of half-angle 15 degrees: none."""
-    from meshes import spiky_grid
     import sys
+
+    from meshes import spiky_grid
+
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-    import coarse_meshes as cm
+    try:
+        import coarse_meshes as cm
+    finally:
+        sys.path.pop(0)
 
     for raised, found in (({620: 10.0}, [620]), ({620: 1e4}, [620]), ({620: -10.0}, [620]),
                           ({20: 10.0}, [20]), ({620: 10.0, 100: 1e4}, [100, 620]),
@@ -2004,7 +2009,8 @@ def test_mesh_spikes_finds_raised_vertices_and_no_feature_of_a_real_mesh() -> No
     for p, f in meshes:
         assert len(pz.mesh_spikes(p, pz._as_triangles(f, len(p), p))[0]) == 0
         parameterize(p, f)  # (no OutlierError)
-    assert pz.mesh_spikes(*_cone(4))[0].tolist() == [0]  # (a needle of half-angle 4 degrees: 14 r high)
+    # (a needle of half-angle 4 degrees: 14 r high)
+    assert pz.mesh_spikes(*_cone(4))[0].tolist() == [0]
 
 
 def test_a_mesh_s_spike_is_refused_or_dissolved_keeping_a_disk() -> None:
