@@ -26,7 +26,7 @@ from .parameterize import (SPIKES_DISSOLVED, fill_value_rows, fill_value_words,
 from .refine import (SWINGS_LEFT, mostly_taken_back, replaced_default_reason,
                      returned_why)
 from .surface import (FOLDED_SHARE, MAX_RESOLUTION, default_swung, grid_frame,
-                      tessellation_fill,
+                      finer_resolution, sag_target, tessellation_fill,
                       noise_near_tolerance, stopped_at_noise)
 
 __all__ = ["main"]
@@ -76,7 +76,8 @@ def _parser() -> argparse.ArgumentParser:
                    "2 sqrt(control points) for a larger net, at most 512, more where the surface "
                    "leaves out most of the domain; at least 8 across the shorter one; a "
                    "domain filling under half the square on its longer side gets as many grid "
-                   "cells as a half-filled square)")
+                   "cells as a half-filled square; then 128 or 256 if the mesh would stray "
+                   "from the spline by more than the fit's max error)")
     f.add_argument("--net", help="write the control net (.obj or .ply) here")
     f.add_argument("--spline", help="write the spline (.npz, TCBSurface.save) here")
     f.add_argument("--drop-invalid", action="store_true",
@@ -352,7 +353,12 @@ def _fit(args) -> int:
         # with this command's option
         raise outlier_error(given, np.flatnonzero(~bad)[exc.indices],
                             advice="pass --drop-outliers") from None
-    resolution = args.resolution or default_resolution(surf.report["control_points"], surf)
+    sag = None
+    if args.resolution:
+        resolution = args.resolution
+    else:  # the mesh within the fit's max error of the spline, as Blender's Auto Resolution
+        resolution, sag = surf.auto_resolution(
+            least=default_resolution(surf.report["control_points"], surf))
     verts, tris = surf.tessellate(resolution)
     write_mesh(args.output, verts, tris)
     if args.net:
@@ -410,7 +416,9 @@ def _fit(args) -> int:
         rows.append(("folded over", f"{r['folded']:.2%} of the mesh's area"))
     rows += [
         ("surface", f"{args.output} ({len(verts)} vertices, {len(tris)} triangles, resolution "
-                    f"{resolution}" + ("" if args.resolution else ", automatic") + ")"),
+                    f"{resolution}" + (", automatic" if not args.resolution else "")
+                    + (f": the mesh within {sag:.3g} of the spline" if sag is not None
+                       and np.isfinite(sag) else "") + ")"),
     ]
     if args.net:
         rows.append(("control net", args.net))
@@ -425,6 +433,12 @@ def _fit(args) -> int:
               SWINGS_LEFT: "the rest of the error is where more knots made the surface swing "
                            "between the data points (a sharp step?)"}.get(
         SWINGS_LEFT if mostly_taken_back(r) else r["stop_reason"])
+    if sag is not None and sag > sag_target(r):  # (the mesh is what the user measures)
+        print(f"note: the surface mesh (resolution {resolution}, the finest chosen "
+              f"automatically) strays up to {sag:.4g} from the spline, more than the fit's max "
+              f"error {r['max']:.4g}: pass --resolution "
+              f"{finer_resolution(resolution, sag, sag_target(r))} (or more) to write the fit "
+              "as it is", file=sys.stderr)
     if advice and args.tolerance > 0:  # the table says why it stopped, not what to change
         unit = " (a fraction of the bounding-box diagonal)" if args.relative else ""
         if near and not mostly_taken_back(r):  # the data's noise is near the tolerance

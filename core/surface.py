@@ -93,6 +93,17 @@ TESSELLATION_SPLITS = 4
 # machine, /tmp/s34/sag_check.py), so 512 is left to Re-tessellate (Blender's warning says so)
 AUTO_RESOLUTIONS = (64, 128, 256)
 AUTO_RESOLUTION_FLOOR = 1e-6  # ... and a mesh within this share of the diagonal is taken
+
+
+def sag_target(report) -> float:
+    """How close to the spline :meth:`TCBSurface.auto_resolution` holds its mesh, model units:
+    the fit's max error at its data (``report["max"]``), at least AUTO_RESOLUTION_FLOOR of the
+    data's diagonal (a plane's max error is rounding, which no mesh is within); NaN without a
+    max."""
+    rep = report or {}
+    return max(float(rep.get("max", np.nan)),
+               AUTO_RESOLUTION_FLOOR * float(rep.get("diagonal", 0.0)))
+
 # the edge-split rounds look a mesh's compression up on a grid of at most this many cells along
 # the longer side (4x finer than the tessellation's grid up to resolution 128)
 TESSELLATION_STRETCH_CELLS = 512
@@ -121,6 +132,18 @@ _COVER_TOL = 1e-9
 _OPTION_NAMES = tuple(f.name for f in dataclasses.fields(RefineOptions))
 _PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", "axes", "stretch",
                  "holes", "outliers")
+
+
+def finer_resolution(resolution: int, sag: float, target: float) -> int:
+    """The resolution at which a mesh of ``sag`` at ``resolution`` would come within ``target``
+    of the spline if the sag fell 4x per doubling (a quadratic's chord error: h^2), rounded up
+    to a power of two times ``resolution`` and at most MAX_RESOLUTION; where the spline has
+    features smaller than the step it falls less, so this is the least to try, not a promise
+    (what the command line and Blender advise when Auto Resolution's finest strays)."""
+    if not (sag > target > 0):
+        return int(resolution)
+    doublings = int(np.ceil(0.5 * np.log2(sag / target)))
+    return int(min(MAX_RESOLUTION, resolution * 2 ** max(doublings, 1)))
 
 
 def _readonly(a):
@@ -553,21 +576,24 @@ class TCBSurface:
         verts, matrix = self._points(uv, callback, matrix=True)
         return verts, faces.copy(), matrix
 
-    def auto_resolution(self, target: float | None = None) -> tuple[int, float]:
+    def auto_resolution(self, target: float | None = None,
+                        least: int | None = None) -> tuple[int, float]:
         """The coarsest of AUTO_RESOLUTIONS whose tessellation strays from the spline
         (:meth:`tessellation_sag`) by at most ``target`` (model units; default: the fit's max
         error at its data, ``report["max"]``, or AUTO_RESOLUTION_FLOOR of the data's diagonal
-        if larger), else the finest: ``(resolution, its sag)`` (not in method.md). A tight fit
+        if larger), else the finest: ``(resolution, its sag)`` (not in method.md). With
+        ``least``: ``least`` and the AUTO_RESOLUTIONS above it (the command line's
+        ``default_resolution``, which grows with the net and over a sparse domain). A tight fit
         needs a fine mesh: at the default 64, the mesh of F7 fitted to 1e-4 (1992 control
         points, max 8.8e-4 of the diagonal) strayed 7.9e-3 from the spline (256: 8.1e-4),
         nefertiti's at 1e-3 6.6e-3 against the fit's 6.2e-3 (128: 2.2e-3;
         benchmarks/tessellation_sag.py); a user measured the mesh, not the spline (user
         test)."""
-        if target is None:  # (at least AUTO_RESOLUTION_FLOOR of the diagonal: a plane's max
-            rep = self._report or {}  # error is rounding, which no mesh is within)
-            target = max(float(rep.get("max", np.nan)),
-                         AUTO_RESOLUTION_FLOOR * float(rep.get("diagonal", 0.0)))
-        for resolution in AUTO_RESOLUTIONS:
+        if target is None:
+            target = sag_target(self._report)
+        candidates = AUTO_RESOLUTIONS if least is None else (
+            [int(least)] + [r for r in AUTO_RESOLUTIONS if r > least])
+        for resolution in candidates:
             sag = self.tessellation_sag(resolution)
             if not sag > target:  # (NaN target or sag: the first)
                 break

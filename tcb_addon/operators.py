@@ -396,14 +396,14 @@ def resolution_note(surf) -> str | None:
     if chosen is None:
         return None
     resolution, sag = chosen
-    rep = dict(surf.report or {})
-    worst = float(rep.get("max", 0.0))
-    if not sag > max(worst, _core().surface.AUTO_RESOLUTION_FLOOR
-                     * float(rep.get("diagonal", 0.0))):
+    target = _core().surface.sag_target(surf.report)
+    if not sag > target:
         return None
+    finer = _core().surface.finer_resolution(resolution, sag, target)
     return (f"the surface mesh (Resolution {resolution}, the finest Auto Resolution takes) "
             f"strays up to {sag:.4g} from the spline, more than the fit's max error "
-            f"{worst:.4g}: Re-tessellate finer (e.g. {2 * resolution}) to see the fit as it is")
+            f"{float(surf.report['max']):.4g}: Re-tessellate finer (e.g. {finer}) to see the fit "
+            "as it is")
 
 
 def folded_over(tcb) -> bool:

@@ -2320,6 +2320,35 @@ def test_the_summary_says_why_an_earlier_iteration_is_returned(addon):
     assert "of 5 (lowest max error)" in ops._summary(surf)
 
 
+def test_auto_resolution_warns_when_its_finest_mesh_still_strays(clean_scene, addon, capfd):
+    """A 5 x 5 saddle of quads fitted to 1e-4 (about 800 control points on 25 vertices): at 256,
+    the finest Auto Resolution takes, the mesh strays from the spline by several times the
+    fit's max error; the summary warns and names a finer resolution to Re-tessellate with
+    (core.surface.finer_resolution: 1024 here, where the sag is within it; 512 was not)."""
+    bpy = clean_scene
+    core = core_module()
+    g = np.linspace(-1, 1, 5)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    i = np.arange(25).reshape(5, 5)
+    quads = np.c_[i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()]
+    saddle = add_mesh(bpy, "Saddle", np.c_[x.ravel(), y.ravel(), 0.5 * (x * x - y * y).ravel()],
+                      quads)
+    capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, saddle)):
+        assert bpy.ops.tcb.fit_surface(tolerance=1e-4) == {"FINISHED"}
+    out = capfd.readouterr().out
+    surface = bpy.context.view_layer.objects.active
+    surf = spline_of(surface)
+    assert surface.tcb.resolution == core.surface.AUTO_RESOLUTIONS[-1] == 256
+    sag, worst = surf.tessellation_sag(256), surf.report["max"]
+    finer = core.surface.finer_resolution(256, sag, core.surface.sag_target(surf.report))
+    assert sag > worst and finer > 256
+    assert (f"the surface mesh (Resolution 256, the finest Auto Resolution takes) strays up to "
+            f"{sag:.4g} from the spline, more than the fit's max error {worst:.4g}: "
+            f"Re-tessellate finer (e.g. {finer})") in out, out
+    assert "Warning" in out
+
+
 def test_auto_resolution_makes_the_mesh_as_close_to_the_spline_as_the_fit_is_to_the_data(
         clean_scene, addon, capfd):
     """At the default Resolution 64 the surface mesh of a tight fit strayed from the spline by
