@@ -890,6 +890,11 @@ SHRINK_MAX = 2.0
 # typically 0.5-1x of it; a coarser start aimed at the tolerance itself leaves no room (the
 # RMS of one knot count is not one number: it varies 1.5x with the knots' draws)
 SHRINK_TARGET = 0.5
+# a coarser start that misses, with at most 1/SHRINK_SPLIT of the knots of the fit it followed:
+# one more start halfway between them (geometric mean of the knot counts), kept if it meets.
+# The steps of the coarser starts were ~0.6x each, so the net returned jumped with the draws:
+# a grid turned about its normal got 44-90 control points at 1e-3 (user test; /tmp/s35/rot.py)
+SHRINK_SPLIT = 1.3
 # a run with a tolerance stops when the error has stopped falling (_stalled): over at least
 # STALL_WINDOW insertions and 1.5x the knots, the best RMS fell like knots^-r with r <
 # STALL_RATE (dense noise, 10 000 points: 0.035-0.05, i.e. about 1.5% less error for 50% more
@@ -1121,7 +1126,8 @@ def adaptive_fit(
     of the tolerance when that is at most SHRINK_FRACTION of them (at least MIN_START_KNOTS),
     as long as they meet it, and with a max error within SHRINK_MAX times the tolerance or the
     max of the fit they follow; the first that misses (or swings) ends the run and the last
-    that met it is returned (a plane, a sphere cap, a bump had nets of 140-148 control points,
+    that met it is returned, unless one start halfway between the two (SHRINK_SPLIT) meets it
+    (a plane, a sphere cap, a bump had nets of 140-148 control points,
     the probe's, whatever the tolerance: now 37-55 at 1e-2; benchmarks/net_size.py). A
     continued run (``start_knots``) with a tolerance inserts the knots
     :func:`predicted_knots` says are missing, up to doubling them. Reports say whether an
@@ -1297,6 +1303,7 @@ def adaptive_fit(
     in_a_row = 0  # insertions taken back since the last fit kept
     settle_restart = False  # the fit is the one a restart that swung was sized from
     shrinking = None  # a coarser fresh start after one that met the tolerance by far
+    split = False  # ... the start halfway between a coarser one that missed and the finer one
     shrink_max = np.inf  # ... whose max error is held to this (SHRINK_MAX)
 
     def insert(knots, triangles, steer, count) -> np.ndarray:
@@ -1495,8 +1502,8 @@ def adaptive_fit(
             # a fresh start that meets the tolerance by far (a loose tolerance, a smooth
             # shape): a coarser fresh start with the knots the error-rate model predicts, at
             # least MIN_START_KNOTS; the finer fit stays the one returned if it misses
-            if (fresh and options.initial_knots is None and it < options.max_iterations - 1
-                    and len(interior) > MIN_START_KNOTS):
+            if (fresh and not split and options.initial_knots is None
+                    and it < options.max_iterations - 1 and len(interior) > MIN_START_KNOTS):
                 want = predicted_knots(len(interior), max(value, 1e-300),
                                        SHRINK_TARGET * tol, sized, options.degree)
                 want = max(int(np.ceil(want)), MIN_START_KNOTS)
@@ -1507,8 +1514,16 @@ def adaptive_fit(
                     n_before, pending, prev = len(interior), np.zeros((0, 2)), None
                     continue
             break
-        if shrinking:  # a coarser start missed the tolerance: the finer one is returned
+        if shrinking:  # a coarser start missed the tolerance: the finer one is returned ...
             reason = "tolerance reached"
+            # ... or one halfway between them (SHRINK_SPLIT), if it meets
+            halfway = int(round(np.sqrt(sized[0] * len(interior))))
+            if (not split and sized[0] >= SHRINK_SPLIT * len(interior)
+                    and it < options.max_iterations - 1 and len(interior) < halfway < sized[0]):
+                split = True
+                interior, ring_knots = place(halfway)
+                n_before, pending, prev = len(interior), np.zeros((0, 2)), None
+                continue
             break
         if it == options.max_iterations - 1:
             break
