@@ -2397,6 +2397,17 @@ def test_a_mesh_s_spike_vertex_is_named_or_dissolved_and_the_others_fit_as_witho
         others = np.delete(np.arange(len(p)), row)
         assert np.max(surf.errors[others]) <= 1.1 * np.max(clean.errors[others])
         assert rep["control_points"] <= 1.05 * clean.report["control_points"]
+    # three in a row: the middle one's ring is bent by both others, so it is found once they
+    # are dissolved (core.parameterize._MESH_SPIKE_ROUNDS); a corner pair
+    for rows in ([620, 621, 622], [0, 1]):
+        p3, f3 = spiky_grid({row: 10.0 for row in rows})
+        with pytest.raises(OutlierError) as err:
+            fit_surface(p3, f3)
+        assert list(err.value.indices) == rows
+        three = fit_surface(p3, f3, drop_outliers=True)
+        others = np.delete(np.arange(len(p3)), rows)
+        assert three.report["outliers"] == len(rows) and np.isnan(three.errors[rows]).all()
+        assert np.max(three.errors[others]) <= 1.1 * np.max(clean.errors[others])
     again = surf.refine(p, f, max_iterations=1)
     assert again.report["outliers"] == 1 and np.isnan(again.errors[20])
     order = np.random.default_rng(0).permutation(len(p))
