@@ -16,13 +16,17 @@ the errors, so the basis is evaluated once per fit. ``alpha`` and ``beta`` are g
 ``trace(A^T W A) / trace(G)``, so one ``smoothness`` works at any scale and knot density. One
 sparse LU factorization serves the three coordinates.
 
-The fairing measures the surface minus its reference ``L``: the control points ``L_I = M
-[xi_I, 1]`` of the weighted least-squares affine map ``(u, v) -> p`` of the data (``xi_I`` the
-Greville points, which reproduce it exactly, method.md section 2.2), i.e. the energies above are
-those of ``S - (affine fit)``. The second-order energy of an affine map is 0 anyway; the
-first-order one is not, so without the reference the fairing pulled the surface towards a
-constant: a plane was not reproduced (in-plane errors of 7e-4 of its size, edges drawn in),
-and a cloud's in-plane coordinates, which are exactly affine in its parameters, were bent.
+The fairing measures the surface minus its reference ``L``: the control points of the weighted
+least-squares quadratic map ``(u, v) -> p`` of the data (:func:`fairing_reference`: its polar
+form at each function's interior knots, which reproduces it exactly, method.md section 2.2;
+the affine map, ``L_I = M [xi_I, 1]`` at the Greville points ``xi_I``, at degree 1 or where the
+quadratic is ill-determined), i.e. the energies above are those of ``S - (quadratic fit)``.
+Without a reference the first-order energy pulled the surface towards a constant: a plane was
+not reproduced (in-plane errors of 7e-4 of its size, edges drawn in), and a cloud's in-plane
+coordinates, which are exactly affine in its parameters, were bent; against the affine one the
+second-order energy pulled curved surfaces towards a plane (a saddle, which a quadratic spline
+holds exactly, 0.23 mm off at its border over 100 mm: user test). (method.md section 5 has
+the energies of ``S`` itself.)
 
 Quadrature: three points per triangle of ``Gamma_0`` (the rule exact for quadratics, weights
 ``area / 3``). ``Gamma_0`` covers the convex hull of all knots, including the border rings, so every
@@ -45,7 +49,8 @@ from .parallel import background
 from .simplex import orient2d
 
 __all__ = ["FitResult", "fit_control_points", "fairing_quadrature", "check_smoothness",
-           "affine_reference", "PARTITION_TOL", "AUTO_SMOOTHNESS", "SPARSE_SMOOTHNESS",
+           "affine_reference", "fairing_reference", "PARTITION_TOL", "AUTO_SMOOTHNESS",
+           "SPARSE_SMOOTHNESS",
            "DEFAULT_SMOOTHNESS"]
 
 PARTITION_TOL = 1e-9
@@ -62,8 +67,8 @@ FOLDS = 5
 MIN_AUTO_POINTS = 10
 # sparse data: fewer fitted points than this per basis function that sees data. Between the
 # points only the fairing holds the surface, and the choice also tries these larger weights
-# (the limit of a large weight is the affine fit): on 30-60 random points of Franke's
-# function cross-validation chose 1-100
+# (the limit of a large weight is the quadratic fit, fairing_reference): on 30-60 random
+# points of Franke's function cross-validation chose 1-100
 SPARSE_POINTS_PER_CONTROL = 2
 SPARSE_SMOOTHNESS = (1e2, 1e1, 1.0, 1e-1)
 
@@ -234,7 +239,7 @@ def fit_control_points(
     if G2 is not None:
         G = G + (data_trace / max(G2.diagonal().sum(), 1e-300)) * G2
     G = G.tocsr()
-    L = affine_reference(space, uv, points, weights)
+    L = fairing_reference(space, uv, points, weights)
     GL = G @ L
     if not (has_data | (G.diagonal() > 0)).all():
         raise SingularSystemError(
@@ -258,7 +263,7 @@ def fit_control_points(
                         lambda c: smoothness * (G @ c - GL))
     else:
         # no fairing: pure least squares for the functions that see data, then the functions
-        # without data minimize the fairing energy of S - (affine fit) with the others held
+        # without data minimize the fairing energy of S - (reference) with the others held
         # (they do not touch the data, so the fit at the data is the exact least-squares one)
         d, u = np.flatnonzero(has_data), np.flatnonzero(~has_data)
         C = np.zeros((n, 3))
@@ -324,6 +329,63 @@ def affine_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.ndar
         XtWP += wX.T @ (points[s : s + CHUNK] - cp)
     M, *_ = np.linalg.lstsq(XtWX, XtWP, rcond=None)  # (2, 3)
     return cp + (np.asarray(space.greville) - cu) @ M
+
+
+# fairing_reference: a quadratic whose normal equations (in centred coordinates scaled to unit
+# RMS) have a smallest eigenvalue below this share of the largest is not taken (data along a
+# curve, a thin strip): the affine reference then
+QUADRATIC_REFERENCE_COND = 1e-8
+
+
+def fairing_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.ndarray
+                      ) -> np.ndarray:
+    """Control points ``L`` (n_basis, 3) of the reference the fairing measures the surface
+    against (module docstring): at degree 2 and 3, the weighted least-squares quadratic map
+    ``(u, v) -> p`` of the data, whose control points are its polar form at each function's
+    interior knots ``I`` (quadratic reproduction through the blossom, method.md section 2.2:
+    ``F({a, b}) = c + g (a + b) / 2 + a^T H b`` for ``c + g x + x^T H x``, at three knots the
+    means over their pairs and the knots); :func:`affine_reference` at degree 1, or where the
+    quadratic is ill-determined (QUADRATIC_REFERENCE_COND).
+
+    Against the affine reference the second-order energy pulled every curved surface towards
+    a plane, most at its border (the fairing's natural boundary condition, zero curvature at
+    the edge of the border rings): a saddle z = 0.01 (x^2 - y^2) over 100 mm, which a
+    quadratic spline holds exactly, took 141 control points for an RMS of 1e-2 with the
+    surface 0.23 mm off at the border (37 and 7.7e-3 without fairing), and with the criterion
+    "max" 1195 control points whose final, cross-validated smoothness left fins of 0.53 mm
+    along the border (user test; /tmp/s35/fair/cmp.py). Against the quadratic: 37 control
+    points and 7.7e-3, 41 and 8.4e-3; a 90-degree cylinder's border 0.11 -> 0.04 mm; Franke,
+    F7, the crease, the DEM and the bundled meshes as before to 3 digits."""
+    w = np.asarray(weights, dtype=np.float64)
+    total = float(w.sum())
+    if space.degree < 2 or not total > 0 or space.n_basis == 0:
+        return affine_reference(space, uv, points, weights)
+    cu = (w @ uv) / total
+    scale = float(np.sqrt(w @ ((uv - cu) ** 2).sum(axis=1) / total))
+    if not scale > 0:
+        return affine_reference(space, uv, points, weights)
+
+    def monomials(x):  # 1, x, y, x^2, x y, y^2 of centred, scaled parameters
+        x = (x - cu) / scale
+        return np.c_[np.ones(len(x)), x, x[:, 0] ** 2, x[:, 0] * x[:, 1], x[:, 1] ** 2]
+    XtWX, XtWP = np.zeros((6, 6)), np.zeros((6, 3))
+    for s in range(0, len(uv), CHUNK):
+        X = monomials(uv[s : s + CHUNK])
+        wX = X * w[s : s + CHUNK, None]
+        XtWX += wX.T @ X
+        XtWP += wX.T @ points[s : s + CHUNK]
+    ev = np.linalg.eigvalsh(XtWX)
+    if not ev[0] > QUADRATIC_REFERENCE_COND * ev[-1]:
+        return affine_reference(space, uv, points, weights)
+    coef = np.linalg.solve(XtWX, XtWP)  # (6, 3)
+    K = (np.asarray(space.knots)[space.interior_sets] - cu) / scale  # (n_basis, k, 2)
+    k = K.shape[1]
+    pairs = [(a, b) for a in range(k) for b in range(a + 1, k)]
+    xx = np.mean([K[:, a, 0] * K[:, b, 0] for a, b in pairs], axis=0)
+    yy = np.mean([K[:, a, 1] * K[:, b, 1] for a, b in pairs], axis=0)
+    xy = np.mean([0.5 * (K[:, a, 0] * K[:, b, 1] + K[:, b, 0] * K[:, a, 1])
+                  for a, b in pairs], axis=0)
+    return np.c_[np.ones(len(K)), K.mean(axis=1), xx, xy, yy] @ coef
 
 
 def check_smoothness(value):
@@ -395,7 +457,7 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
         rhs = AtP - WAf.T @ Pf
         # G is scaled by the data term (module docstring): here by that of the points kept
         G_fit = (K_fit.diagonal().sum() / data_trace) * G
-        GL_fit = G_fit @ affine_reference(space, uv, points, np.where(fold == f, 0.0, weights))
+        GL_fit = G_fit @ fairing_reference(space, uv, points, np.where(fold == f, 0.0, weights))
         for s in candidates:
             if s in failed:
                 continue

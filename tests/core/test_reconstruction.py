@@ -136,7 +136,7 @@ def test_a_loose_tolerance_on_a_smooth_shape_gets_a_small_net(monkeypatch):
     Where half the tolerance needs about the probe's knots it stays (the bump at 3e-4). The
     first coarser start that misses ends the run, and the last that met it is returned, unless
     one start halfway between them (geometric mean of the knots, SHRINK_SPLIT) meets it: the
-    bump at 1e-3 (70 control points missed the max by 1.5%, 99 met it; 140 before); the bump
+    bump at 7e-4 (82 control points missed the max by 3%, 105 met it; 140 before); the bump
     at 3e-3 held to its max (SHRINK_MAX 1: its 52 control points have a max of 1.1x the
     tolerance), one made to miss the RMS (aimed at 4x the tolerance), and one that swings (it
     had been taken back as a sizing restart to the finer start, which shrank to it again,
@@ -183,10 +183,10 @@ def test_a_loose_tolerance_on_a_smooth_shape_gets_a_small_net(monkeypatch):
     r, knots = run(bump, 3e-3)  # (its max 1.1x the tolerance: within SHRINK_MAX)
     assert len(knots) == 2 and r["control_points"] < 60 and 3e-3 < r["max_rel"]
     assert len(run(bump, 3e-4)[1]) == 1
-    r, knots = run(bump, 1e-3)  # a miss, then the start halfway, which meets it
+    r, knots = run(bump, 7e-4)  # a miss, then the start halfway, which meets it
     h = r["history"]
-    assert len(knots) == 3 and h[1]["max_rel"] > 2e-3 and r["returned_iteration"] == 3
-    assert r["control_points"] < 0.75 * h[0]["control_points"]
+    assert len(knots) == 3 and h[1]["max_rel"] > 1.4e-3 and r["returned_iteration"] == 3
+    assert r["control_points"] < 0.8 * h[0]["control_points"]
     monkeypatch.setattr(refine, "SHRINK_SPLIT", np.inf)  # (no start halfway)
     monkeypatch.setattr(refine, "SHRINK_MAX", 1.0)  # every point within the tolerance
     r, knots = run(bump, 3e-3)  # the coarser start meets the RMS, not the max
@@ -1521,8 +1521,8 @@ def test_a_cross_validated_smoothness_that_swings_off_the_data_is_raised(monkeyp
     Since the points are fitted in an order of their coordinates, no cloud of 20-50 points of
     sin(kx), k = 3..6, seeds 0-9, gets a swinging choice (the user test's cloud now gets 1e-5,
     0.23 off inside its domain): the cross-validation is made to choose the least smoothing
-    here, 1e-7, whose surface swings (0.52 off inside the domain at 2 places; 1e-6 too, 0.45),
-    and 1e-5 (0.21) is taken."""
+    here, 1e-7, whose surface swings (0.47 off inside the domain at 2 places; 1e-6 too, 0.42;
+    0.52 and 0.45 with the fairing's affine reference), and 1e-5 (0.20) is taken."""
     def off(surf):  # inside the data's domain (beyond it the surface extrapolates)
         g = np.random.default_rng(9).random((5000, 2))
         uv = surf.parameterization.project(np.c_[g, np.sin(3 * g[:, 0])])
@@ -1542,7 +1542,7 @@ def test_a_cross_validated_smoothness_that_swings_off_the_data_is_raised(monkeyp
     assert sel["chosen"] == 1e-7 and surf.report["smoothness"] == 1e-5
     assert "1e-07, the cross-validated choice, the surface swung away" in sel["smoother"]
     assert chosen.report["swings"]["places"] > 0 and surf.report["swings"]["places"] == 0
-    assert off(surf) < 0.3 < 0.5 < off(chosen)
+    assert off(surf) < 0.25 < 0.4 < off(chosen)
     monkeypatch.setattr(core.fit, "_one_standard_error", one_se)
     xy = np.random.default_rng(1).random((30, 2))
     with warnings.catch_warnings():

@@ -165,7 +165,9 @@ def test_noise_gets_more_smoothing_and_the_choice_beats_the_extremes(space):
     uv, P = _data(3000, 0.05)
     noisy = fit_control_points(space, uv, P, smoothness="auto")
     assert noisy.smoothness in AUTO_SMOOTHNESS and clean.smoothness in AUTO_SMOOTHNESS
-    assert noisy.smoothness >= 100 * clean.smoothness
+    # (10x: 1e-2 against 1e-3; 100x, 1e-4 for the clean data, while the fairing measured the
+    # surface against the affine fit, whose bias on a curved surface cost more)
+    assert noisy.smoothness >= 10 * clean.smoothness
     # against the true surface the noisy data's choice is better than following the noise
     least = fit_control_points(space, uv, P, smoothness=min(AUTO_SMOOTHNESS))
     assert _grid_error(space, noisy.control_points) < 0.75 * _grid_error(space, least.control_points)
@@ -374,3 +376,62 @@ def test_cli_smoothness_auto(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "core", "fit", str(src), "-o", str(out),
                           "--smoothness", "lots"], cwd=ROOT, capture_output=True, text=True)
     assert bad.returncode != 0 and "nonnegative number or 'auto'" in bad.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# the fairing's reference (core.fit.fairing_reference)
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("degree", [2, 3])
+def test_the_fairing_reference_is_the_quadratic_fit_reproduced_through_the_blossom(degree):
+    """fairing_reference at degree 2 and 3: the spline of its control points is the weighted
+    least-squares quadratic of the data (exactly a quadratic given, to rounding, wherever the
+    basis is a partition of unity); data along a line (no quadratic in two variables): the
+    affine reference."""
+    from core.fit import affine_reference, fairing_reference
+
+    space = build_space(knot_set("random", 60, degree, 3), degree)
+    rng = np.random.default_rng(1)
+    uv = rng.random((2000, 2))
+
+    def quadratic(t):
+        u, v = t.T
+        return np.c_[u - 0.3 * v, 2 * v + 0.1 * u * u,
+                     0.3 + u - 2 * v + 0.7 * u * u - 1.1 * u * v + 0.4 * v * v]
+    L = fairing_reference(space, uv, quadratic(uv), np.ones(len(uv)))
+    probe = rng.random((500, 2))
+    np.testing.assert_allclose(space.evaluate(probe) @ L, quadratic(probe), atol=1e-12)
+    # weighted: the quadratic of the weighted points (a second quadratic on half of them,
+    # weight 0 on the other half)
+    other = quadratic(uv) + np.c_[0 * uv[:, 0], 0 * uv[:, 0], uv[:, 0] * uv[:, 1]]
+    w = (np.arange(len(uv)) % 2).astype(float)
+    mixed = np.where(w[:, None] > 0, other, quadratic(uv))
+    L = fairing_reference(space, uv, mixed, w)
+    np.testing.assert_allclose(space.evaluate(probe) @ L,
+                               quadratic(probe) + np.c_[0 * probe, probe.prod(axis=1)],
+                               atol=1e-12)
+    line = np.c_[rng.random(300), np.full(300, 0.5)]
+    pts = quadratic(line)
+    np.testing.assert_array_equal(fairing_reference(space, line, pts, np.ones(300)),
+                                  affine_reference(space, line, pts, np.ones(300)))
+
+
+def test_the_default_fairing_does_not_flatten_a_curved_surface():
+    """A saddle z = 0.01 (x^2 - y^2) over 100 mm, without noise, at an absolute tolerance of
+    0.01 mm: a quadratic spline holds it exactly, but the fairing measured against the affine
+    fit pulled it towards a plane, most at its border (the fairing's natural boundary
+    condition), so the default smoothness took 141 control points and left the surface
+    0.23 mm off there; with the criterion "max", 1195 control points whose cross-validated
+    final smoothness left fins of 0.53 mm along the border (user test). Measured against the
+    quadratic fit (fairing_reference): a small net, within the tolerance of the true surface
+    everywhere on its mesh."""
+    rng = np.random.default_rng(35)
+    xy = rng.uniform(-50, 50, (20000, 2))
+    P = np.c_[xy, 0.01 * (xy[:, 0] ** 2 - xy[:, 1] ** 2)]
+    for criterion in ("rms", "max"):
+        surf = fit_surface(P, tolerance=0.01, relative=False, criterion=criterion)
+        V, _ = surf.tessellate(128)
+        true = np.abs(V[:, 2] - 0.01 * (V[:, 0] ** 2 - V[:, 1] ** 2))
+        assert surf.report["control_points"] <= 60, criterion
+        assert true.max() <= 0.01, (criterion, true.max())
