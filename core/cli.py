@@ -434,11 +434,12 @@ def _fit(args) -> int:
                            "between the data points (a sharp step?)"}.get(
         SWINGS_LEFT if mostly_taken_back(r) else r["stop_reason"])
     if sag is not None and sag > sag_target(r):  # (the mesh is what the user measures)
+        finer = finer_resolution(resolution, sag, sag_target(r))
         print(f"note: the surface mesh (resolution {resolution}, the finest chosen "
               f"automatically) strays up to {sag:.4g} from the spline, more than the fit's max "
-              f"error {r['max']:.4g}: pass --resolution "
-              f"{finer_resolution(resolution, sag, sag_target(r))} (or more) to write the fit "
-              "as it is", file=sys.stderr)
+              f"error {r['max']:.4g}: pass --resolution {finer} "
+              + ("(the finest)" if finer >= MAX_RESOLUTION else "(or more)")
+              + " to write the fit as it is", file=sys.stderr)
     if advice and args.tolerance > 0:  # the table says why it stopped, not what to change
         unit = " (a fraction of the bounding-box diagonal)" if args.relative else ""
         if near and not mostly_taken_back(r):  # the data's noise is near the tolerance
