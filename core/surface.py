@@ -1218,7 +1218,8 @@ class TCBSurface:
             keys = (faces_digest(faces), faces_set_digest(faces, points))
         return _run(points, param, options, callback, faces_key=keys[0], faces_set_key=keys[1],
                     start=self.knots[: self._n_interior], rings=self.knots[self._n_interior:],
-                    history=self._report.get("history", []), start_degree=self.degree)
+                    history=self._report.get("history", []), start_degree=self.degree,
+                    projection_given=bool(self._report.get("projection_given")))
 
     # ---- files -------------------------------------------------------------------------
     def to_bytes(self, compact: bool = False) -> bytes:
@@ -2130,11 +2131,13 @@ TESSELLATION_JITTER = 1e-7
 
 
 def _run(points, param, options, callback, start=None, rings=None, history=(), checked=False,
-         start_degree=None, faces_key=None, spikes=False, faces_set_key=None):
+         start_degree=None, faces_key=None, spikes=False, faces_set_key=None,
+         projection_given=False):
     """Fit ``points`` over ``param``; ``checked``: ``parameterize_points`` has just accepted
     these very points (a cloud), so :func:`normalize` need not check them again.
     ``faces_key``, ``faces_set_key``: the digests of the given faces (:func:`faces_digest`,
-    :func:`faces_set_digest`) that the report keeps."""
+    :func:`faces_set_digest`) that the report keeps. ``projection_given``: the cloud was
+    projected along a direction the user gave (``report["projection_given"]``)."""
     t0 = time.perf_counter()
     used = np.asarray(param.used, dtype=bool)
     # the used points, in an order of their coordinates alone (coordinate_order): the fit's
@@ -2398,6 +2401,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
             and reason != "cancelled"):  # a cloud's noise, to say what kept the tolerance off
         report["noise"] = local_noise(points[kept], seed=options.seed)
         report["noise_rel"] = report["noise"] / diagonal
+    if projection_given:
+        report["projection_given"] = True
     surf = TCBSurface(best.space, C, param, errors, report, best.n_interior, options,
                       active=best.active)
     if reason == STALLED and param.faces is None and report["rms_rel"] > FAR_STALL_RMS:
@@ -2837,7 +2842,8 @@ def fit_surface(
     return _run(points, param, options, callback, checked=faces is None,
                 faces_key=None if faces is None else faces_digest(faces),
                 faces_set_key=None if faces is None else faces_set_digest(faces, points),
-                spikes=faces is None and not drop_outliers)
+                spikes=faces is None and not drop_outliers,
+                projection_given=faces is None and projection is not None)
 
 
 def default_swung(selection: dict | None) -> bool:
@@ -3086,15 +3092,21 @@ def data_layers(uv, residuals, seed: int = 0) -> float:
 def far_stall_warning(report: dict) -> str:
     """The warning of an error that stopped falling far above the data's scatter (``_run``)."""
     d = report["distance_rms"]
+    given = bool(report.get("projection_given"))
     return (f"the error stopped falling with the data {d:.4g} from the surface (RMS of their "
             f"distances, {100 * d / report['diagonal']:.1f}% of the diagonal), "
             f"{d / max(report['scatter'], 1e-300):.0f} times their scatter about their local "
-            f"planes ({report['scatter']:.3g}): that is not noise. The cloud may fold over "
-            "the plane it was projected on (parts of it seen edge-on, or overlapping in "
-            "projection): give the direction it faces "
-            "(projection=, on the command line --projection, in Blender the Projection "
-            "option), split it into patches that each face one direction, or supply a mesh of "
-            "disk topology (with faces)")
+            f"planes ({report['scatter']:.3g}): that is not noise. The cloud may "
+            + ("not be a height field along the direction given (parts of it seen edge-on "
+               "along it, or overlapping): split it into patches that each face one "
+               "direction, give another direction, "
+               if given else
+               "fold over the plane it was projected on (parts of it seen edge-on, or "
+               "overlapping in projection): give the direction it faces (projection=, on the "
+               "command line "
+               "--projection, in Blender the Projection option), split it into patches that "
+               "each face one direction, ")
+            + "or supply a mesh of disk topology (with faces)")
 
 
 def layers_warning(report: dict) -> str:

@@ -1306,6 +1306,15 @@ def test_an_error_stopped_far_above_the_data_s_scatter_is_warned_of():
     assert r["stop_reason"] == "the error stopped falling" and r["rms_rel"] > 0.1
     assert r["distance_rms"] > 0.02 * r["diagonal"] and r["distance_rms"] > 6 * r["scatter"]
     assert "projection=" in str([w.message for w in caught if "not noise" in str(w.message)][0])
+    # along that direction given: not advised to give one (a fillet's wall edge-on along the
+    # z given had been: user test); the report says it was given, for refine() too
+    with pytest.warns(RuntimeWarning, match="not be a height field along the direction "
+                      "given") as caught:
+        given = fit_surface(turned, projection=tuple(surf.parameterization.axes[2]))
+    said = str([w.message for w in caught if "not noise" in str(w.message)][0])
+    assert "projection=" not in said and "supply a mesh" in said
+    assert given.report["projection_given"] and "projection_given" not in r
+    assert given.refine(turned, max_iterations=1).report["projection_given"]
     quiet = []
     for points in (grid, grid + noise):
         with warnings.catch_warnings(record=True) as caught:
