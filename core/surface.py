@@ -77,6 +77,16 @@ MIN_ACROSS = 5.0
 # 96-step tessellation from where their projection's descent ended
 CLOSEST_DISTANCE_TOL = 1e-9
 CLOSEST_SAME_BASIN = 2.0
+# ... and a point that ended off the surface (farther than CLOSEST_ON_SURFACE of its size) also
+# descends from those of its CLOSEST_STARTS nearest starts that lie on its side of the tangent
+# plane at its foot, at an angle above asin(CLOSEST_OTHER_SHEET) from it (another part of the
+# surface may be closer there), and again from its foot when its rounds ran out
+# (TCBSurface._other_starts): a coarse mesh fitted with many control points folds at its
+# creases within a step of the starting tessellation, and its own tessellation's vertices
+# measured up to 5e-3 of the diagonal from it (user test: 4.4e-3 on a Suzanne patch)
+CLOSEST_STARTS = 4
+CLOSEST_ON_SURFACE = 1e-7
+CLOSEST_OTHER_SHEET = 0.1
 # closest points are computed in chunks of this many points: a callback hears of each (progress,
 # cancellation) and the descent's work arrays stay bounded (1e6 points in 16 chunks)
 CLOSEST_CHUNK = 1 << 16
@@ -699,7 +709,12 @@ class TCBSurface:
         cloud's notch, which :meth:`tessellate` leaves out, there is surface too); the better
         result is returned. A point whose descent ends on the domain's edge also descends
         along the edge (:meth:`_edge_closest`), from the nearest of CLOSEST_EDGE_SAMPLES
-        surface points per edge.
+        surface points per edge. A point that ended off the surface also descends from those of
+        its CLOSEST_STARTS nearest starts that lie on its side of the tangent plane at its foot
+        (another part of the surface, a fold or the other flank of a crease, may be closer:
+        the nearest start alone had ended in a local minimum), and again from its foot when
+        the ``iterations`` rounds ran out before it stopped; the nearest result is kept
+        (:meth:`_other_starts`).
 
         ``callback``, if given, is called with ``{"points_done": k, "points": m}`` before the
         first chunk of :data:`CLOSEST_CHUNK` points and after each (k of the m points done);
@@ -767,18 +782,12 @@ class TCBSurface:
                                                                      "points": m}):
                 raise CancelledError(f"closest points cancelled after {s} of {m} points")
             c = slice(s, s + CLOSEST_CHUNK)
-            near, nearest = tree.query(p[c], workers=-1)
-            xc, dc, Sc = self._descend(p[c], starts[nearest], lo, hi, steps, None, size, near,
-                                       edge)
-            # the steps above stay in the domain's box; the few that ended outside the domain
-            # (on the extension over the border rings) are redone from the same starts with
-            # every step kept in the domain (clamping all points' steps to the polygon made
-            # points outside a 596-edge mesh 9x slower)
-            out = np.flatnonzero(~self._in_domain(xc))
-            if len(out):
-                xc[out], dc[out], Sc[out] = self._descend(
-                    p[c][out], starts[nearest[out]], lo, hi, steps, self._into_domain, size,
-                    near[out], edge)
+            near, nearest = tree.query(p[c], k=CLOSEST_STARTS, workers=-1)
+            near, nearest = near.reshape(len(near), -1), nearest.reshape(len(near), -1)
+            xc, dc, Sc, left = self._descend_in(p[c], starts[nearest[:, 0]], lo, hi, steps,
+                                                size, near[:, 0], edge)
+            self._other_starts(p[c], xc, dc, Sc, left, starts, at, near, nearest, lo, hi, steps,
+                               size, edge)
             # a step pushed back onto the edge (of the box or the domain) stalls short of the
             # closest point along it (user test: 286 of 2000 points around patch-01's edge
             # came out up to 33% farther than a known surface point): those that ended on the
@@ -795,7 +804,70 @@ class TCBSurface:
             callback({"points_done": m, "points": m})
         return x, d, S
 
-    def _descend(self, p, x, lo, hi, steps, keep_in, size, near, edge):
+    def _descend_in(self, p, x0, lo, hi, steps, size, near, edge, plane=True):
+        """:meth:`_descend` from the starts ``x0`` with the steps kept in the domain's box;
+        the few that ended outside the domain (on the extension over the border rings) are
+        redone from the same starts with every step kept in the domain (clamping all points'
+        steps to the polygon made points outside a 596-edge mesh 9x slower). Returns the
+        parameters, distances, surface points and the mask of the points still stepping when
+        the rounds ran out (``left`` of :meth:`_newton_closest`)."""
+        left = np.zeros(len(p), dtype=bool)
+        x, d, S = self._descend(p, x0, lo, hi, steps, None, size, near, edge, plane, left)
+        out = np.flatnonzero(~self._in_domain(x))
+        if len(out):
+            still = np.zeros(len(out), dtype=bool)
+            x[out], d[out], S[out] = self._descend(p[out], x0[out], lo, hi, steps,
+                                                   self._into_domain, size, near[out], edge,
+                                                   plane, still)
+            left[out] = still
+        return x, d, S, left
+
+    def _other_starts(self, p, x, d, S, left, starts, at, near, nearest, lo, hi, steps,
+                      size, edge):
+        """Multi-start: the points whose first descent ended at ``x`` (distances ``d``, surface
+        points ``S``, updated in place where better) farther than CLOSEST_ON_SURFACE times
+        ``size`` from the surface (a point on it is at its global minimum) descend again from
+        (1) those of their next nearest ``starts`` (``nearest[:, 1:]``, surface points ``at``,
+        at distances ``near``) that lie on the point's side of the tangent plane at its foot,
+        at an angle of more than asin(CLOSEST_OTHER_SHEET) from it: the ball around the point
+        through its foot lies on that side, so another part of the surface that enters it (a
+        fold, the other flank of a crease, a ripple finer than the starting tessellation) has
+        starts there, while the starts of the foot's own sheet lie near the plane; and (2)
+        their foot, when they were still stepping as the rounds ran out (a descent that took
+        short retried steps round a bend). Each point keeps the nearest of its results. All
+        pairs of points and starts in one vectorized descent, without the cloud's projection
+        start (:meth:`_descend_in`); not in method.md. Own tessellation vertices of a 6 x 7
+        quad mesh fitted with 600-700 control points measured up to 5e-3 of the diagonal from
+        the surface with the nearest start alone, 4e-8 with these (benchmark: the report of
+        branch h88)."""
+        far = d > CLOSEST_ON_SURFACE * size
+        pi, xs0, ns = [], [], []
+        if nearest.shape[1] > 1:
+            n = (p - S) / np.maximum(d, 1e-300)[:, None]
+            w = at[nearest[:, 1:]] - S[:, None, :]  # (m, K - 1, 3)
+            up = np.einsum("mkj,mj->mk", w, n)
+            i, j = np.nonzero(far[:, None]
+                              & (up > CLOSEST_OTHER_SHEET * np.linalg.norm(w, axis=2)))
+            pi.append(i)
+            xs0.append(starts[nearest[i, j + 1]])
+            ns.append(near[i, j + 1])
+        i = np.flatnonzero(left & far)
+        pi.append(i)
+        xs0.append(x[i])
+        ns.append(d[i])
+        i, x0, nr = np.concatenate(pi), np.vstack(xs0), np.concatenate(ns)
+        if len(i) == 0:
+            return
+        xs, ds, Ss, _ = self._descend_in(p[i], x0, lo, hi, steps, size, nr, edge, plane=False)
+        order = np.lexsort((ds, i))  # each point's nearest result first
+        i, xs, ds, Ss = i[order], xs[order], ds[order], Ss[order]
+        first = np.r_[True, i[1:] != i[:-1]]
+        i, xs, ds, Ss = i[first], xs[first], ds[first], Ss[first]
+        b = ds < d[i]
+        x[i[b]], d[i[b]], S[i[b]] = xs[b], ds[b], Ss[b]
+
+    def _descend(self, p, x, lo, hi, steps, keep_in, size, near, edge, plane=True,
+                 left=None):
         """Gauss-Newton (:meth:`_newton_closest`) from the starts ``x`` (at distances
         ``near``) and, for a cloud, also from the points' projections on its plane; the better
         result of each point (starting from the better start only was 1.6x faster on the DEM
@@ -815,20 +887,23 @@ class TCBSurface:
         to 1.5e-3, beside the step's wall (/tmp/s19/rules.py of the nineteenth session)."""
         keep = np.clip if keep_in is None else keep_in
         x = keep(np.array(x, dtype=np.float64), lo, hi)
-        if not (self._param.kind == "plane" and self._param.origin is not None):
+        if not (plane and self._param.kind == "plane" and self._param.origin is not None):
             return self._newton_closest(p, x, self._surface_and_gradient(x), lo, hi, steps,
-                                        keep_in, size)
+                                        keep_in, size, left)
         y = keep(self._param.project(p), lo, hi)
         y, e, T = self._newton_closest(p, y, self._surface_and_gradient(y), lo, hi, steps,
-                                       keep_in, size)
+                                       keep_in, size, left)
         apart = np.max(np.abs(x - y), axis=1) > CLOSEST_SAME_BASIN * float(np.max(hi - lo)) / 96
         apart |= (e > near) | (e > 0.25 * edge) | (keep_in is not None)
         if apart.any():
             a = np.flatnonzero(apart)
+            la = None if left is None else np.zeros(len(a), dtype=bool)
             xa, da, Sa = self._newton_closest(p[a], x[a], self._surface_and_gradient(x[a]), lo,
-                                              hi, steps, keep_in, size)
+                                              hi, steps, keep_in, size, la)
             b = da < e[a]
             y[a[b]], e[a[b]], T[a[b]] = xa[b], da[b], Sa[b]
+            if left is not None:
+                left[a[b]] = la[b]
         return y, e, T
 
     def _on_edge(self, x: np.ndarray) -> np.ndarray:
@@ -976,7 +1051,8 @@ class TCBSurface:
         rows = np.arange(len(y))
         return proj[rows, best], gap[rows, best]
 
-    def _newton_closest(self, p, x, start, lo, hi, iterations, keep_in=None, size=0.0):
+    def _newton_closest(self, p, x, start, lo, hi, iterations, keep_in=None, size=0.0,
+                        left=None):
         """Gauss-Newton from ``x`` (with the surface and its gradient there, ``start``) inside
         the box ``[lo, hi]``, or where ``keep_in(x, lo, hi)`` puts the steps (the data's
         domain: :meth:`_into_domain`); returns the parameters, their distances and the
@@ -991,7 +1067,9 @@ class TCBSurface:
         the surface changes a distance ``|r|`` by at most about ``t^2 / (2 |r|)`` (or ``t``
         when ``t`` is most of ``|r|``), so a point stops once ``t^2 <= 2 delta |r|``; its
         distance is then within ``3 delta``. Most points of a fitted cloud stop one step
-        sooner (method: Gauss-Newton on the squared distance, not in method.md)."""
+        sooner (method: Gauss-Newton on the squared distance, not in method.md). ``left``, a
+        boolean array (m,) if given, is set to the points still stepping when the
+        ``iterations`` rounds ran out (:meth:`_other_starts` descends again from them)."""
         tiny = 1e-8 * float(np.max(hi - lo))
         delta = CLOSEST_DISTANCE_TOL * size
         S, Su, Sv = start
@@ -1017,6 +1095,9 @@ class TCBSurface:
                 moved &= np.einsum("ij,ij->i", t, t) > 2.0 * delta * dist[active]
             active = self._try_steps(p, active[moved], cand[moved], x, dist, (S, Su, Sv),
                                      scale)
+        if left is not None:  # (the points still stepping when the rounds ran out)
+            left[:] = False
+            left[active] = iterations > 0
         return x, dist, S
 
     def distances(self, points, callback=None) -> np.ndarray:
