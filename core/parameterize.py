@@ -2773,7 +2773,7 @@ def mesh_spikes(p: np.ndarray, tris: np.ndarray, edges=None) -> tuple[np.ndarray
     sub = (deg >= 4)[i] & (np.linalg.norm(c, axis=1) > 0.5 * r)[i]
     ii, rr = i[sub], rel[sub]
     keep = np.ones(len(ii), dtype=bool)
-    for _ in range(_MESH_SPIKE_LEFT_OUT):
+    for _ in range(_MESH_SPIKE_LEFT_OUT if len(ii) else 0):
         left = np.maximum(np.bincount(ii[keep], minlength=n), 1)
         c = (np.column_stack([np.bincount(ii[keep], rr[keep, k], n) for k in range(3)])
              / left[:, None])

@@ -164,7 +164,9 @@ def test_fit_with_auto_smoothness_stores_the_chosen_value(clean_scene, addon):
     surface = bpy.context.view_layer.objects.active
     surf = spline_of(surface)
     chosen = surf.report["smoothness"]
-    assert chosen in core_module().fit.AUTO_SMOOTHNESS
+    # (400 points for about as many control points: sparse, the larger candidates too; the
+    # grid is a quadratic, which the largest holds as the fairing's reference)
+    assert chosen in core_module().fit.AUTO_SMOOTHNESS + core_module().fit.SPARSE_SMOOTHNESS
     assert surf.report["smoothness_selection"]["chosen"] == chosen
     assert surface.tcb.auto_smoothness and surface.tcb.smoothness == pytest.approx(chosen)
     # Refine keeps choosing
@@ -2309,9 +2311,11 @@ def test_the_summary_says_why_an_earlier_iteration_is_returned(addon):
     surf = core.fit_surface(np.c_[xy, franke], tolerance=1e-2)
     rep = surf.report
     assert rep["stop_reason"] == "tolerance reached" and rep["returned_iteration"] == 1
-    assert rep["history"][1]["rms_rel"] <= 1e-2 < rep["history"][1]["max_rel"] / 2
-    assert ("the surface of iteration 1 of 2 (the smallest net that met the tolerance)"
-            in ops._summary(surf))
+    # (the coarser start, and the one halfway back to the probe: core.refine.SHRINK_SPLIT)
+    h = rep["history"]
+    assert all(x["rms_rel"] <= 1e-2 < x["max_rel"] / 2 for x in h[1:])
+    assert (f"the surface of iteration 1 of {len(h)} (the smallest net that met the "
+            "tolerance)" in ops._summary(surf))
     r = np.sqrt((80.0 * xy[:3000, 0] - 40.0) ** 2 + (90.0 * xy[:3000, 1] - 45.0) ** 2)
     peak = np.c_[xy[:3000], np.exp(-0.04 * r) * np.cos(0.15 * r)]
     surf = core.fit_surface(peak, tolerance=1e-6, criterion="max", max_iterations=5,
@@ -2321,21 +2325,22 @@ def test_the_summary_says_why_an_earlier_iteration_is_returned(addon):
 
 
 def test_auto_resolution_warns_when_its_finest_mesh_still_strays(clean_scene, addon, capfd):
-    """A 5 x 5 saddle of quads fitted to 1e-4 (about 800 control points on 25 vertices): at 256,
-    the finest Auto Resolution takes, the mesh strays from the spline by several times the
-    fit's max error; the summary warns and names a finer resolution to Re-tessellate with
-    (core.surface.finer_resolution: 1024 here, where the sag is within it; 512 was not)."""
+    """A 17 x 17 saddle of quads fitted to 1e-5 (about 1570 control points on 289 vertices):
+    at 256, the finest Auto Resolution takes, the mesh strays from the spline by several
+    times the fit's max error; the summary warns and names a finer resolution to
+    Re-tessellate with (core.surface.finer_resolution). (A 5 x 5 one's summary, with two
+    more warnings, is cut at about 1000 characters where background Blender prints it.)"""
     bpy = clean_scene
     core = core_module()
-    g = np.linspace(-1, 1, 5)
+    g = np.linspace(-1, 1, 17)
     x, y = np.meshgrid(g, g, indexing="ij")
-    i = np.arange(25).reshape(5, 5)
+    i = np.arange(17 * 17).reshape(17, 17)
     quads = np.c_[i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()]
     saddle = add_mesh(bpy, "Saddle", np.c_[x.ravel(), y.ravel(), 0.5 * (x * x - y * y).ravel()],
                       quads)
     capfd.readouterr()
     with bpy.context.temp_override(**select(bpy, saddle)):
-        assert bpy.ops.tcb.fit_surface(tolerance=1e-4) == {"FINISHED"}
+        assert bpy.ops.tcb.fit_surface(tolerance=1e-5) == {"FINISHED"}
     out = capfd.readouterr().out
     surface = bpy.context.view_layer.objects.active
     surf = spline_of(surface)
@@ -2374,14 +2379,13 @@ def test_auto_resolution_makes_the_mesh_as_close_to_the_spline_as_the_fit_is_to_
     assert len(surface.data.vertices) == len(surf.tessellation_uv(st.resolution)[0])
     assert np.allclose(positions(surface), surf.tessellate(st.resolution)[0], atol=1e-5)
     chosen = st.resolution
-    # Refine: a finer fit, chosen again (at least as fine)
+    # Refine: chosen again for the refined fit (the coarsest within its max error)
     with bpy.context.temp_override(**select(bpy, surface)):
         assert bpy.ops.tcb.refine() == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
     surf = spline_of(surface)
-    assert surface.tcb.resolution >= chosen
-    assert surf.tessellation_sag(surface.tcb.resolution) <= max(
-        surf.report["max"], surf.tessellation_sag(core.surface.AUTO_RESOLUTIONS[-1]))
+    assert (surface.tcb.resolution, pytest.approx(surf.tessellation_sag(
+        surface.tcb.resolution))) == surf.auto_resolution()
     # a script's Resolution is kept; the panel's Auto Resolution (both given) chooses
     # (the fit itself is reused from the cache: the summary speaks of Auto Resolution only
     # when it chose; review)
