@@ -2017,6 +2017,9 @@ def test_mesh_spikes_finds_raised_vertices_and_no_feature_of_a_real_mesh() -> No
         parameterize(p, f)  # (no OutlierError)
     # (a needle of half-angle 4 degrees: 14 r high)
     assert pz.mesh_spikes(*_cone(4))[0].tolist() == [0]
+    # two triangles: no vertex of 3 neighbours, none off its ring's centroid (an IndexError)
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]])
+    assert len(pz.mesh_spikes(square, np.array([[0, 1, 2], [0, 2, 3]]))[0]) == 0
 
 
 def test_a_mesh_s_spike_is_refused_or_dissolved_keeping_a_disk() -> None:
