@@ -280,7 +280,9 @@ def _fit(args) -> int:
         raise TCBError(f"--resolution must be at most {MAX_RESOLUTION} (about 12 million "
                        f"vertices), got {args.resolution}")
     t0 = time.perf_counter()
-    points, faces = read_geometry(args.input)
+    # a DEM's no-data cells come back as points, found and refused or left out below as a
+    # cloud's (the reader had refused them before --drop-invalid was seen: user test)
+    points, faces = read_geometry(args.input, keep_fill_values=True)
     if faces is not None and args.projection is not None:
         raise TCBError(
             f"--projection applies to point clouds; {args.input} is a mesh, which is "

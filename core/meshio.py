@@ -70,11 +70,19 @@ class _MalformedError(Exception):
 # --------------------------------------------------------------------------------------------
 
 
-def read_geometry(path: PathLike) -> tuple[np.ndarray, np.ndarray | None]:
+def read_geometry(path: PathLike, *, keep_fill_values: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray | None]:
     """Read points and (optionally) faces from a file; the format follows the extension.
 
     Args:
         path: file to read (see the module docstring for the formats).
+        keep_fill_values: a DEM (``.npz`` with ``elevation``) whose cells without data hold
+            a common fill value (-9999 ...) and no ``nodata`` key is refused, since those
+            cells would be fitted as terrain; with True its cells are returned as points
+            (fill values and all) for the caller to find with
+            :func:`core.parameterize.fill_value_rows` and leave out, as the command line's
+            ``--drop-invalid`` does for any point cloud (it had refused the DEM before it
+            saw the option: user test).
 
     Returns:
         ``(points, faces)``: ``points (n, 3) float64``; ``faces (f, 3) int64`` triangles with
@@ -96,7 +104,9 @@ def read_geometry(path: PathLike) -> tuple[np.ndarray, np.ndarray | None]:
         )
     try:
         # (a reader may add which columns the file stored in 32 bits: PLY can mix them)
-        points, faces, *single = _READERS[ext](p)
+        reader = _READERS[ext]
+        points, faces, *single = (reader(p, keep_fill_values=keep_fill_values)
+                                  if reader is _read_npz else reader(p))
     except _MalformedError as exc:
         raise FileFormatError(f"cannot read {p.name!r}: {exc}") from None
     except OSError as exc:
@@ -934,9 +944,11 @@ def _npz_array(z, key: str) -> np.ndarray:
     return z[key]
 
 
-def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    """``points`` (+ optional ``faces``), or a DEM (``elevation`` + ``xmin..ymax``). A file
-    that is not a zip archive, or a damaged or truncated one, is refused with a message."""
+def _read_npz(path: Path, keep_fill_values: bool = False
+              ) -> tuple[np.ndarray, np.ndarray | None]:
+    """``points`` (+ optional ``faces``), or a DEM (``elevation`` + ``xmin..ymax``; with
+    ``keep_fill_values`` see :func:`read_geometry`). A file that is not a zip archive, or a
+    damaged or truncated one, is refused with a message."""
     with open(path, "rb") as fh:
         magic = fh.read(len(_NPY_MAGIC))
     if not magic:
@@ -969,7 +981,8 @@ def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
                             f"({int(bad.sum())} such values)")
                 return pts, _concave_split(pts, f.astype(np.int64))
             if "elevation" in keys:
-                return _dem_points({k: _npz_array(z, k) for k in keys}), None
+                return _dem_points({k: _npz_array(z, k) for k in keys},
+                                   keep_fill_values), None
     except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
         raise _MalformedError(f"the zip archive is damaged or truncated ({exc})") from None
     raise _MalformedError(
@@ -978,7 +991,7 @@ def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     )
 
 
-def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
+def _dem_points(z: dict[str, np.ndarray], keep_fill_values: bool = False) -> np.ndarray:
     """Grid points of a DEM: ``elevation`` (rows, cols), bounds ``xmin, xmax, ymin, ymax``.
 
     Column ``j`` is at ``x = linspace(xmin, xmax, cols)[j]`` and row ``i`` at
@@ -1002,6 +1015,9 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
     the south-west corner, ``x' = (x - x0) * 111200 cos(lat_mid)``, ``y' = (y - y0) * 111200``;
     an optional key ``units`` (``'degrees'`` or ``'metres'``) overrides the guess. Non-finite
     elevations (no data) are skipped, and so are values equal to an optional ``nodata`` key.
+    Without that key, cells at a common fill value far below all others are refused
+    (:func:`_refuse_fill_values`), or with ``keep_fill_values`` returned as points for the
+    caller to leave out; they are no relief in the guess of the units either way.
     """
     elev = np.asarray(z["elevation"])
     if elev.ndim != 2 or min(elev.shape) < 2 or not np.issubdtype(elev.dtype, np.number):
@@ -1027,12 +1043,20 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
         gx, gy = np.meshgrid(_dem_nodes(xmin, xmax, cols, z.get("dx"), "x"),
                              _dem_nodes(ymin, ymax, rows, z.get("dy"), "y"))
     h = elev.astype(np.float64)
+    fill = np.zeros(h.shape, dtype=bool)  # cells at a fill value, without a 'nodata' key
+    if "nodata" not in z:
+        finite = np.isfinite(h)
+        if not keep_fill_values:
+            _refuse_fill_values(h[finite])
+        found = fill_value_rows(h[finite].reshape(-1, 1))
+        if found is not None:
+            fill[finite] = found[0]
     units = str(z["units"]) if "units" in z else "auto"
     if units not in ("auto", "degrees", "metres", "meters"):
         raise _MalformedError(f"unknown DEM units {units!r}; use 'degrees' or 'metres'")
     if units == "auto":
         extent = max(abs(xmax - xmin), abs(ymax - ymin))
-        finite = h[np.isfinite(h)]
+        finite = h[np.isfinite(h) & ~fill]
         if "nodata" in z:  # (its -9999 made a small metric grid's relief look like metres)
             finite = finite[finite != float(z["nodata"])]
         relief = float(np.ptp(finite)) if finite.size else 0.0
@@ -1058,8 +1082,6 @@ def _dem_points(z: dict[str, np.ndarray]) -> np.ndarray:
     keep = np.isfinite(pts[:, 2])
     if "nodata" in z:
         keep &= pts[:, 2] != float(z["nodata"])
-    else:
-        _refuse_fill_values(pts[keep, 2])
     return pts[keep]
 
 

@@ -392,6 +392,28 @@ def test_a_rasters_no_data_fill_is_refused_or_left_out_with_drop_invalid(tmp_pat
     assert verts[:, 2].min() > 250 and verts[:, 2].max() < 350
 
 
+def test_a_dem_no_data_fill_is_refused_or_left_out_with_drop_invalid(tmp_path):
+    """A DEM .npz with -9999 cells and no 'nodata' key was refused by the reader even with
+    --drop-invalid, whose help names a raster's fill value (the same data as .xyz was fitted:
+    user test): refused naming the option without it, left out and counted with it."""
+    ys, xs = np.mgrid[0:30, 0:40]
+    elev = 100 + 5 * np.sin(xs / 6.0) + 3 * np.cos(ys / 5.0)
+    elev[10:13, 20:24] = -9999.0
+    src = tmp_path / "dem.npz"
+    np.savez(src, elevation=elev, xmin=0.0, xmax=390.0, ymin=0.0, ymax=290.0)
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--quiet")
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0
+    assert "12 of the 1200 points have z = -9999" in r.stderr
+    assert "pass --drop-invalid to leave them out" in r.stderr
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--drop-invalid", "--max-control-points",
+            "100", "--max-iterations", "2")
+    assert r.returncode == 0, r.stderr
+    assert "left out 12 points with z = -9999" in r.stderr
+    assert "1188 points" in r.stderr
+    verts, _ = read_geometry(tmp_path / "s.obj")
+    assert verts[:, 2].min() > 85 and verts[:, 2].max() < 115
+
+
 def test_a_mesh_with_a_nan_vertex_gets_command_line_advice(tmp_path):
     """A mesh's NaN vertex was refused with the engine's advice, Python code
     ("points[np.isfinite(points).all(axis=1)]"); --drop-invalid does not apply to a mesh."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import re
+import warnings
 import zipfile
 from pathlib import Path
 
@@ -735,6 +736,21 @@ def test_a_dem_fill_value_without_a_nodata_key_is_refused(tmp_path: Path) -> Non
     np.savez(tmp_path / "deep.npz", elevation=np.where(elev < 0, -9999.0, -9000.0), **bounds)
     assert len(read_geometry(tmp_path / "deep.npz")[0]) == 6  # a trench, not a fill value
 
+
+
+def test_a_dem_fill_value_is_kept_for_the_caller_with_keep_fill_values(tmp_path: Path) -> None:
+    """keep_fill_values returns a DEM's fill cells as points (the CLI's --drop-invalid leaves
+    them out), and they do not make degree-sized bounds look geographic."""
+    elev = np.array([[101.0, 102.0, -9999.0], [104.0, -9999.0, 106.0]])
+    np.savez(tmp_path / "d.npz", elevation=elev, xmin=10.0, xmax=12.0, ymin=5.0, ymax=6.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no conversion from degrees
+        pts, faces = read_geometry(tmp_path / "d.npz", keep_fill_values=True)
+    assert faces is None and len(pts) == 6
+    assert (pts[:, 2] == -9999.0).sum() == 2
+    assert pts[:, 0].max() == 12.0  # metres as stored
+    with pytest.raises(FileFormatError, match="no-data fill value"):
+        read_geometry(tmp_path / "d.npz")
 
 # ---------------------------------------------------------------------------------------------
 # paths
