@@ -442,6 +442,17 @@ def _fit(args) -> int:
               f"error {r['max']:.4g}: pass --resolution {finer} "
               + ("(the finest)" if finer >= MAX_RESOLUTION else "(or more)")
               + " to write the fit as it is", file=sys.stderr)
+    flat = _flat_height_field(surf, points) if faces is None else None
+    if flat is not None and args.relative and args.tolerance > 0:
+        # (terrain "tolerance reached" at RMS 42.7 m on 840 m of relief: 1e-3 of a 44 km
+        # diagonal; the README says terrain wants --absolute, the CLI said nothing: user test)
+        across, height = flat
+        print(f"note: the input is a height field {across:.5g} across and {height:.4g} high, "
+              f"and the tolerance is relative to the bounding-box diagonal: "
+              f"{args.tolerance:g} of it is {args.tolerance * r['diagonal']:.4g} in the "
+              f"data's units ({args.tolerance * r['diagonal'] / height:.2g} of the height "
+              "range); pass --absolute --tolerance T for a tolerance of T in the data's units",
+              file=sys.stderr)
     if advice and args.tolerance > 0:  # the table says why it stopped, not what to change
         unit = " (a fraction of the bounding-box diagonal)" if args.relative else ""
         if near and not mostly_taken_back(r):  # the data's noise is near the tolerance
@@ -456,6 +467,28 @@ def _fit(args) -> int:
             print(f"note: the tolerance {args.tolerance:g}{unit} was not reached: {advice}, or "
                   "loosen --tolerance", file=sys.stderr)
     return 0
+
+
+# a cloud whose bounding-box diagonal is over this many times its height range along its
+# projection is told that a relative tolerance is of the diagonal, not of the heights
+FLAT_HEIGHT_FIELD = 10.0
+
+
+def _flat_height_field(surf, points: np.ndarray):
+    """``(diagonal, height range)`` of a point cloud fitted as a height field (projected on
+    a plane: a DEM raster or a cloud) whose bounding-box diagonal is over FLAT_HEIGHT_FIELD
+    times its range of heights along the projection, else None. Such data (terrain: km
+    across, tens or hundreds of m high) has a relative tolerance of the diagonal that is a
+    large share of its relief."""
+    param = surf.parameterization
+    if param.kind != "plane" or not len(points):
+        return None
+    heights = np.asarray(points, dtype=np.float64) @ np.asarray(param.axes[2], dtype=np.float64)
+    height = float(np.ptp(heights))
+    diagonal = float(surf.report["diagonal"])
+    if height > 0 and diagonal > FLAT_HEIGHT_FIELD * height:
+        return diagonal, height
+    return None
 
 
 def _warning_line(message, category, filename, lineno, line=None) -> str:
