@@ -153,8 +153,8 @@ def _smoothness_text(report: dict) -> str:
 
 def _check_output(path: str | None, what: str, extensions=WRITE_EXTENSIONS) -> None:
     """Refuse an output path before the fit, not after it: a wrong extension, a folder in its
-    place, a missing folder or one that does not accept new files, a file that cannot be
-    replaced."""
+    place, a missing folder (or a file where one of its folders should be) or one that does
+    not accept new files, a file that cannot be replaced."""
     if path is None:
         return
     if Path(path).suffix.lower() not in extensions:
@@ -166,6 +166,11 @@ def _check_output(path: str | None, what: str, extensions=WRITE_EXTENSIONS) -> N
         raise TCBError(f"cannot write the {what} to {path}: it is a folder; give a file name")
     folder = Path(path).parent
     if not folder.is_dir():
+        # a file where a folder of the path should be was called a missing folder (user test)
+        blocking = next((a for a in (folder, *folder.parents) if a.exists()), None)
+        if blocking is not None and not blocking.is_dir():
+            raise TCBError(f"cannot write the {what} to {path}: {blocking} is a file, not a "
+                           "folder")
         raise TCBError(f"cannot write the {what} to {path}: the folder {folder} does not exist")
     if Path(path).exists() and not os.access(path, os.W_OK):
         raise TCBError(f"cannot write the {what} to {path}: the file is read-only")

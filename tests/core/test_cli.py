@@ -314,12 +314,18 @@ def test_bad_options_are_refused_before_the_fit(tmp_path):
     not even exist here, so a check made after the fit would report the missing input
     instead)."""
     missing_input = tmp_path / "never-read.ply"
+    afile = tmp_path / "afile"
+    afile.write_text("not a folder")
     cases = [
         (["-o", tmp_path / "s.obj", "--resolution", "1"], "--resolution must be at least 2"),
         # (100 000 ran out of memory after the fit, with a traceback: user test)
         (["-o", tmp_path / "s.obj", "--resolution", "100000"], "--resolution must be at most 4096"),
         (["-o", tmp_path / "nope" / "s.obj"], "does not exist"),
         (["-o", tmp_path / "s.obj", "--net", tmp_path / "nope" / "n.ply"], "does not exist"),
+        # a file where a folder should be was called a folder that does not exist (user test)
+        (["-o", afile / "s.obj"], f"{afile} is a file, not a folder"),
+        (["-o", tmp_path / "s.obj", "--spline", afile / "deeper" / "s.npz"],
+         f"{afile} is a file, not a folder"),
         (["-o", tmp_path / "s.obj", "--spline", tmp_path / "s.obj"], "use one of .npz"),
         # argparse's own errors too (it printed its usage of 11 lines first: user test)
         (["-o", tmp_path / "s.obj", "--degree", "5"], "invalid choice: 5 (choose from 2, 3)"),
