@@ -233,21 +233,34 @@ def _concave_split(verts: np.ndarray, polys: np.ndarray) -> np.ndarray:
     return polygon_triangles(verts, polys)
 
 
-def _loadtxt(lines: list[str], what: str, **kw) -> np.ndarray:
-    """``np.loadtxt`` over a list of lines; problems become _MalformedError naming ``what``."""
+def _loadtxt(lines: list[str], what: str, numbers=None, **kw) -> np.ndarray:
+    """``np.loadtxt`` over a list of lines; problems become _MalformedError naming ``what``,
+    the line quoted and, given ``numbers`` (the 1-based line numbers in the file of
+    ``lines``), its number."""
     if not lines:
         return np.empty((0, len(kw.get("usecols", (0,)))))
     try:
         return np.loadtxt(lines, ndmin=2, comments=None, **kw)
     except ValueError as exc:
         msg = str(exc).split("\n")[0]
-        # numpy counts the rows of ``lines`` (comments and a header left out): quote the line
-        # itself instead (a file's line 11 was "row 8": user test)
+        # numpy counts the rows of ``lines`` (comments and a header left out), from 0 in a
+        # conversion error and from 1 in a short line's: quote the line itself with its number
+        # in the file instead (a file's line 11 was "row 8", and a short line 1501 "row 1501"
+        # while a bad number on it had no number: user test)
         at = re.search(r" at row (\d+), column (\d+)", msg)
+        short = re.search(r"invalid column index (\d+) at row (\d+) with (\d+) columns?", msg)
+        row = None
         if at and int(at.group(1)) < len(lines):
-            line = lines[int(at.group(1))].strip()
+            row = int(at.group(1))
             msg = f"{msg[: at.start()]} in column {at.group(2)}{msg[at.end():]}"
-            raise _MalformedError(f"bad {what} {line[:60]!r}: {msg}") from None
+        elif short and 0 < int(short.group(2)) <= len(lines):
+            row, k = int(short.group(2)) - 1, int(short.group(3))
+            msg = (f"it has {k} column{'s' if k != 1 else ''}, and column "
+                   f"{int(short.group(1)) + 1} is read")
+        if row is not None:
+            where = f" {numbers[row]}" if numbers is not None else ""
+            raise _MalformedError(f"bad {what}{where} {lines[row].strip()[:60]!r}: {msg}"
+                                  ) from None
         raise _MalformedError(f"bad {what}: {msg}") from None
 
 
@@ -308,9 +321,15 @@ def _read_text(path: Path) -> str:
 
 def _text_lines(path: Path) -> list[str]:
     """Non-empty lines of a text file with ``#`` comments removed."""
+    return _numbered_text_lines(path)[0]
+
+
+def _numbered_text_lines(path: Path) -> tuple[list[str], list[int]]:
+    """:func:`_text_lines` and their 1-based line numbers in the file (for messages)."""
     text = _read_text(path)
     text = re.sub(r"#[^\n]*", "", text)
-    return [ln for ln in text.splitlines() if ln.strip()]
+    numbered = [(k, ln) for k, ln in enumerate(text.splitlines(), 1) if ln.strip()]
+    return [ln for _, ln in numbered], [k for k, _ in numbered]
 
 
 # --------------------------------------------------------------------------------------------
@@ -322,7 +341,7 @@ _OFF_HEADER = re.compile(r"^(ST)?(C)?(N)?(4)?(n)?OFF$")
 
 def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     """ASCII OFF: ``OFF``, ``V F E``, ``V`` vertex lines, ``F`` lines ``n i0 ... i_{n-1}``."""
-    lines = _text_lines(path)
+    lines, numbers = _numbered_text_lines(path)
     if not lines:
         raise _MalformedError("the file is empty")
     head = lines[0].split()
@@ -353,7 +372,8 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
             f"the header announces {nv} vertices and {nf} faces, but only {found} data lines "
             "follow (the file is truncated)"
         )
-    verts = _loadtxt(lines[body : body + nv], "vertex line", usecols=(0, 1, 2))
+    verts = _loadtxt(lines[body : body + nv], "vertex line", numbers[body : body + nv],
+                     usecols=(0, 1, 2))
     faces = _polygons_from_lines(lines[body + nv : body + nv + nf], "face line", verts=verts)
     return verts, (faces if nf else None)
 
@@ -390,6 +410,7 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     the ``v``/``f`` lines (a backslash at a line's end continues it); coordinates are converted
     in bulk by ``np.loadtxt``."""
     coords: list[str] = []
+    coord_lines: list[int] = []  # their line numbers, for messages
     polys: list[list[int]] = []
     text = _read_text(path)
     for lineno, raw in _obj_records(text.splitlines()):
@@ -400,6 +421,7 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
             if len(parts) < 4:
                 raise _MalformedError(f"line {lineno}: a vertex needs x, y, z: {raw.strip()!r}")
             coords.append(" ".join(parts[1:4]))
+            coord_lines.append(lineno)
             continue
         try:
             idx = [int(t.split("/", 1)[0]) for t in parts[1:]]
@@ -413,7 +435,7 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
             )
         if len(idx) >= 3:
             polys.append(idx)
-    verts = _loadtxt(coords, "vertex line", usecols=(0, 1, 2))
+    verts = _loadtxt(coords, "vertex line", coord_lines, usecols=(0, 1, 2))
     if not polys:
         return verts, None
     by_size: dict[int, list[int]] = {}
@@ -773,11 +795,12 @@ def _write_ply(path: Path, v: np.ndarray, f: np.ndarray) -> None:
 _COUNT_LINE = re.compile(r"\s*\d+\s*")
 
 
-def _skip_point_counts(lines: list[str]) -> list[str]:
-    """The lines without the point counts of a Leica ``.pts`` file: a first line holding a
-    lone integer, and, in a file of several scans one after the other, the count before each
-    scan (found by following the counts). A count beyond the lines left means a truncated
-    file; lines after the counted ones are kept as points."""
+def _skip_point_counts(lines: list[str], numbers: list[int]) -> tuple[list[str], list[int]]:
+    """The lines (and their line numbers ``numbers``) without the point counts of a Leica
+    ``.pts`` file: a first line holding a lone integer, and, in a file of several scans one
+    after the other, the count before each scan (found by following the counts). A count
+    beyond the lines left means a truncated file; lines after the counted ones are kept as
+    points."""
     pos, kept = 0, []
     while pos < len(lines) and _COUNT_LINE.fullmatch(lines[pos]):
         n = int(lines[pos])
@@ -786,9 +809,12 @@ def _skip_point_counts(lines: list[str]) -> list[str]:
                 f"a point count line says {n} points but {len(lines) - pos - 1} lines follow "
                 "(the file is truncated)"
             )
-        kept.append(lines[pos + 1 : pos + 1 + n])
+        kept.append(range(pos + 1, pos + 1 + n))
         pos += 1 + n
-    return lines if pos == 0 else [ln for scan in kept for ln in scan] + lines[pos:]
+    if pos == 0:
+        return lines, numbers
+    rows = [k for scan in kept for k in scan] + list(range(pos, len(lines)))
+    return [lines[k] for k in rows], [numbers[k] for k in rows]
 
 
 def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
@@ -796,7 +822,7 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
     (with semicolons, or between whitespace, a decimal comma is read as a point: a
     spreadsheet's CSV or a scanner's export in many locales). A first line holding a lone
     integer is a point count (Leica ``.pts``) and is skipped."""
-    lines = _skip_point_counts(_text_lines(path))
+    lines, numbers = _skip_point_counts(*_numbered_text_lines(path))
     if not lines:
         raise _MalformedError("the file has no data lines")
     data = lines[1:3] or lines[:1]  # the separator of the data lines (line 0 may be a header)
@@ -821,13 +847,14 @@ def _read_xyz(path: Path) -> tuple[np.ndarray, None]:
         [float(t) for t in (lines[0].split(delim))[:3]]
     except ValueError:
         header, lines = lines[0], lines[1:]  # a header line such as 'x,y,z'
+        numbers = numbers[1:]
         if lines and len(header.split(delim)) == len(lines[0].split(delim)):
             cols = _header_columns(header, delim)  # (its names, when they line up)
     if not lines:
         raise _MalformedError("the file has no data lines")
     if len(lines[0].split(delim)) < 3:  # (a header's columns: as many as the data's)
         raise _MalformedError("each line needs at least three numbers (x, y, z)")
-    return _loadtxt(lines, "line", usecols=cols, delimiter=delim), None
+    return _loadtxt(lines, "line", numbers, usecols=cols, delimiter=delim), None
 
 
 _DECIMAL_COMMA = re.compile(r"[+-]?\d+(,\d+)?([eE][+-]?\d+)?")

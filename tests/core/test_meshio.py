@@ -491,9 +491,25 @@ def test_text_in_a_number_column_raises_file_format_error(tmp_path: Path) -> Non
     # after a comment and a header, the bad line is quoted (numpy's "row 8" was line 11)
     good = "".join(f"{k} {k} {k}\n" for k in range(8))
     (tmp_path / "h.xyz").write_text("# scan\nx y z\n" + good + "8 8 3,5\n9 9 9\n")
-    with pytest.raises(FileFormatError, match=r"bad line '8 8 3,5': could not convert string "
-                                              r"'3,5' to float64 in column 3"):
+    with pytest.raises(FileFormatError, match=r"bad line 11 '8 8 3,5': could not convert "
+                                              r"string '3,5' to float64 in column 3"):
         read_geometry(tmp_path / "h.xyz")
+    # a short line by the same number (it was "row 9", 1-based among the data rows, while a
+    # bad number had no number at all: user test), blank lines and a point count counted too
+    (tmp_path / "s.xyz").write_text("# scan\nx y z\n\n" + good + "8 8\n9 9 9\n")
+    with pytest.raises(FileFormatError, match=r"bad line 12 '8 8': it has 2 columns, and "
+                                              r"column 3 is read"):
+        read_geometry(tmp_path / "s.xyz")
+    (tmp_path / "c.pts").write_text("10\n" + good + "8 8 x\n9 9 9\n")
+    with pytest.raises(FileFormatError, match=r"bad line 10 '8 8 x'"):
+        read_geometry(tmp_path / "c.pts")
+    (tmp_path / "m.off").write_text("OFF\n# a comment\n3 1 0\n0 0 0\n1 0 zero\n0 1 0\n"
+                                    "3 0 1 2\n")
+    with pytest.raises(FileFormatError, match=r"bad vertex line 5 '1 0 zero'"):
+        read_geometry(tmp_path / "m.off")
+    (tmp_path / "m.obj").write_text("# obj\nv 0 0 0\nvt 0 0\nv 1 0 O\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(FileFormatError, match=r"bad vertex line 4 '1 0 O'"):
+        read_geometry(tmp_path / "m.obj")
 
 
 def test_npy_and_npz_points_and_faces(tmp_path: Path) -> None:
