@@ -186,9 +186,12 @@ class TCBSurface:
     coefficients : (n_basis, 3) float64, read-only, the coefficients of every basis function
     parameterization : Parameterization of the data it was fitted to
     errors : (N,) float64, ``|S(x_j) - p_j|`` of the last fit (NaN for unused mesh vertices and
-        dropped outliers)
+        dropped outliers); of the fit's control points, also after :meth:`with_control_points`
+        (the surface keeps no copy of the data to measure an edit against)
     report : dict, statistics of the fit (knots, control points, rms, max, history, ...); a new
-        deep copy on every access
+        deep copy on every access. Like ``errors`` they are the fit's: a surface whose control
+        points were edited since (:meth:`with_control_points`) says so with
+        ``report["edited"]``, the number of control points that differ from the fit's
     n_interior : int, the first ``n_interior`` knots are interior knots, the rest border rings
     """
 
@@ -679,7 +682,10 @@ class TCBSurface:
         the border functions stay); this one is unchanged. All ``space.n_basis`` coefficients
         (as in ``coefficients``) are accepted too. ``errors`` and ``report`` still describe the
         fit (the surface keeps no copy of the data): measure an edited surface against the data
-        with :meth:`distances`."""
+        with :meth:`distances`. The new surface's ``report["edited"]`` is the number of its
+        control points (rows of ``coefficients``) that differ from the fit's, and is left out
+        when none does (its rms and max had been read as the edited surface's: user test);
+        it is kept by :meth:`save`."""
         c = _as_control_points(control_points)
         if c.shape == (len(self._active), 3):
             full = np.array(self._c)
@@ -690,8 +696,13 @@ class TCBSurface:
             raise InvalidInputError(
                 f"control_points must have shape ({len(self._active)}, 3), got {c.shape}"
             )
+        report = copy.deepcopy(self._report)
+        report.pop("edited", None)
+        moved = _moved_rows(full, self._fitted_c)
+        if moved:
+            report["edited"] = moved
         edited = TCBSurface(
-            self._space, full, self._param, self._errors, self._report,
+            self._space, full, self._param, self._errors, report,
             self._n_interior, self._options, active=self._active,
         )
         edited._fitted_c = self._fitted_c
@@ -1110,7 +1121,10 @@ class TCBSurface:
 
     # ---- refinement --------------------------------------------------------------------
     def fitted_to(self, points, rounding: float = 0.0) -> bool:
-        """Whether ``points`` are the data this surface was fitted to: the same count and (for
+        """Whether ``points`` are the data this surface's fit was made from (an edited surface,
+        :meth:`with_control_points`, keeps its fit's data, and ``report["edited"]`` says that
+        its control points moved since; it is not a measure of how well the surface fits
+        them, which :meth:`distances` gives): the same count and (for
         surfaces that keep ``report["data_digest"]``; older files do not) the same values in
         the same order, or values that differ from them only by rounding. :meth:`refine` needs
         them.
@@ -1286,7 +1300,7 @@ class TCBSurface:
                 f"{', '.join(_OPTION_NAMES)}"
             )
         if not np.array_equal(self._c, self._fitted_c):  # (as Blender's Refine says: user test)
-            moved = int(np.count_nonzero(np.any(self._c != self._fitted_c, axis=1)))
+            moved = _moved_rows(self._c, self._fitted_c)
             warnings.warn(
                 f"{moved} edited control point{' is' if moved == 1 else 's are'} replaced: "
                 "refine() fits the data again from the knots (the edits are not kept)",
@@ -1451,6 +1465,8 @@ class TCBSurface:
                                           f"points have shape {fitted.shape})")
                 fitted.setflags(write=False)
                 surf._fitted_c = fitted
+                if "edited" not in report:  # (saved before the report said so)
+                    surf._report["edited"] = _moved_rows(surf._c, fitted)
             if "functions" not in report:  # saved when every basis function counted
                 report["functions"] = int(space.n_basis)
                 report["control_points"] = len(surf.active)
@@ -1515,8 +1531,14 @@ class TCBSurface:
         r = self._report
         return (
             f"TCBSurface(mode={self.mode!r}, degree={self.degree}, knots={len(self.knots)}, "
-            f"control_points={len(self._active)}, rms_rel={r.get('rms_rel', float('nan')):.3g})"
+            f"control_points={len(self._active)}, rms_rel={r.get('rms_rel', float('nan')):.3g}"
+            + (f" of the fit, {r['edited']} edited" if r.get("edited") else "") + ")"
         )
+
+
+def _moved_rows(coefficients: np.ndarray, fitted: np.ndarray) -> int:
+    """How many rows of ``coefficients`` differ from the fit's ``fitted`` (report["edited"])."""
+    return int(np.count_nonzero(np.any(coefficients != fitted, axis=1)))
 
 
 def _as_control_points(value) -> np.ndarray:

@@ -4,6 +4,7 @@ The border rings (method.md section 3) carry functions that vanish on the domain
 control points: the budget does not count them and the control net does not show them.
 """
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -106,6 +107,39 @@ def test_editing_the_control_points(ridge):
     np.testing.assert_array_equal(surf.with_control_points(moved).coefficients, moved)
     with pytest.raises(InvalidInputError, match="shape"):
         surf.with_control_points(np.zeros((len(surf.control_points) + 1, 3)))
+
+
+def test_an_edited_surface_says_its_report_and_errors_are_of_the_fit(ridge, tmp_path):
+    """with_control_points kept the fit's rms and max in the report with no word that the
+    surface had moved since, also after a save and a load (user test): report["edited"]
+    counts the control points that differ from the fit's; the fit's numbers, errors and
+    fitted_to (Blender's Refine relies on it) stay the fit's, and moving the control points
+    back to the fit's removes the mark."""
+    surf = ridge
+    assert "edited" not in surf.report
+    C = surf.control_points.copy()
+    C[[3, 7]] += [0.0, 0.0, 0.2]
+    edited = surf.with_control_points(C)
+    assert edited.report["edited"] == 2
+    assert "edited" not in surf.report  # the original's report is not shared
+    assert edited.report["rms"] == surf.report["rms"]
+    np.testing.assert_array_equal(edited.errors, surf.errors)
+    assert "2 edited" in repr(edited) and "edited" not in repr(surf)
+    edited.save(tmp_path / "e.npz")
+    back = TCBSurface.load(tmp_path / "e.npz")
+    assert back.report["edited"] == 2
+    # edited again from the edited surface: counted against the fit, not the last edit
+    C[5] += [0.0, 0.0, 0.1]
+    assert back.with_control_points(C).report["edited"] == 3
+    assert "edited" not in back.with_control_points(surf.control_points).report
+    # a file saved before the report said so: the count from its fitted control points
+    with np.load(tmp_path / "e.npz") as z:
+        arrays = dict(z)
+    report = json.loads(str(arrays["report"]))
+    del report["edited"]
+    arrays["report"] = np.array(json.dumps(report))
+    np.savez(tmp_path / "old.npz", **arrays)
+    assert TCBSurface.load(tmp_path / "old.npz").report["edited"] == 2
 
 
 @pytest.mark.parametrize("mode, degree, budget", [("tcb", 3, 150), ("dcb", 3, 300), ("dcb", 2, 150)])
