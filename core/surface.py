@@ -270,19 +270,28 @@ class TCBSurface:
 
     def __call__(self, uv) -> np.ndarray:
         """Surface points (m, 3) at parameters ``uv`` (m, 2); NaN rows where the spline is not
-        defined (outside :meth:`covers`)."""
+        defined (outside :meth:`covers`).
+
+        The spline is defined on more than the data's domain (:meth:`domain_contains`): the
+        border rings around it (method.md section 3) extend the surface a little beyond the
+        data, and there its points are finite though no data were fitted (an extrapolation);
+        only beyond them are they NaN. So a parameter outside the domain may give a point or
+        NaN (user test: two such parameters gave one of each); mask with
+        :meth:`domain_contains` to keep to the fitted part."""
         return self._evaluate(uv, [(0, 0)])[0]
 
     def derivative(self, uv, derivative=(1, 0)) -> np.ndarray:
         """Partial derivative ``d^(du+dv) S / du^du dv^dv`` (m, 3); ``du + dv <= 2``; NaN rows
-        outside :meth:`covers`."""
+        outside :meth:`covers` (finite a little outside the data's domain: see
+        :meth:`__call__`)."""
         return self._evaluate(uv, [derivative])[0]
 
     def normals(self, uv) -> np.ndarray:
         """Unit normals ``S_u x S_v / |S_u x S_v|`` (m, 3), negated for a mesh wound against
         its canonical winding (``parameterization.flipped``: the map is the reversed faces',
         and the normals face the given faces' way, as they do for the other winding); NaN
-        rows outside :meth:`covers`."""
+        rows outside :meth:`covers` (finite a little outside the data's domain: see
+        :meth:`__call__`)."""
         su, sv = self._evaluate(uv, [(1, 0), (0, 1)])
         n = np.cross(su, sv)
         if self._param.flipped:
@@ -295,7 +304,9 @@ class TCBSurface:
         holds the data's domain and part of the border rings around it (method.md section 3);
         beyond it the links of the outer ring do not close, the basis sums to less than 1 and
         fades to 0, so the surface would be pulled towards the origin. :meth:`__call__`,
-        :meth:`derivative` and :meth:`normals` give NaN there."""
+        :meth:`derivative` and :meth:`normals` give NaN there, and finite values everywhere
+        it covers, also outside the data's domain (:meth:`domain_contains`, a smaller
+        region)."""
         return self._covered(self._space.evaluate(uv))
 
     @staticmethod
@@ -317,7 +328,10 @@ class TCBSurface:
         return out
 
     def domain_contains(self, uv) -> np.ndarray:
-        """Mask of parameters inside the data's parameter domain."""
+        """Mask (m,) of parameters inside the data's parameter domain (a mesh's disk polygon,
+        a cloud's convex hull of its parameters): where the surface was fitted. It lies inside
+        :meth:`covers`, the larger region where the surface is defined (finite, extrapolated
+        by the border rings outside the domain); False here does not mean NaN there."""
         return self._param.contains(uv)
 
     # ---- meshes ------------------------------------------------------------------------

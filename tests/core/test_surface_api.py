@@ -404,3 +404,27 @@ def test_refine_of_a_cloud_in_another_order_maps_it_as_the_fit_did():
             moved = surf.refine(points[perm], max_control_points=120, max_iterations=2)
             np.testing.assert_array_equal(moved.control_points, plain.control_points)
             np.testing.assert_array_equal(moved.errors, plain.errors[perm])
+
+
+def test_the_surface_is_defined_where_its_basis_covers_not_only_on_the_domain(surf):
+    """Two parameters outside the data's domain gave NaN and a finite point (user test): the
+    documented contract is "defined where the basis covers" (the border rings extend the
+    surface beyond the domain), not "NaN outside the domain". The domain lies inside the
+    covered region; there points, derivatives and normals are finite, beyond it NaN; and
+    __call__ and domain_contains say so in their docstrings."""
+    uv = surf.parameterization.uv
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    grid = np.stack(np.meshgrid(np.linspace(lo[0] - 1.0, hi[0] + 1.0, 81),
+                                np.linspace(lo[1] - 1.0, hi[1] + 1.0, 81)), -1).reshape(-1, 2)
+    inside, covered = surf.domain_contains(grid), surf.covers(grid)
+    assert inside.any() and not covered.all()
+    assert np.all(covered[inside])  # the domain lies in the covered region
+    beyond = covered & ~inside  # the border rings: defined though outside the domain
+    assert beyond.any()
+    for values in (surf(grid), surf.derivative(grid), surf.normals(grid)):
+        assert np.isfinite(values[covered]).all()
+        assert np.isnan(values[~covered]).all()
+    for method in (TCBSurface.__call__, TCBSurface.domain_contains):
+        words = " ".join(method.__doc__.split())
+        assert "covers" in words and "domain" in words, method.__name__
+    assert "finite" in " ".join(TCBSurface.domain_contains.__doc__.split())
