@@ -239,7 +239,8 @@ def fit_control_points(
     if G2 is not None:
         G = G + (data_trace / max(G2.diagonal().sum(), 1e-300)) * G2
     G = G.tocsr()
-    L = fairing_reference(space, uv, points, weights)
+    quadratic = quadratic_reference_fits(space, uv, weights)  # (the folds' too)
+    L = fairing_reference(space, uv, points, weights, quadratic)
     GL = G @ L
     if not (has_data | (G.diagonal() > 0)).all():
         raise SingularSystemError(
@@ -253,7 +254,8 @@ def fit_control_points(
     if smoothness == "auto":
         ts = time.perf_counter()
         smoothness, validation = _choose_smoothness(space, uv, points, weights, AtA, AtP, G,
-                                                    chunks if keep else None, scored, sparse)
+                                                    chunks if keep else None, scored, sparse,
+                                                    quadratic=quadratic)
         t_select = time.perf_counter() - ts
     t2 = time.perf_counter()
     if smoothness > 0:
@@ -331,21 +333,33 @@ def affine_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.ndar
     return cp + (np.asarray(space.greville) - cu) @ M
 
 
-# fairing_reference: a quadratic whose normal equations (in centred coordinates scaled to unit
-# RMS) have a smallest eigenvalue below this share of the largest is not taken (data along a
-# curve, a thin strip): the affine reference then
-QUADRATIC_REFERENCE_COND = 1e-8
+# fairing_reference: the quadratic is taken where it is well determined over the data: its
+# normal equations, in parameters whitened by the data's own covariance (a long strip is as
+# good as a square), have a smallest eigenvalue of at least this share of the largest (a
+# square or a disk 0.07-0.08, a square with a hole of 0.3 of its side 0.033, annuli of width
+# 0.3 / 0.2 / 0.1 of the radius 9e-3 / 3.6e-3 / 8e-4: /tmp/s35/cond.py). A thin annulus's
+# quadratic is set by its width, and the fairing carried it into the hole: 0.048 -> 0.107 off
+# there (review) ...
+QUADRATIC_REFERENCE_COND = 2e-3
+# ... and where the data are dense: at least this many points per basis function. Between
+# sparse points the fairing, not the data, shapes the surface, and a quadratic of the whole
+# cloud is no guide to it: 500 points of Franke's function at degree 3 were 0.065 off
+# against 0.055 with the affine reference, in DCB mode 0.097 against 0.083 (review); the
+# CAD-like patches it is for have 100 and more
+QUADRATIC_REFERENCE_POINTS = 5.0
 
 
-def fairing_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.ndarray
-                      ) -> np.ndarray:
+def fairing_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.ndarray,
+                      quadratic: bool | None = None) -> np.ndarray:
     """Control points ``L`` (n_basis, 3) of the reference the fairing measures the surface
     against (module docstring): at degree 2 and 3, the weighted least-squares quadratic map
     ``(u, v) -> p`` of the data, whose control points are its polar form at each function's
     interior knots ``I`` (quadratic reproduction through the blossom, method.md section 2.2:
     ``F({a, b}) = c + g (a + b) / 2 + a^T H b`` for ``c + g x + x^T H x``, at three knots the
-    means over their pairs and the knots); :func:`affine_reference` at degree 1, or where the
-    quadratic is ill-determined (QUADRATIC_REFERENCE_COND).
+    means over their pairs and the knots); :func:`affine_reference` at degree 1, for sparse
+    data or where the quadratic is ill-determined (:func:`quadratic_reference_fits`; given as
+    ``quadratic``, else decided on these weights: a fit decides once, for its
+    cross-validation folds too).
 
     Against the affine reference the second-order energy pulled every curved surface towards
     a plane, most at its border (the fairing's natural boundary condition, zero curvature at
@@ -355,30 +369,22 @@ def fairing_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.nda
     "max" 1195 control points whose final, cross-validated smoothness left fins of 0.53 mm
     along the border (user test; /tmp/s35/fair/cmp.py). Against the quadratic: 37 control
     points and 7.7e-3, 41 and 8.4e-3; a 90-degree cylinder's border 0.11 -> 0.04 mm; Franke,
-    F7, the crease, the DEM and the bundled meshes as before to 3 digits."""
+    F7, the crease, the DEM (quadratic TCB fits of 5000 points and more) and the bundled meshes
+    as before to 3 digits."""
+    if quadratic is None:
+        quadratic = quadratic_reference_fits(space, uv, weights)
+    if not quadratic:
+        return affine_reference(space, uv, points, weights)
     w = np.asarray(weights, dtype=np.float64)
-    total = float(w.sum())
-    if space.degree < 2 or not total > 0 or space.n_basis == 0:
-        return affine_reference(space, uv, points, weights)
-    cu = (w @ uv) / total
-    scale = float(np.sqrt(w @ ((uv - cu) ** 2).sum(axis=1) / total))
-    if not scale > 0:
-        return affine_reference(space, uv, points, weights)
-
-    def monomials(x):  # 1, x, y, x^2, x y, y^2 of centred, scaled parameters
-        x = (x - cu) / scale
-        return np.c_[np.ones(len(x)), x, x[:, 0] ** 2, x[:, 0] * x[:, 1], x[:, 1] ** 2]
+    cu, white = _whitening(uv, w)
     XtWX, XtWP = np.zeros((6, 6)), np.zeros((6, 3))
     for s in range(0, len(uv), CHUNK):
-        X = monomials(uv[s : s + CHUNK])
+        X = _monomials((uv[s : s + CHUNK] - cu) @ white)
         wX = X * w[s : s + CHUNK, None]
         XtWX += wX.T @ X
         XtWP += wX.T @ points[s : s + CHUNK]
-    ev = np.linalg.eigvalsh(XtWX)
-    if not ev[0] > QUADRATIC_REFERENCE_COND * ev[-1]:
-        return affine_reference(space, uv, points, weights)
     coef = np.linalg.solve(XtWX, XtWP)  # (6, 3)
-    K = (np.asarray(space.knots)[space.interior_sets] - cu) / scale  # (n_basis, k, 2)
+    K = (np.asarray(space.knots)[space.interior_sets] - cu) @ white  # (n_basis, k, 2)
     k = K.shape[1]
     pairs = [(a, b) for a in range(k) for b in range(a + 1, k)]
     xx = np.mean([K[:, a, 0] * K[:, b, 0] for a, b in pairs], axis=0)
@@ -386,6 +392,43 @@ def fairing_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.nda
     xy = np.mean([0.5 * (K[:, a, 0] * K[:, b, 1] + K[:, b, 0] * K[:, a, 1])
                   for a, b in pairs], axis=0)
     return np.c_[np.ones(len(K)), K.mean(axis=1), xx, xy, yy] @ coef
+
+
+def _monomials(x: np.ndarray) -> np.ndarray:
+    """1, x, y, x^2, x y, y^2 at the (whitened) parameters ``x`` (m, 2)."""
+    return np.c_[np.ones(len(x)), x, x[:, 0] ** 2, x[:, 0] * x[:, 1], x[:, 1] ** 2]
+
+
+def _whitening(uv: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The weighted mean ``c`` of ``uv`` and a 2 x 2 ``W`` such that ``(uv - c) @ W`` has unit
+    weighted covariance (None when the data are a point or a line)."""
+    total = float(w.sum())
+    cu = (w @ uv) / total
+    d = uv - cu
+    cov = (d * w[:, None]).T @ d / total
+    ev, vec = np.linalg.eigh(cov)
+    if not ev[0] > 1e-12 * max(ev[1], 1e-300):
+        return cu, None
+    return cu, vec / np.sqrt(ev)
+
+
+def quadratic_reference_fits(space, uv: np.ndarray, weights: np.ndarray) -> bool:
+    """Whether :func:`fairing_reference` takes the data's quadratic: degree 2 or more, at least
+    QUADRATIC_REFERENCE_POINTS points of positive weight per basis function, and the quadratic
+    well determined over the data (QUADRATIC_REFERENCE_COND, in whitened parameters)."""
+    w = np.asarray(weights, dtype=np.float64)
+    if (space.degree < 2 or space.n_basis == 0 or not float(w.sum()) > 0
+            or np.count_nonzero(w > 0) < QUADRATIC_REFERENCE_POINTS * space.n_basis):
+        return False
+    cu, white = _whitening(uv, w)
+    if white is None:
+        return False
+    XtWX = np.zeros((6, 6))
+    for s in range(0, len(uv), CHUNK):
+        X = _monomials((uv[s : s + CHUNK] - cu) @ white)
+        XtWX += (X * w[s : s + CHUNK, None]).T @ X
+    ev = np.linalg.eigvalsh(XtWX)
+    return bool(ev[0] > QUADRATIC_REFERENCE_COND * ev[-1])
 
 
 def check_smoothness(value):
@@ -404,14 +447,15 @@ def check_smoothness(value):
 
 
 def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=None,
-                       sparse=None):
+                       sparse=None, quadratic=None):
     """Cross-validated choice of the fairing weight (method.md section 5).
 
     The points are dealt into :data:`FOLDS` folds by :func:`_folds` (same input, same choice;
     points with (nearly) the same parameters share a fold). For fold
     ``f`` the normal equations of the other points are those of all points minus the fold's
     rows, ``K_f = A^T W A - A_f^T W_f A_f + s G_f`` and ``A^T W P - A_f^T W_f P_f + s G_f L_f``
-    (``L_f`` the affine reference of the points kept; ``G_f``
+    (``L_f`` the reference of the points kept, :func:`fairing_reference`, quadratic or not as
+    ``quadratic`` says, the full fit's decision; ``G_f``
     scaled by the data term of the points kept, as in a fit with the fold's weights set to 0,
     without its final iterative refinement); every candidate ``s`` of :data:`AUTO_SMOOTHNESS`
     is solved on them (one sparse factorization each; the basis is not evaluated again) and
@@ -457,7 +501,8 @@ def _choose_smoothness(space, uv, points, weights, AtA, AtP, G, chunks, scored=N
         rhs = AtP - WAf.T @ Pf
         # G is scaled by the data term (module docstring): here by that of the points kept
         G_fit = (K_fit.diagonal().sum() / data_trace) * G
-        GL_fit = G_fit @ fairing_reference(space, uv, points, np.where(fold == f, 0.0, weights))
+        GL_fit = G_fit @ fairing_reference(space, uv, points, np.where(fold == f, 0.0, weights),
+                                           quadratic)
         for s in candidates:
             if s in failed:
                 continue

@@ -2729,6 +2729,7 @@ _MESH_SPIKE_FLAT = 10.0
 _MESH_SPIKE_MAX_SHARE = 0.05  # more spikes than this share of the vertices: a rough mesh
 _MESH_SPIKE_ROUNDS = 3  # the spikes found, dissolved, then the mesh without them checked again
 _MESH_SPIKE_LEFT_OUT = 2  # the test again without 1, then 2 of each ring's farthest neighbours
+_MESH_SPIKE_SLOPE_OF_3 = 30.0  # ... and where 3 are left, steeper than this (88 degrees)
 
 
 def mesh_spikes(p: np.ndarray, tris: np.ndarray, edges=None) -> tuple[np.ndarray, np.ndarray]:
@@ -2753,9 +2754,10 @@ def mesh_spikes(p: np.ndarray, tris: np.ndarray, edges=None) -> tuple[np.ndarray
     1.4e5), the vertices beside it 0.02. More than ``_MESH_SPIKE_MAX_SHARE`` of the vertices:
     a rough mesh, none is a spike. The vertex beside a spike sees it in its ring (bent: not
     flagged); two adjacent spikes see each other, so the test is made again with each ring
-    without the neighbour farthest from its centroid (at least 3 left): each is found then (three in a row,
-    the middle one not); a corner vertex of fewer than 3 neighbours (one triangle) is not
-    checked. A mesh of fewer than 20 vertices
+    without the neighbour farthest from its centroid, then the next one (at least 3 left;
+    with 3, whose plane has no scatter, steeper than _MESH_SPIKE_SLOPE_OF_3): each is found
+    then; a corner vertex of fewer than 3 neighbours is tested against the plane of its
+    neighbours and theirs. A mesh of fewer than 20 vertices
     may have one spike (the share rounded up). Vectorized: sums over the edges (bincount) and
     one batched 3 x 3 eigendecomposition: 1.9 s for a grid mesh of 4.9e5 vertices (its map
     46 s, on the same busy machine); the rings without neighbours, on the vertices off their
@@ -2790,9 +2792,13 @@ def mesh_spikes(p: np.ndarray, tris: np.ndarray, edges=None) -> tuple[np.ndarray
         order = np.lexsort((-far, ii))
         first = np.r_[True, ii[order][1:] != ii[order][:-1]]  # each vertex's farthest first
         keep[order[first]] = False
-        more, high = _ring_spikes(ii[keep], rr[keep], n, 3)
-        height = np.where(spike, height, high)
-        spike |= more
+        # (3 left: their plane has no scatter, so the flat test cannot fail; then steeper:
+        # a rough Delaunay mesh had a vertex 9x its 3 nearest neighbours' ring size above
+        # them refused, review)
+        for least, slope in ((4, _MESH_SPIKE_SLOPE), (3, _MESH_SPIKE_SLOPE_OF_3)):
+            more, high = _ring_spikes(ii[keep], rr[keep], n, least, slope)
+            height = np.where(spike, height, high)
+            spike |= more
     # a corner vertex of fewer than 3 neighbours (one triangle, or two): against the plane of
     # its neighbours and theirs
     low = np.flatnonzero((deg > 0) & (deg < 3))
@@ -2811,11 +2817,12 @@ def mesh_spikes(p: np.ndarray, tris: np.ndarray, edges=None) -> tuple[np.ndarray
     return found.astype(np.int64), height[found]
 
 
-def _ring_spikes(i: np.ndarray, rel: np.ndarray, n: int, least: int
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def _ring_spikes(i: np.ndarray, rel: np.ndarray, n: int, least: int,
+                 slope: float = _MESH_SPIKE_SLOPE) -> tuple[np.ndarray, np.ndarray]:
     """:func:`mesh_spikes`' test at each of the ``n`` vertices with at least ``least`` of the
-    neighbours given (``rel``: vertex ``i``'s neighbour minus the vertex): whether it is a
-    spike (n,) and its height above the plane of those neighbours (n,; 0 where not tested)."""
+    neighbours given (``rel``: vertex ``i``'s neighbour minus the vertex), steeper than
+    ``slope``: whether it is a spike (n,) and its height above the plane of those neighbours
+    (n,; 0 where not tested)."""
     deg = np.bincount(i, minlength=n)
     at = np.flatnonzero(deg >= least)
     spike, height = np.zeros(n, dtype=bool), np.zeros(n)
@@ -2833,7 +2840,7 @@ def _ring_spikes(i: np.ndarray, rel: np.ndarray, n: int, least: int
     w, v = np.linalg.eigh(cov[at])
     s = np.sqrt(np.maximum(w[:, 0], 0.0))
     d = np.abs(np.einsum("ij,ij->i", c[at], v[:, :, 0]))  # (the vertex is at 0: -c off)
-    spike[at] = (d > _MESH_SPIKE_SLOPE * r[at]) & (d > _MESH_SPIKE_FLAT * s)
+    spike[at] = (d > slope * r[at]) & (d > _MESH_SPIKE_FLAT * s)
     height[at] = d
     return spike, height
 

@@ -1126,7 +1126,8 @@ def adaptive_fit(
     of the tolerance when that is at most SHRINK_FRACTION of them (at least MIN_START_KNOTS),
     as long as they meet it, and with a max error within SHRINK_MAX times the tolerance or the
     max of the fit they follow; the first that misses (or swings) ends the run and the last
-    that met it is returned, unless one start halfway between the two (SHRINK_SPLIT) meets it
+    that met it is returned, unless, after a miss (not a swing), one start halfway between
+    the two (SHRINK_SPLIT) meets it
     (a plane, a sphere cap, a bump had nets of 140-148 control points,
     the probe's, whatever the tolerance: now 37-55 at 1e-2; benchmarks/net_size.py). A
     continued run (``start_knots``) with a tolerance inserts the knots
