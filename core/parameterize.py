@@ -2426,6 +2426,80 @@ def _map_energy(p: np.ndarray, tris: np.ndarray, uv: np.ndarray) -> float:
     return float(np.sum(area * frob * (1.0 + 1.0 / det**2)) / (4.0 * area.sum()))
 
 
+# the parts of a nested dissection (_dissection_order) left whole: at most this many vertices
+DISSECTION_LEAF = 32
+
+
+def _dissection_order(r: np.ndarray, c: np.ndarray, x: np.ndarray,
+                      leaf: int = DISSECTION_LEAF) -> np.ndarray:
+    """A fill-reducing ordering (nested dissection) of the ``m = len(x)`` unknowns of a system
+    whose off-diagonal pattern is the edges ``r[k] - c[k]``, with positions ``x`` (m, 3): each
+    part of more than ``leaf`` vertices is cut at the median of its longest side, the
+    vertices of its second half with an edge to the first are its separator (ordered after
+    both halves), and the halves are cut in turn, all parts of a level at once. Coordinate
+    bisection: any cut is a valid separator, its quality only changes the fill. As a
+    permutation ``order`` of ``range(m)``: factor ``A[order][:, order]``.
+
+    On the 1000x1000 grid mesh's mean-value system, SuperLU's factor of it took 6.3 s with
+    1.14e8 entries of L + U, against 17.1 s and 1.48e8 with its own MMD_AT_PLUS_A ordering
+    (3.5 s for this ordering, made once for the two systems); 450x450: 0.85 s (1.93e7)
+    against 1.4 s (2.16e7), 0.4 s to order."""
+    m = len(x)
+    part = np.zeros(m, np.int64)
+    active = np.ones(m, bool)
+    key = np.zeros(m, np.int64)  # base 3 digits, a level each: half 0, half 1, separator 2
+    o = np.arange(m)  # the active vertices, by part
+    for _ in range(38):  # (3^39 > 2^63)
+        if not len(o):
+            break
+        po = part[o]
+        start = np.flatnonzero(np.r_[True, po[1:] != po[:-1]])
+        size = np.diff(np.r_[start, len(o)])
+        if not (size > leaf).any():
+            break
+        xo = x[o]
+        axis = np.argmax(np.maximum.reduceat(xo, start, axis=0)
+                         - np.minimum.reduceat(xo, start, axis=0), axis=1)
+        group = np.repeat(np.arange(len(start)), size)
+        s = np.lexsort((xo[np.arange(len(o)), axis[group]], group))
+        rank = np.empty(len(o), np.int64)
+        rank[s] = np.arange(len(o)) - start[group[s]]
+        split = np.repeat(size > leaf, size)
+        side = np.full(m, -1, np.int64)
+        side[o[split]] = rank[split] >= np.repeat(size // 2, size)[split]
+        cross = (side[r] >= 0) & (side[c] >= 0) & (side[r] != side[c]) & (part[r] == part[c])
+        sep = np.where(side[r[cross]] == 1, r[cross], c[cross])
+        digit = np.maximum(side, 0)
+        digit[sep] = 2
+        key = 3 * key + digit
+        cut = side >= 0
+        part[cut] = 2 * part[cut] + side[cut]
+        active[o[~split]] = False
+        active[sep] = False
+        o = o[s]
+        o = o[active[o]]
+    return np.argsort(key, kind="stable")
+
+
+class _OrderedLU:
+    """SuperLU's factor of ``a[order][:, order]`` (its ordering NATURAL, its pivoting as
+    by default) answering for ``a``, or of ``a`` by MMD_AT_PLUS_A when ``order`` is None."""
+
+    def __init__(self, a, order=None):
+        self.order = order
+        if order is None:
+            self.lu = splu(sp.csc_matrix(a), permc_spec="MMD_AT_PLUS_A")
+        else:
+            self.lu = splu(sp.csr_matrix(a)[order][:, order].tocsc(), permc_spec="NATURAL")
+
+    def solve(self, rhs, trans="N"):
+        if self.order is None:
+            return self.lu.solve(rhs, trans=trans)
+        x = np.empty(rhs.shape)
+        x[self.order] = self.lu.solve(np.asfortranarray(rhs[self.order]), trans=trans)
+        return x
+
+
 def _cotan_weights(p: np.ndarray, tris: np.ndarray, n: int) -> sp.csr_matrix:
     """The cotangent weights ``C`` (``(n, n)`` CSR, symmetric): ``c_ij = (cot alpha_ij +
     cot beta_ij) / 2``, ``alpha_ij, beta_ij`` the angles opposite edge ``ij`` in its two
@@ -2444,19 +2518,19 @@ def _cotan_weights(p: np.ndarray, tris: np.ndarray, n: int) -> sp.csr_matrix:
                          shape=(n, n)).tocsr()
 
 
-def _cotan_carried(p, tris, loop, interior, defect) -> np.ndarray | None:
+def _cotan_carried(p, tris, loop, interior, defect, order=None) -> np.ndarray | None:
     """:func:`_carried_curvature` by the cotangent Laplacian, or None when its system is
     singular or its solution not finite. Factored with SuperLU's minimum-degree ordering of
     ``A^T + A`` (MMD_AT_PLUS_A; the matrix is symmetric), not its default COLAMD: on a
     450x450 grid mesh 1.9x less time and 44% less fill (21.6e6 entries of L + U against
-    38.3e6), the same solution to 4e-14 (relative)."""
+    38.3e6), the same solution to 4e-14 (relative); ``order``: the ordering of
+    :func:`_dissection_order` instead (:class:`_OrderedLU`)."""
     c = _cotan_weights(p, tris, len(p))[interior]
     lap = sp.diags(np.asarray(c.sum(axis=1)).ravel()) - c[:, interior]
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # (a singular factor is caught below)
-            carried = c[:, loop].T @ splu(sp.csc_matrix(lap),
-                                          permc_spec="MMD_AT_PLUS_A").solve(defect)
+            carried = c[:, loop].T @ _OrderedLU(lap, order).solve(defect)
         if np.isfinite(carried).all():
             return carried
     except RuntimeError:
@@ -2978,13 +3052,20 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     """:func:`parameterize_mesh` of faces taken in the winding given (the map itself).
 
     Cost: the two sparse factorizations (the cotangent Laplacian of :func:`_cotan_carried`,
-    then the mean-value system) are most of it. Both with the MMD_AT_PLUS_A ordering, and
-    the cotangent factor freed before the mean-value one is made, ``parameterize`` of a
-    binary-PLY grid mesh of a noisy bump (/tmp/u35/big_mesh_timing.py's generator) went from
-    7.25 to 4.75 s and 1.15 to 0.55 GB peak RSS at 450x450 (202500) vertices, and from 91 to
-    50 s and 6.6 to 2.7 GB at 1000x1000 (``/usr/bin/time -v python -c "parameterize(
-    *read_geometry('bigmesh.ply'))"``, before and after alternated on a shared 2-core
-    machine); the uv the same to 5e-14 there and on data/*.off."""
+    then the mean-value system) are most of it. ``parameterize`` of a binary-PLY grid mesh
+    of a noisy bump (/tmp/u35/big_mesh_timing.py's generator; ``/usr/bin/time -v python -c
+    "parameterize(*read_geometry('bigmesh.ply'))"``, versions alternated on a shared 2-core
+    machine), seconds and peak RSS:
+
+    ========================================  ==============  ===============
+    ordering of the factors                   450x450 (2e5)   1000x1000 (1e6)
+    ========================================  ==============  ===============
+    COLAMD (the default), both held at once   7.4 s, 1.15 GB  91 s, 6.6 GB
+    MMD_AT_PLUS_A, the cotangent one freed    5.3 s, 0.55 GB  50 s, 2.7 GB
+    one :func:`_dissection_order` for both    4.3 s, 0.52 GB  34 s, 2.4 GB
+    ========================================  ==============  ===============
+
+    The uv the same to 5e-14 there and on data/*.off."""
     p = _as_points(points, what="vertices")
     n = len(p)
     tris = _as_triangles(faces, n, p)
@@ -3146,18 +3227,22 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     interior = used.copy()
     interior[loop] = False
     ii = np.flatnonzero(interior)
-    w = lu = known = None
+    w = lu = known = order = None
+    if len(ii):  # (one ordering for the two systems on the interior's edges)
+        at = np.full(n, -1)
+        at[ii] = np.arange(len(ii))
+        inner = (at[ea] >= 0) & (at[eb] >= 0)
+        order = _dissection_order(at[ea[inner]], at[eb[inner]], p[ii])
     if FLAT_BOUNDARY:  # (the cotangent solve of _flattened_map first, its factor freed)
         theta = _angle_sums(p, tris)
-        known = (theta, _cotan_carried(p, tris, loop, ii, 2.0 * np.pi - theta[ii])
+        known = (theta, _cotan_carried(p, tris, loop, ii, 2.0 * np.pi - theta[ii], order)
                  if len(ii) else np.zeros(len(loop)))
     if len(ii):
         w = _mean_value_weights(p, tris, n)[ii]
         a = sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w[:, ii]
         rhs = w[:, loop] @ uv[loop]
         try:
-            # (MMD_AT_PLUS_A: a is structurally symmetric; see _cotan_carried)
-            lu = splu(sp.csc_matrix(a), permc_spec="MMD_AT_PLUS_A")
+            lu = _OrderedLU(a, order)  # (its pattern that of the cotangent system)
             sol = lu.solve(np.asfortranarray(rhs))
         except RuntimeError as exc:  # singular factor
             raise ParameterizationError(
