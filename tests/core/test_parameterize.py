@@ -2084,3 +2084,34 @@ def test_a_fold_refusal_quotes_the_share_of_the_best_direction_tried() -> None:
             assert abs(float(across.group(2))) > 0.99
     assert shares[0] < shares[1] < shares[2] < 60.0, shares
     assert shares[1] < 40.0  # (was 100.0)
+
+
+def test_the_dissection_order_is_a_fill_reducing_permutation_and_keeps_the_map() -> None:
+    """``_dissection_order`` (the ordering of the mesh map's two sparse factors) is a
+    permutation; on a 120x120 grid its factor has less fill than SuperLU's default COLAMD
+    and at most 10% more than MMD_AT_PLUS_A (7% measured; 10% less on 400x400, 23% less on
+    1000x1000, where it factors 2.7x faster), and the map it gives is COLAMD's, to rounding."""
+    k = 120
+    x, y = np.meshgrid(np.linspace(-1, 1, k), np.linspace(-1, 1, k))
+    pts = np.column_stack([x.ravel(), y.ravel(), 0.3 * np.sin(2 * x.ravel()) * y.ravel()])
+    q = (np.arange(k - 1)[:, None] * k + np.arange(k - 1)[None, :]).ravel()
+    faces = np.concatenate([np.column_stack([q, q + 1, q + k + 1]),
+                            np.column_stack([q, q + k + 1, q + k])])
+    par = parameterize_mesh(pts, faces)
+    interior = np.flatnonzero(par.used & ~np.isin(np.arange(len(pts)), par.boundary))
+    w = pz._mean_value_weights(pts, par.faces, len(pts))[interior]
+    a = pz.sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w[:, interior]
+    r, c = a.nonzero()
+    order = pz._dissection_order(r[r != c], c[r != c], pts[interior])
+    assert np.array_equal(np.sort(order), np.arange(len(interior)))
+    nested = pz._OrderedLU(a, order)
+    fill = nested.lu.L.nnz + nested.lu.U.nnz
+    for spec, most in (("COLAMD", 1.0), ("MMD_AT_PLUS_A", 1.1)):
+        lu = pz.splu(pz.sp.csc_matrix(a), permc_spec=spec)
+        assert fill < most * (lu.L.nnz + lu.U.nnz)
+    rhs = w[:, par.boundary] @ par.uv[par.boundary]
+    plain = pz.splu(pz.sp.csc_matrix(a)).solve(np.asfortranarray(rhs))
+    np.testing.assert_allclose(nested.solve(np.asfortranarray(rhs)), plain, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(nested.solve(rhs[:, 0], trans="T"),
+                               pz.splu(pz.sp.csc_matrix(a)).solve(rhs[:, 0], trans="T"),
+                               rtol=0, atol=1e-12 * np.abs(rhs).max())
