@@ -1530,8 +1530,8 @@ def test_a_cross_validated_smoothness_that_swings_off_the_data_is_raised(monkeyp
     Since the points are fitted in an order of their coordinates, no cloud of 20-50 points of
     sin(kx), k = 3..6, seeds 0-9, gets a swinging choice (the user test's cloud now gets 1e-5,
     0.23 off inside its domain): the cross-validation is made to choose the least smoothing
-    here, 1e-7, whose surface swings (0.47 off inside the domain at 2 places; 1e-6 too, 0.42;
-    0.52 and 0.45 with the fairing's affine reference), and 1e-5 (0.20) is taken."""
+    here, 1e-7, whose surface swings (0.52 off inside the domain at 2 places; 1e-6 too, 0.45),
+    and 1e-5 (0.21) is taken."""
     def off(surf):  # inside the data's domain (beyond it the surface extrapolates)
         g = np.random.default_rng(9).random((5000, 2))
         uv = surf.parameterization.project(np.c_[g, np.sin(3 * g[:, 0])])
@@ -1551,7 +1551,7 @@ def test_a_cross_validated_smoothness_that_swings_off_the_data_is_raised(monkeyp
     assert sel["chosen"] == 1e-7 and surf.report["smoothness"] == 1e-5
     assert "1e-07, the cross-validated choice, the surface swung away" in sel["smoother"]
     assert chosen.report["swings"]["places"] > 0 and surf.report["swings"]["places"] == 0
-    assert off(surf) < 0.25 < 0.4 < off(chosen)
+    assert off(surf) < 0.3 < 0.5 < off(chosen)
     monkeypatch.setattr(core.fit, "_one_standard_error", one_se)
     xy = np.random.default_rng(1).random((30, 2))
     with warnings.catch_warnings():
