@@ -373,16 +373,11 @@ def fairing_reference(space, uv: np.ndarray, points: np.ndarray, weights: np.nda
     as before to 3 digits."""
     if quadratic is None:
         quadratic = quadratic_reference_fits(space, uv, weights)
-    if not quadratic:
+    moments = _quadratic_moments(uv, np.asarray(weights, dtype=np.float64),
+                                 points) if quadratic else None
+    if moments is None:
         return affine_reference(space, uv, points, weights)
-    w = np.asarray(weights, dtype=np.float64)
-    cu, white = _whitening(uv, w)
-    XtWX, XtWP = np.zeros((6, 6)), np.zeros((6, 3))
-    for s in range(0, len(uv), CHUNK):
-        X = _monomials((uv[s : s + CHUNK] - cu) @ white)
-        wX = X * w[s : s + CHUNK, None]
-        XtWX += wX.T @ X
-        XtWP += wX.T @ points[s : s + CHUNK]
+    cu, white, XtWX, XtWP = moments
     coef = np.linalg.solve(XtWX, XtWP)  # (6, 3)
     K = (np.asarray(space.knots)[space.interior_sets] - cu) @ white  # (n_basis, k, 2)
     k = K.shape[1]
@@ -412,6 +407,25 @@ def _whitening(uv: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return cu, vec / np.sqrt(ev)
 
 
+def _quadratic_moments(uv: np.ndarray, w: np.ndarray, points: np.ndarray | None = None):
+    """``(c, W, X^T w X, X^T w P)`` of the weighted least-squares quadratic in the whitened
+    parameters ``(uv - c) @ W`` (:func:`_whitening`; ``X`` their :func:`_monomials`),
+    accumulated in chunks of points (the last None without ``points``); None for data on a
+    line."""
+    cu, white = _whitening(uv, w)
+    if white is None:
+        return None
+    XtWX = np.zeros((6, 6))
+    XtWP = None if points is None else np.zeros((6, 3))
+    for s in range(0, len(uv), CHUNK):
+        X = _monomials((uv[s : s + CHUNK] - cu) @ white)
+        wX = X * w[s : s + CHUNK, None]
+        XtWX += wX.T @ X
+        if points is not None:
+            XtWP += wX.T @ points[s : s + CHUNK]
+    return cu, white, XtWX, XtWP
+
+
 def quadratic_reference_fits(space, uv: np.ndarray, weights: np.ndarray) -> bool:
     """Whether :func:`fairing_reference` takes the data's quadratic: degree 2 or more, at least
     QUADRATIC_REFERENCE_POINTS points of positive weight per basis function, and the quadratic
@@ -420,14 +434,10 @@ def quadratic_reference_fits(space, uv: np.ndarray, weights: np.ndarray) -> bool
     if (space.degree < 2 or space.n_basis == 0 or not float(w.sum()) > 0
             or np.count_nonzero(w > 0) < QUADRATIC_REFERENCE_POINTS * space.n_basis):
         return False
-    cu, white = _whitening(uv, w)
-    if white is None:
+    moments = _quadratic_moments(uv, w)
+    if moments is None:
         return False
-    XtWX = np.zeros((6, 6))
-    for s in range(0, len(uv), CHUNK):
-        X = _monomials((uv[s : s + CHUNK] - cu) @ white)
-        XtWX += (X * w[s : s + CHUNK, None]).T @ X
-    ev = np.linalg.eigvalsh(XtWX)
+    ev = np.linalg.eigvalsh(moments[2])
     return bool(ev[0] > QUADRATIC_REFERENCE_COND * ev[-1])
 
 
