@@ -3176,9 +3176,12 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
             # dissolved, they may leave spikes that stood among them (the middle one of three
             # in a row: its ring bent by both), found on the mesh without them
             kept = _dissolved(p, tris, spikes)
+            # (the share of a rough mesh, _MESH_SPIKE_MAX_SHARE, over all rounds: review)
+            most = max(1.0, _MESH_SPIKE_MAX_SHARE * np.count_nonzero(np.bincount(
+                np.r_[ea, eb], minlength=n) >= 3))
             for _ in range(_MESH_SPIKE_ROUNDS - 1):
                 more, high = mesh_spikes(p, kept)
-                if not len(more):
+                if not len(more) or len(spikes) + len(more) > most:
                     break
                 kept = _dissolved(p, kept, more)
                 spikes, heights = np.r_[spikes, more], np.r_[heights, high]
