@@ -440,6 +440,10 @@ def _fit(args) -> int:
               SWINGS_LEFT: "the rest of the error is where more knots made the surface swing "
                            "between the data points (a sharp step?)"}.get(
         SWINGS_LEFT if mostly_taken_back(r) else r["stop_reason"])
+    if advice and r.get("spikes"):  # (the warning above names them: a sharp step had been
+        # blamed for 30 stray points, the run spending 20 iterations on them; user test)
+        advice = ("the points that stick out like spikes (the warning above) pull the "
+                  "surface: pass --drop-outliers")
     if sag is not None and sag > sag_target(r):  # (the mesh is what the user measures)
         finer = finer_resolution(resolution, sag, sag_target(r))
         print(f"note: the surface mesh (resolution {resolution}, the finest chosen "
