@@ -25,7 +25,7 @@ from .parameterize import (SPIKES_DISSOLVED, fill_value_rows, fill_value_words,
                           projection_direction)
 from .refine import (SWINGS_LEFT, mostly_taken_back, replaced_default_reason,
                      returned_why)
-from .surface import (FOLDED_SHARE, MAX_RESOLUTION, default_swung, grid_frame,
+from .surface import (FOLDED_SHARE, MAX_RESOLUTION, SPIKES_HELD_OFF, default_swung, grid_frame,
                       finer_resolution, sag_target, tessellation_fill,
                       noise_near_tolerance, stopped_at_noise)
 
@@ -442,8 +442,7 @@ def _fit(args) -> int:
         SWINGS_LEFT if mostly_taken_back(r) else r["stop_reason"])
     if advice and r.get("spikes"):  # (the warning above names them: a sharp step had been
         # blamed for 30 stray points, the run spending 20 iterations on them; user test)
-        advice = ("the points that stick out like spikes (the warning above) pull the "
-                  "surface: pass --drop-outliers")
+        advice = f"{SPIKES_HELD_OFF}: pass --drop-outliers"
     if sag is not None and sag > sag_target(r):  # (the mesh is what the user measures)
         finer = finer_resolution(resolution, sag, sag_target(r))
         print(f"note: the surface mesh (resolution {resolution}, the finest chosen "

@@ -3209,6 +3209,12 @@ def data_layers(uv, residuals, seed: int = 0) -> float:
     return float(np.median(above - below))
 
 
+# what the command line and Blender say of a run that missed its tolerance with spike points
+# in the cloud (report["spikes"], whose warning names them), before the option to leave them out
+SPIKES_HELD_OFF = ("the points that stick out like spikes (the warning above) pull the "
+                   "surface")
+
+
 def far_stall_warning(report: dict) -> str:
     """The warning of an error that stopped falling far above the data's scatter (``_run``)."""
     d = report["distance_rms"]

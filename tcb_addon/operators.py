@@ -639,6 +639,8 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None,
                   "the surface swing between the points (a sharp step?): add points there"
                   }.get(_core().refine.SWINGS_LEFT if _core().refine.mostly_taken_back(rep)
                         else reason, "")
+        if advice and rep.get("spikes"):  # (as the command line: user test)
+            advice = f"{_core().surface.SPIKES_HELD_OFF}: turn on Drop Outliers"
         opts = surf.options
         if advice and not _core().refine.mostly_taken_back(rep) and (
                 _core().surface.noise_near_tolerance(rep, opts.tolerance, opts.relative,

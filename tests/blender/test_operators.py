@@ -2324,6 +2324,27 @@ def test_the_summary_says_why_an_earlier_iteration_is_returned(addon):
     assert "of 5 (lowest max error)" in ops._summary(surf)
 
 
+def test_a_fit_held_off_by_spikes_advises_drop_outliers(clean_scene, addon, capfd):
+    """A cloud with 10 of its 3000 points raised 5 above a saddle, Drop Outliers off: the
+    budget stops the run, and the summary says to turn on Drop Outliers (it had blamed swings
+    at a sharp step; the command line's user test), as the engine's warning names the
+    spikes."""
+    bpy = clean_scene
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-50, 50, (3000, 2))
+    pts = np.c_[xy, 0.01 * (xy[:, 0] ** 2 - xy[:, 1] ** 2)]
+    pts[:10, 2] += 5.0
+    cloud = add_point_cloud(bpy, "Spiky", pts)
+    capfd.readouterr()
+    assert fit(bpy, cloud, tolerance=0.01, relative=False, max_control_points=300) == {
+        "FINISHED"}
+    out = capfd.readouterr().out
+    assert spline_of(bpy.context.view_layer.objects.active).report["spikes"] > 0
+    assert ("the tolerance was not reached (control-point budget reached): the points that "
+            "stick out like spikes (the warning above) pull the surface: turn on Drop "
+            "Outliers or loosen the tolerance") in out, out
+
+
 def test_auto_resolution_warns_when_its_finest_mesh_still_strays(clean_scene, addon, capfd):
     """A 17 x 17 saddle of quads fitted to 1e-5 (about 1570 control points on 289 vertices):
     at 256, the finest Auto Resolution takes, the mesh strays from the spline by several
