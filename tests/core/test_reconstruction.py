@@ -271,7 +271,9 @@ def test_the_max_criterion_returns_the_fit_of_lowest_max_when_it_misses_the_tole
         h = rep["history"]
         assert len(h) == 5 and all(x["control_points"] <= 600 for x in h)
         best = min(h, key=lambda x: x[key])
-        assert rep["returned_iteration"] == best["iteration"] and rep[key] == best[key]
+        # (the returned fit's errors are measured again: the same to rounding)
+        assert rep["returned_iteration"] == best["iteration"]
+        assert rep[key] == pytest.approx(best[key], rel=1e-12)
         if criterion == "max":
             assert best is not h[-1] and h[-1]["rms_rel"] < best["rms_rel"]
             # the command line says why (it said "of lowest RMS": review)
