@@ -2875,7 +2875,8 @@ def mesh_spikes(p: np.ndarray, tris: np.ndarray, edges=None) -> tuple[np.ndarray
     # than half the ring's size (a spike with m of its k neighbours raised: k / 2m, at least
     # 1.25 for the k >= m + 3 tested; a flat grid's inner vertices 0, its border ones 0.6)
     deg = np.bincount(i, minlength=n)
-    c = np.column_stack([np.bincount(i, rel[:, k], n) for k in range(3)]) / np.maximum(deg, 1)[:, None]
+    c = (np.column_stack([np.bincount(i, rel[:, k], n) for k in range(3)])
+         / np.maximum(deg, 1)[:, None])
     r = np.bincount(i, np.linalg.norm(rel - c[i], axis=1), n) / np.maximum(deg, 1)
     sub = (deg >= 4)[i] & (np.linalg.norm(c, axis=1) > 0.5 * r)[i]
     ii, rr = i[sub], rel[sub]
@@ -2891,10 +2892,9 @@ def mesh_spikes(p: np.ndarray, tris: np.ndarray, edges=None) -> tuple[np.ndarray
         # (3 left: their plane has no scatter, so the flat test cannot fail; then steeper:
         # a rough Delaunay mesh had a vertex 9x its 3 nearest neighbours' ring size above
         # them refused, review)
-        for least, slope in ((4, _MESH_SPIKE_SLOPE), (3, _MESH_SPIKE_SLOPE_OF_3)):
-            more, high = _ring_spikes(ii[keep], rr[keep], n, least, slope)
-            height = np.where(spike, height, high)
-            spike |= more
+        more, high = _ring_spikes(ii[keep], rr[keep], n, 3, slope_of_3=_MESH_SPIKE_SLOPE_OF_3)
+        height = np.where(spike, height, high)
+        spike |= more
     # a corner vertex of fewer than 3 neighbours (one triangle, or two): against the plane of
     # its neighbours and theirs
     low = np.flatnonzero((deg > 0) & (deg < 3))
@@ -2914,11 +2914,11 @@ def mesh_spikes(p: np.ndarray, tris: np.ndarray, edges=None) -> tuple[np.ndarray
 
 
 def _ring_spikes(i: np.ndarray, rel: np.ndarray, n: int, least: int,
-                 slope: float = _MESH_SPIKE_SLOPE) -> tuple[np.ndarray, np.ndarray]:
+                 slope_of_3: float = _MESH_SPIKE_SLOPE) -> tuple[np.ndarray, np.ndarray]:
     """:func:`mesh_spikes`' test at each of the ``n`` vertices with at least ``least`` of the
     neighbours given (``rel``: vertex ``i``'s neighbour minus the vertex), steeper than
-    ``slope``: whether it is a spike (n,) and its height above the plane of those neighbours
-    (n,; 0 where not tested)."""
+    _MESH_SPIKE_SLOPE (``slope_of_3`` where exactly 3 are given): whether it is a spike (n,)
+    and its height above the plane of those neighbours (n,; 0 where not tested)."""
     deg = np.bincount(i, minlength=n)
     at = np.flatnonzero(deg >= least)
     spike, height = np.zeros(n, dtype=bool), np.zeros(n)
@@ -2936,6 +2936,7 @@ def _ring_spikes(i: np.ndarray, rel: np.ndarray, n: int, least: int,
     w, v = np.linalg.eigh(cov[at])
     s = np.sqrt(np.maximum(w[:, 0], 0.0))
     d = np.abs(np.einsum("ij,ij->i", c[at], v[:, :, 0]))  # (the vertex is at 0: -c off)
+    slope = np.where(deg[at] == 3, slope_of_3, _MESH_SPIKE_SLOPE)
     spike[at] = (d > slope * r[at]) & (d > _MESH_SPIKE_FLAT * s)
     height[at] = d
     return spike, height
