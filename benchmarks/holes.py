@@ -13,7 +13,12 @@ vertices over the diagonal, and for the grid the largest distance, over the diag
 the surface and the function at the centres of the removed cells ("in hole"; for the strip,
 the distance of the removed vertices to the surface). Default settings otherwise.
 
-    .venv/bin/python benchmarks/holes.py [--quick]
+With ``--clouds``: point clouds with round gaps inside them (occlusions), fitted once; the
+share of each gap (over the xy plane) that the surface mesh at resolution 128 covers without and with
+``fill_holes`` (the fit is the same), and the largest and RMS distance between the surface
+and the function over the gap (its tessellation vertices there), against the fit's RMS.
+
+    .venv/bin/python benchmarks/holes.py [--quick] [--clouds]
 """
 
 from __future__ import annotations
@@ -104,11 +109,51 @@ def run(P, F, rule: str):
         parameterize_module.HOLE_BACKWARD, parameterize_module.HOLE_BULGE = saved
 
 
+def smooth(x, y):
+    return 0.3 * np.sin(2.0 * x) * np.cos(1.5 * y) + 0.1 * x * y
+
+
+def cloud_table() -> None:
+    """The ``--clouds`` table (module docstring): three round gaps in 30 000 random points of
+    ``smooth`` over [-1, 1]^2, and the same gaps in 3000 points."""
+    gaps = [((-0.4, 0.3), 0.08), ((0.35, -0.25), 0.15), ((0.3, 0.5), 0.25)]
+    print("| points | gap radius | fit RMS | covered without | covered with | max in gap | "
+          "RMS in gap | holes counted |")
+    print("|---|---|---|---|---|---|---|---|")
+    for n in (30_000, 3000):
+        xy = np.random.default_rng(1).uniform(-1, 1, (n, 2))
+        keep = np.ones(len(xy), dtype=bool)
+        for c, r in gaps:
+            keep &= np.hypot(xy[:, 0] - c[0], xy[:, 1] - c[1]) > r
+        P = np.c_[xy[keep], smooth(*xy[keep].T)]
+        rows = {}
+        for fill in (False, True):
+            surf = fit_surface(P, fill_holes=fill)
+            v, t = surf.tessellate(128)
+            cen = v[t].mean(axis=1)
+            a, b = v[t[:, 1], :2] - v[t[:, 0], :2], v[t[:, 2], :2] - v[t[:, 0], :2]
+            area = 0.5 * np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])  # (over the xy plane)
+            err = np.abs(v[:, 2] - smooth(v[:, 0], v[:, 1]))
+            for c, r in gaps:
+                inside = np.hypot(cen[:, 0] - c[0], cen[:, 1] - c[1]) < r
+                on = np.hypot(v[:, 0] - c[0], v[:, 1] - c[1]) < r
+                rows.setdefault(r, []).append((area[inside].sum() / (np.pi * r * r),
+                                               err[on], surf.report))
+        for r, ((without, _, _), (with_, e, rep)) in rows.items():
+            big = f"{e.max():.2e} | {np.sqrt(np.mean(e ** 2)):.2e}" if len(e) else " | "
+            print(f"| {len(P)} | {r} | {rep['rms']:.2e} | {100 * without:.0f}% | "
+                  f"{100 * with_:.0f}% | {big} | {rep['holes_filled']} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="two grid holes only (smoke test)")
+    ap.add_argument("--clouds", action="store_true", help="gaps in point clouds instead")
     args = ap.parse_args()
     warnings.simplefilter("ignore")  # (the removed cells' inner vertices: in no face)
+    if args.clouds:
+        cloud_table()
+        return
     cases = [(name, P, F, ("grid", at)) for name, P, F, at in grid_cases(args.quick)]
     if not args.quick:
         for deg in (30, 90, 180, 240):

@@ -90,7 +90,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--fill-holes", action="store_true",
                    help="meshes with holes (boundary loops besides the outer one): map them as "
                    "if the holes were filled, so that the surface spans them, instead of "
-                   "refusing them (meshes only: refused for a point cloud)")
+                   "refusing them; point clouds: cover the gaps inside the cloud (occlusions, "
+                   "dropouts) with surface, which the output mesh otherwise leaves open")
     f.add_argument("--projection", type=_projection, default=None, metavar="x|y|z|DX,DY,DZ",
                    help="point clouds: project along this direction (a height field over the "
                    "plane across it) instead of choosing it; still checked for folds. Its sign "
@@ -292,11 +293,6 @@ def _fit(args) -> int:
         raise TCBError(
             f"--projection applies to point clouds; {args.input} is a mesh, which is "
             "parameterized by its faces: leave the option out"
-        )
-    if faces is None and args.fill_holes:
-        raise TCBError(
-            f"--fill-holes applies to meshes; {args.input} is a point cloud, whose surface is "
-            "trimmed to where its points are: leave the option out"
         )
     given = points
     bad = ~np.isfinite(points).all(axis=1)

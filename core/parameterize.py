@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
+from scipy import ndimage
 from scipy.sparse.csgraph import (
     breadth_first_order, connected_components, depth_first_order, minimum_spanning_tree,
 )
@@ -397,9 +398,11 @@ class Parameterization:
             length over its mesh edges (NaN for unused vertices); the map to the disk
             compresses steep and outlying parts of a mesh, and the tessellation refines there.
             None for a point cloud (and for files written before it existed).
-        holes: ``(h,) int64`` (disk only, ``parameterize_mesh(..., fill_holes=True)``): the
-            number of boundary vertices of each hole of the mesh that was filled for the map
-            (the surface spans it, held by the fairing); None when there were none.
+        holes: ``(h,) int64`` (``fill_holes=True``): for a disk, the number of boundary
+            vertices of each hole of the mesh that was filled for the map (the surface spans
+            it, held by the fairing); for a plane, the lattice cells of each hole of the
+            cloud's domain that its tessellation covers (:func:`cloud_holes`); None when there
+            were none.
         flipped: (disk only) True when the faces given were wound the other way than the
             canonical winding (:func:`winding_flipped`): the map, and ``faces``, ``boundary``
             and ``domain_polygon``, are those of the faces reversed (bit for bit for faces
@@ -451,14 +454,28 @@ class Parameterization:
         inside = _points_in_polygon(x, self.domain_polygon, tol)
         return bool(inside[0]) if single else inside
 
-    def in_holes(self, uv: np.ndarray) -> np.ndarray:
+    def in_holes(self, uv: np.ndarray, grown: bool = False) -> np.ndarray:
         """Mask (m,) of the parameters ``uv`` (m, 2) inside one of the holes that were filled
         for the map (``holes``; ``fill_holes=True``): there the surface spans a gap, with no
         data under it. The holes are the loops of the faces' border edges (edges of one face)
         besides the outer ``boundary``, all tested at once by the even-odd rule
         (:func:`_points_in_polygon`); a point on a hole's border may count either way. All
-        False when no hole was filled."""
+        False when no hole was filled. A point cloud's holes (:func:`cloud_holes`) are cells
+        of a lattice (computed at the first call); ``grown``: grown by one cell (what its
+        tessellation covers; some data points at a hole's rim are in them)."""
         x = np.atleast_2d(np.asarray(uv, dtype=np.float64))
+        if self.holes is not None and self.kind == "plane":
+            lattice = self.__dict__.get("_hole_lattice")
+            if lattice is None:  # (a cache: the parameterization is immutable)
+                lattice = _cloud_hole_lattice(self)
+                object.__setattr__(self, "_hole_lattice", lattice)
+            lo, h, mask = lattice[0], lattice[1], lattice[2][int(bool(grown))]
+            cell = np.floor((x - lo) / h)
+            cell = np.where(np.isfinite(cell), cell, -1).astype(np.int64)
+            ok = ((cell >= 0) & (cell < [mask.shape[1], mask.shape[0]])).all(axis=1)
+            found = np.zeros(len(x), dtype=bool)
+            found[ok] = mask[cell[ok, 1], cell[ok, 0]]
+            return found
         if self.holes is None or self.faces is None or self.boundary is None:
             return np.zeros(len(x), dtype=bool)
         f = np.asarray(self.faces)
@@ -3517,6 +3534,127 @@ def _with_holes_filled(p, tris, bf, bt, blabel, fill_holes: bool) -> Parameteriz
     )
 
 
+# --------------------------------------------------------------------------------------------
+# Where a point cloud's surface reaches, and the holes of a cloud (fill_holes)
+# --------------------------------------------------------------------------------------------
+
+# a cloud scanned in lines (its points' nearest spread across their line by less than TRIM_LINE
+# of their variance along it) gets a tessellation reaching TRIM_GAP_FACTOR times the lower
+# quartile of the distance to the data over a TRIM_LATTICE x TRIM_LATTICE lattice
+# (trim_distance: the gaps between the lines)
+# (the median ratio: random points 0.44, a grid 1; lines jittered across by 0.5 and 1 times
+# their spacing along 0.03 and 0.10: /tmp/s24/ratio.py)
+TRIM_LINE = 0.1
+TRIM_GAP_FACTOR = 6.0
+TRIM_LATTICE = 100
+# the holes of a cloud (cloud_holes) are found on a lattice of cells of half the trim distance,
+# at most this many along the longer side of the domain's box
+CLOUD_HOLE_CELLS = 1024
+# ... and a hole of fewer cells (a square of the trim distance's side) is a void between random
+# points rather than a gap in the scan: covered, but not counted (report["holes_filled"])
+CLOUD_HOLE_MIN_CELLS = 4
+
+
+def trim_distance(param: Parameterization, data: np.ndarray | None = None,
+                  tree: cKDTree | None = None) -> float:
+    """How far from the data a cloud's tessellation reaches (not in method.md): 4 times
+    the data's spacing (the median distance of a point to its nearest one); for a scan
+    made in lines (the median point's 8 nearest spread across their line by less than
+    TRIM_LINE of their variance along it: profiles, sonar tracks, a CMM), whose spacing
+    along the lines does not see the gaps between them (user test: 10 profiles 0.11 apart,
+    1000 points each, tessellated at 256 covered 0.11 of the area between them), the
+    larger of that and TRIM_GAP_FACTOR times the lower quartile of the distance to the
+    data over a TRIM_LATTICE x TRIM_LATTICE lattice in the domain: points of the lattice
+    in a gap between lines are up to half its width from the data, evenly, so the
+    quartile is about an eighth of it. (Not for clouds spread in two directions: a thin
+    L-shaped cloud or a road round a bend covers so little of its hull that the quartile
+    falls in the empty part; review.) ``data``: the finite rows of ``param.uv`` and
+    ``tree`` a KD-tree of them (made when not given)."""
+    if data is None:
+        data = np.asarray(param.uv)[np.isfinite(param.uv).all(axis=1)]
+    if tree is None:
+        tree = cKDTree(data)
+    sample = data[:: max(1, len(data) // 5000)]
+    dist, nb = tree.query(sample, k=min(9, len(data)))
+    spacing = float(np.median(dist[:, 1])) if dist.shape[1] > 1 else 0.0
+    if nb.shape[1] < 3:
+        return 4 * spacing
+    X = data[nb]
+    X = X - X.mean(axis=1, keepdims=True)
+    ev = np.linalg.eigvalsh(np.einsum("mki,mkj->mij", X, X))  # ascending
+    ratio = float(np.median(ev[:, 0] / np.maximum(ev[:, 1], 1e-300)))
+    if ratio >= TRIM_LINE:
+        return 4 * spacing
+    poly = np.asarray(param.domain_polygon, dtype=np.float64)
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    g = [np.linspace(lo[k], hi[k], TRIM_LATTICE + 2)[1:-1] for k in range(2)]
+    grid = np.stack(np.meshgrid(*g), -1).reshape(-1, 2)
+    grid = grid[param.contains(grid)]
+    if len(grid) == 0:
+        return 4 * spacing
+    gap = float(np.quantile(tree.query(grid)[0], 0.25))
+    return max(4 * spacing, TRIM_GAP_FACTOR * gap)
+
+
+def _cloud_hole_lattice(param: Parameterization):
+    """``(lo, h, masks, sizes)``: the holes of a point cloud's domain on a lattice of cells of
+    side ``h`` from ``lo`` (cell ``[i, j]`` is centred at ``lo + h (j + 1/2, i + 1/2)``),
+    ``masks[0][i, j]`` True in a hole, ``masks[1]`` the holes grown by one cell (so that a
+    triangle at a hole's rim, farther from the data than the trim distance with the centre of
+    its cell nearer, is in one; and some data points at the rim), ``sizes`` the cells of each
+    hole. No data point lies in a hole's cell (its centre is farther than the trim distance
+    from all, twice the cell's half-diagonal). A hole is a 4-connected region of
+    cells farther than :func:`trim_distance` from every data parameter that does not reach
+    the border of the domain (the convex hull: a region that does is a bay or a notch, the
+    shape of the data's outline), and whose box has at most HOLE_MAX_SHARE of the diagonal of
+    the domain's box (a mesh's hole: :func:`_with_holes_filled`; a ring's wide middle is not
+    a hole). Not in method.md."""
+    data = np.asarray(param.uv)[np.isfinite(param.uv).all(axis=1)]
+    tree = cKDTree(data)
+    trim = trim_distance(param, data, tree)
+    poly = np.asarray(param.domain_polygon, dtype=np.float64)
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    extent = hi - lo
+    h = max(trim / 2, float(extent.max()) / CLOUD_HOLE_CELLS, 1e-12)
+    nu, nv = (np.ceil(extent / h).astype(int) + 1).tolist()
+    cu = lo[0] + h * (np.arange(nu) + 0.5)
+    cv = lo[1] + h * (np.arange(nv) + 0.5)
+    centres = np.stack(np.meshgrid(cu, cv), -1).reshape(-1, 2)
+    inside = param.contains(centres)
+    far = np.ones(len(centres), dtype=bool)
+    far[inside] = tree.query(centres[inside], distance_upper_bound=trim)[0] > trim
+    # a ring of cells outside the lattice: regions touching its edge reach the border
+    empty = np.pad(far.reshape(nv, nu), 1, constant_values=True)
+    outside = np.pad(~inside.reshape(nv, nu), 1, constant_values=True)
+    labels, count = ndimage.label(empty)
+    border = np.zeros(count + 1, dtype=bool)
+    border[labels[outside]] = True
+    border[0] = True  # (cells near the data)
+    boxes = ndimage.find_objects(labels)
+    span = np.array([[b[0].stop - b[0].start, b[1].stop - b[1].start] for b in boxes],
+                    dtype=np.float64).reshape(-1, 2)
+    large = np.concatenate([[False], h * np.hypot(span[:, 0], span[:, 1])
+                            > HOLE_MAX_SHARE * float(np.hypot(*extent))])
+    hole = ~border & ~large
+    sizes = np.bincount(labels.ravel(), minlength=count + 1)[hole]
+    mask = hole[labels]
+    grown = ndimage.binary_dilation(mask, np.ones((3, 3), dtype=bool))
+    return lo, h, (mask[1:-1, 1:-1], grown[1:-1, 1:-1]), sizes.astype(np.int64)
+
+
+def cloud_holes(param: Parameterization) -> Parameterization:
+    """``param`` (a point cloud's) with ``holes`` set to the cells of each hole of its domain
+    (:func:`_cloud_hole_lattice`), or None when it has none: ``fill_holes=True`` for a cloud.
+    Its tessellation then covers the holes, where the surface is held by the fairing as
+    between any data, and :meth:`Parameterization.in_holes` finds them."""
+    lattice = _cloud_hole_lattice(param)
+    if not len(lattice[3]):
+        return param
+    param = replace(param, holes=_readonly(lattice[3]))
+    object.__setattr__(param, "_hole_lattice", lattice)  # (in_holes' cache)
+    return param
+
+
 def parameterize(
     points: np.ndarray, faces: np.ndarray | None = None, drop_outliers: bool = False,
     projection=None, fill_holes: bool = False,
@@ -3529,7 +3667,8 @@ def parameterize(
     dissolved out of the mesh and left out as loose vertices are).
     """
     if faces is None:
-        return parameterize_points(points, bool(drop_outliers), projection)
+        param = parameterize_points(points, bool(drop_outliers), projection)
+        return cloud_holes(param) if fill_holes else param
     if projection is not None:
         raise InvalidInputError(
             "a projection direction applies to point clouds; a mesh is parameterized by its "

@@ -41,7 +41,8 @@ from .parallel import background
 from .parameterize import (
     Parameterization, _as_points, _check_finite, _edge_pairs, _local_planes, box_normalization,
     _parameterize_mesh, corner_angles, fill_value_rows, fill_value_words, huge_rows, huge_words,
-    local_noise, local_scatter, normalize, parameterize, spike_points,
+    local_noise, local_scatter, normalize, parameterize, spike_points, trim_distance,
+    CLOUD_HOLE_MIN_CELLS,
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
                      check_callback, prefetch_swing_triangles, swing_places)
@@ -120,15 +121,6 @@ TESSELLATION_STRETCH_CELLS = 512
 # grid steps across the shorter side of the domain at least (a road strip 250 times longer than
 # wide had 143 triangles in one row at resolution 64, up to 0.34 m off an 8 m wide road)
 TESSELLATION_MIN_ACROSS = 8
-# a cloud scanned in lines (its points' nearest spread across their line by less than TRIM_LINE
-# of their variance along it) gets a tessellation reaching TRIM_GAP_FACTOR times the lower
-# quartile of the distance to the data over a TRIM_LATTICE x TRIM_LATTICE lattice
-# (TCBSurface._trim_distance: the gaps between the lines)
-# (the median ratio: random points 0.44, a grid 1; lines jittered across by 0.5 and 1 times
-# their spacing along 0.03 and 0.10: /tmp/s24/ratio.py)
-TRIM_LINE = 0.1
-TRIM_GAP_FACTOR = 6.0
-TRIM_LATTICE = 100
 # a domain that fills less than this share of the square on the longer side of its grid frame
 # (a long or ragged patch) gets a finer grid step, as many cells inside it as a domain filling
 # this share (tessellation_step): a Suzanne brow patch (0.26 of its square) had 1222 vertices
@@ -438,7 +430,7 @@ class TCBSurface:
         full = cKDTree(data)
         trim = None
         if self._param.kind == "plane":
-            trim = max(self._trim_distance(data, full), 1.5 * d)
+            trim = max(trim_distance(self._param, data, full), 1.5 * d)
         tri = self._domain_triangles(uv, d, full, trim, lattice)
         step()
         stretch = self._local_stretch(data, full, np.asarray(self._param.stretch)[ok]
@@ -512,40 +504,6 @@ class TCBSurface:
         by_density.cells = 128
         return by_density
 
-    def _trim_distance(self, data, tree) -> float:
-        """How far from the data a cloud's tessellation reaches (not in method.md): 4 times
-        the data's spacing (the median distance of a point to its nearest one); for a scan
-        made in lines (the median point's 8 nearest spread across their line by less than
-        TRIM_LINE of their variance along it: profiles, sonar tracks, a CMM), whose spacing
-        along the lines does not see the gaps between them (user test: 10 profiles 0.11 apart,
-        1000 points each, tessellated at 256 covered 0.11 of the area between them), the
-        larger of that and TRIM_GAP_FACTOR times the lower quartile of the distance to the
-        data over a TRIM_LATTICE x TRIM_LATTICE lattice in the domain: points of the lattice
-        in a gap between lines are up to half its width from the data, evenly, so the
-        quartile is about an eighth of it. (Not for clouds spread in two directions: a thin
-        L-shaped cloud or a road round a bend covers so little of its hull that the quartile
-        falls in the empty part; review.)"""
-        sample = data[:: max(1, len(data) // 5000)]
-        dist, nb = tree.query(sample, k=min(9, len(data)))
-        spacing = float(np.median(dist[:, 1])) if dist.shape[1] > 1 else 0.0
-        if nb.shape[1] < 3:
-            return 4 * spacing
-        X = data[nb]
-        X = X - X.mean(axis=1, keepdims=True)
-        ev = np.linalg.eigvalsh(np.einsum("mki,mkj->mij", X, X))  # ascending
-        ratio = float(np.median(ev[:, 0] / np.maximum(ev[:, 1], 1e-300)))
-        if ratio >= TRIM_LINE:
-            return 4 * spacing
-        poly = np.asarray(self._param.domain_polygon, dtype=np.float64)
-        lo, hi = poly.min(axis=0), poly.max(axis=0)
-        g = [np.linspace(lo[k], hi[k], TRIM_LATTICE + 2)[1:-1] for k in range(2)]
-        grid = np.stack(np.meshgrid(*g), -1).reshape(-1, 2)
-        grid = grid[self._param.contains(grid)]
-        if len(grid) == 0:
-            return 4 * spacing
-        gap = float(np.quantile(tree.query(grid)[0], 0.25))
-        return max(4 * spacing, TRIM_GAP_FACTOR * gap)
-
     def _domain_triangles(self, uv, d, tree, trim, lattice=None) -> np.ndarray:
         """CCW Delaunay triangles of ``uv`` inside the domain (and, for clouds, within ``trim``
         of the data parameters in ``tree``), without zero-area ones.
@@ -579,8 +537,11 @@ class TCBSurface:
             # the search bounded (a hair beyond trim: the same test): unbounded, the triangles
             # in the empty middle of a ring's hull, nearly as far from all data, took 39 of 40 s
             # of a tessellation at 1024 (user test)
-            far = tree.query(uv[tri].mean(axis=1), distance_upper_bound=trim * (1 + 1e-9))[0]
-            tri = tri[far <= trim]
+            cen = uv[tri].mean(axis=1)
+            near = tree.query(cen, distance_upper_bound=trim * (1 + 1e-9))[0] <= trim
+            if self._param.holes is not None:  # (fill_holes: a cloud's holes are covered)
+                near[~near] = self._param.in_holes(cen[~near], grown=True)
+            tri = tri[near]
         return tri
 
     def tessellate(self, resolution: int = 64, callback=None) -> tuple[np.ndarray, np.ndarray]:
@@ -1233,10 +1194,9 @@ class TCBSurface:
             if faces is not None:
                 return None, "faces"
             drop = bool(self._report.get("outliers", 0))
-            tries = [dict(drop_outliers=drop)]
+            tries = [dict(drop_outliers=drop, fill_holes=old.holes is not None)]
             if old.axes is not None:  # (a projection given to the fit: its direction)
-                tries.append(dict(drop_outliers=drop,
-                                  projection=tuple(float(x) for x in old.axes[2])))
+                tries.append(dict(tries[0], projection=tuple(float(x) for x in old.axes[2])))
         # a mesh fitted before the canonical winding (no "canonical_winding" in its report)
         # was mapped as its faces were given: mapped so again (a reordered copy of a mesh
         # wound against it was refused as "values both reordered and rounded": review)
@@ -1607,8 +1567,9 @@ def _same_map(new: Parameterization, old: Parameterization) -> bool:
     if int(np.count_nonzero(new.used)) != int(np.count_nonzero(old.used)):
         return False
     for a, b in ((new.faces, old.faces), (new.boundary, old.boundary), (new.holes, old.holes)):
-        if (a is None) != (b is None) or (a is not None and len(a) != len(b)):
-            return False
+        if (a is None) != (b is None) or (a is not None and len(a) != len(b)
+                                          and new.kind == "disk"):
+            return False  # (a cloud's holes: found on a sample of its points, order-dependent)
     if np.shape(new.domain_polygon) != np.shape(old.domain_polygon):
         return False
     for a, b in ((np.asarray(new.uv)[np.asarray(new.used, dtype=bool)],
@@ -2390,8 +2351,10 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # vertices of a mesh that are in no face: a mesh is fitted through its faces
         "loose_vertices": int(len(used) - used.sum()) - dissolved if param.faces is not None
         else 0,
-        # holes of a mesh that the surface spans (fill_holes=True)
-        "holes_filled": 0 if param.holes is None else int(len(param.holes)),
+        # holes of a mesh that the surface spans, of a cloud that its tessellation covers
+        # (fill_holes=True)
+        "holes_filled": 0 if param.holes is None else int(len(param.holes))
+        if param.kind == "disk" else int(np.count_nonzero(param.holes >= CLOUD_HOLE_MIN_CELLS)),
         "knots": int(len(best.knots)),
         "interior_knots": int(best.n_interior),
         "control_points": int(best.n_control),
@@ -2904,6 +2867,11 @@ def fit_surface(
         them, held by the fairing (``core.parameterize._with_holes_filled``;
         ``report["holes_filled"]`` counts them). A hole whose fan would overlap the mesh (a
         C- or L-shaped gap) is refused with advice (ParameterizationError).
+        Point clouds: the fit is the same; the tessellation, which otherwise leaves out the
+        parts of the domain far from all points, covers the gaps inside the cloud that do not
+        reach its outline (occlusions, dropouts; at most half its size:
+        ``core.parameterize.cloud_holes``), where the surface is held by the fairing;
+        ``report["holes_filled"]`` counts them.
 
     Counts (``degree``, ``max_control_points``, ...) are whole numbers (``2.0`` is 2), flags
     (``relative``, ``feature_sensitive``) Python or numpy bools; anything else is refused.
@@ -2955,10 +2923,6 @@ def fit_surface(
         raise exc from None  # an OutlierError's indices, stay; review)
     if coarse is not None:
         warnings.warn(coarse, RuntimeWarning, stacklevel=2)
-    if faces is None and fill_holes:
-        warnings.warn("fill_holes applies to meshes: a point cloud's surface is trimmed to "
-                      "where its data are, so gaps in it stay open (leave the option out for "
-                      "point clouds)", RuntimeWarning, stacklevel=2)
     return _run(points, param, options, callback, checked=faces is None,
                 faces_key=None if faces is None else faces_digest(faces),
                 faces_set_key=None if faces is None else faces_set_digest(faces, points),

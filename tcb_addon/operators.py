@@ -914,10 +914,6 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         kwargs = self._fit_kwargs()
         self._ignored = []
         # (Drop Outliers applies to meshes too: it dissolves their spike vertices)
-        if data.faces is None and kwargs.get("fill_holes"):  # (a setting left on)
-            kwargs["fill_holes"] = False
-            self._ignored.append(f"Fill Holes applies to meshes: '{data.name}' is fitted as a "
-                                 "point cloud, whose surface keeps to where its points are")
         if data.faces is not None and kwargs.get("projection") is not None:
             # (World Z left on from a terrain's fit refused the next mesh: user test)
             kwargs["projection"] = None
@@ -1082,7 +1078,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         reused = ["the same input and settings as the last fit: its result was reused (the "
                   "seconds are that fit's)"] if getattr(self, "_reused", False) else []
         holes = int((surf.report or {}).get("holes_filled", 0))
-        spanned = [f"the surface spans the mesh's {holes} hole{'s' if holes > 1 else ''} "
+        kind = "mesh" if surf.parameterization.faces is not None else "cloud"
+        spanned = [f"the surface spans the {kind}'s {holes} hole{'s' if holes > 1 else ''} "
                    "(Fill Holes)"] if holes else []
         if reused:
             seconds = getattr(self, "_reused_seconds", None)

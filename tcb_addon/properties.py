@@ -122,8 +122,9 @@ class FitSettings:
         name="Fill Holes",
         description=(
             "Meshes with holes (borders inside the outer one, as a scan's gaps): let the "
-            "surface span them, held smooth, instead of stopping with an error (meshes only; a "
-            "point cloud's surface keeps to where its points are)"
+            "surface span them, held smooth, instead of stopping with an error. Point clouds: "
+            "cover the gaps inside the cloud (occlusions, dropouts), which the surface mesh "
+            "otherwise leaves open"
         ),
         default=False,
     )  # fmt: skip

@@ -892,7 +892,7 @@ def test_fit_mesh_object_nefertiti(clean_scene, addon):
 def test_a_mesh_with_a_hole_is_refused_unless_fill_holes_is_on(clean_scene, addon, capfd):
     """A scan-like grid mesh with a hole: by default an ERROR that says to turn on Fill Holes
     (nothing made); with it the surface spans the hole, close to the shape there, and the
-    report says so; on a point cloud the setting is ignored with a note."""
+    report says so; a point cloud's gap is covered with it."""
     bpy = clean_scene
     verts, faces = grid(24)
     centre = verts[faces].mean(axis=1)
@@ -934,9 +934,17 @@ def test_a_mesh_with_a_hole_is_refused_unless_fill_holes_is_on(clean_scene, addo
     assert surface.tcb.deviation_max < 2 * surface.tcb.deviation_data_max
     assert (f"{over.sum()} surface vertices over the mesh's filled holes (no data there) are "
             "grey") in capfd.readouterr().out
-    cloud = add_point_cloud(bpy, "Cloud", verts[used])
-    assert fit(bpy, cloud, fill_holes=True) == {"FINISHED"}
-    assert "Fill Holes applies to meshes" in capfd.readouterr().out
+    # a cloud's gap: left open by default, covered with Fill Holes (and said so)
+    xy = np.random.default_rng(0).uniform(-1, 1, (4000, 2))
+    xy = xy[np.hypot(xy[:, 0] - 0.2, xy[:, 1] + 0.1) > 0.35]
+    cloud = add_point_cloud(bpy, "Cloud", np.c_[xy, 0.3 * (xy[:, 0] ** 2 - 0.5 * xy[:, 1] ** 2)])
+    for fill in (False, True):
+        capfd.readouterr()
+        assert fit(bpy, cloud, fill_holes=fill) == {"FINISHED"}
+        said = "the surface spans the cloud's 1 hole (Fill Holes)" in capfd.readouterr().out
+        v = positions(bpy.context.view_layer.objects.active)
+        near = np.hypot(v[:, 0] - 0.2, v[:, 1] + 0.1) < 0.15
+        assert said == fill and near.any() == fill, (fill, said, near.sum())
     # a hole made by a modifier: the error says so, as for other shapes (review: the note
     # was lost)
     verts, faces = grid(24)

@@ -586,7 +586,7 @@ def test_a_mesh_s_spike_vertex_names_drop_outliers_which_dissolves_it(tmp_path):
 
 def test_a_mesh_with_holes_names_fill_holes_and_is_fitted_with_it(tmp_path):
     """A grid mesh with a hole: one line naming --fill-holes; with it the surface spans the
-    hole and the table says so; the option on a point cloud is refused."""
+    hole and the table says so; on a point cloud the output mesh covers the cloud's hole."""
     g = np.linspace(0, 1, 16)
     x, y = (a.ravel() for a in np.meshgrid(g, g))
     pts = np.c_[x, y, 0.2 * np.sin(3 * x) * y]
@@ -605,10 +605,20 @@ def test_a_mesh_with_holes_names_fill_holes_and_is_fitted_with_it(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "1 hole spanned" in r.stdout
     assert TCBSurface.load(tmp_path / "s.npz").report["holes_filled"] == 1
+    # the cloud of the vertices around the hole (its inner vertices left out)
+    rng = np.random.default_rng(0)
+    xy = rng.random((3000, 2))
+    xy = xy[np.hypot(xy[:, 0] - 0.5, xy[:, 1] - 0.5) > 0.2]
     cloud = tmp_path / "cloud.xyz"
-    np.savetxt(cloud, pts)
-    r = run("fit", cloud, "-o", tmp_path / "c.obj", "--quiet", "--fill-holes")
-    assert r.returncode == 2 and "--fill-holes applies to meshes" in r.stderr
+    np.savetxt(cloud, np.c_[xy, 0.2 * np.sin(3 * xy[:, 0]) * xy[:, 1]])
+    for option, covered in (((), False), (("--fill-holes",), True)):
+        r = run("fit", cloud, "-o", tmp_path / "c.obj", *option)
+        assert r.returncode == 0, r.stderr
+        assert ("1 hole spanned" in r.stdout) == covered
+        v, t = read_geometry(tmp_path / "c.obj")
+        c = v[t].mean(axis=1)
+        near = np.hypot(c[:, 0] - 0.5, c[:, 1] - 0.5) < 0.1
+        assert near.any() == covered
 
 
 def test_corrupt_input_files_give_one_line_and_exit_2(tmp_path):

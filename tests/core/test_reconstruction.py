@@ -1733,7 +1733,7 @@ def test_fill_holes_spans_a_mesh_s_holes_and_keeps_its_own_vertices_and_faces(tm
     vertices and faces (no fan vertex or face left), counting each hole's border. A C-shaped
     hole, which a fan from its centre would squeeze, is closed by ears of its border and fits
     as a disk does; a hole no triangulation closes is refused with advice. A tube's second
-    loop is no hole; a cloud warns that the option applies to meshes."""
+    loop is no hole."""
     from core import HolesError
 
     m = 31
@@ -1823,10 +1823,56 @@ def test_fill_holes_spans_a_mesh_s_holes_and_keeps_its_own_vertices_and_faces(tm
                        r".* winds .* Grid Fill"):
         fit_surface(P, cells[~cut], fill_holes=True)
     monkeypatch.undo()
-    with pytest.warns(RuntimeWarning, match="fill_holes applies to meshes"):
-        fit_surface(P, fill_holes=True, max_iterations=1)
     with pytest.raises(InvalidInputError, match="fill_holes must be True or False"):
         fit_surface(P, F, fill_holes="yes")
+
+
+def _covered(uv, tri, x):
+    """Mask of the parameters ``x`` inside one of the triangles ``tri`` of ``uv``."""
+    a, b, c = (uv[tri[:, k]][None] for k in range(3))
+    p = x[:, None]
+    s = np.sign(orient2d(a, b, c))
+    inside = ((np.sign(orient2d(a, b, p)) * s >= 0) & (np.sign(orient2d(b, c, p)) * s >= 0)
+              & (np.sign(orient2d(c, a, p)) * s >= 0))
+    return inside.any(axis=1)
+
+
+def test_fill_holes_covers_a_cloud_s_holes_but_not_its_bays(tmp_path):
+    """A scan with two occlusions (round gaps inside the cloud) and a notch cut into its side:
+    the tessellation leaves all three open; with fill_holes the same fit (the option changes
+    where the surface is shown, not the fit) covers the two holes, within a few fit errors of
+    the shape there, and leaves the notch, which reaches the cloud's outline, open; the report
+    counts the holes, the parameterization finds them (in_holes), a stored surface
+    tessellates as the fitted one and a refine of the points in another order covers them."""
+    f = lambda x, y: 0.3 * np.sin(2 * x) * np.cos(1.5 * y) + 0.1 * x * y  # noqa: E731
+    xy = np.random.default_rng(3).uniform(-1, 1, (12000, 2))
+    holes = np.array([[-0.4, 0.3], [0.3, -0.35]]), np.array([0.15, 0.25])
+    keep = (np.hypot(*(xy[:, None] - holes[0]).transpose(2, 0, 1)) > holes[1]).all(axis=1)
+    keep &= ~((xy[:, 0] > 0.5) & (np.abs(xy[:, 1] - 0.4) < 0.15))  # the notch
+    P = np.c_[xy[keep], f(*xy[keep].T)]
+    plain = fit_surface(P, tolerance=2e-3)
+    filled = fit_surface(P, tolerance=2e-3, fill_holes=True)
+    assert np.array_equal(plain.control_points, filled.control_points)
+    assert plain.report["holes_filled"] == 0 and filled.report["holes_filled"] == 2
+    par = filled.parameterization
+    spots = par.project(np.c_[np.r_[holes[0], [[0.85, 0.4]]], np.zeros(3)])  # holes, notch
+    assert list(par.in_holes(spots)) == [True, True, False]
+    assert not par.in_holes(par.uv).any() and not plain.parameterization.in_holes(spots).any()
+    for surf, covered in ((plain, [False, False, False]), (filled, [True, True, False])):
+        uv, tri = surf.tessellation_uv(128)
+        assert list(_covered(uv, tri, spots)) == covered
+    # over the holes the surface keeps to the shape (held by the fairing: no data there)
+    v, _ = filled.tessellate(128)
+    over = par.in_holes(filled.tessellation_uv(128)[0])
+    assert over.sum() > 100
+    off = np.abs(v[over, 2] - f(v[over, 0], v[over, 1]))
+    assert off.max() < 10 * filled.report["rms"], (off.max(), filled.report["rms"])
+    filled.save(tmp_path / "s.npz")
+    again = TCBSurface.load(tmp_path / "s.npz")
+    assert np.array_equal(again.tessellation_uv(128)[1], filled.tessellation_uv(128)[1])
+    turned = again.refine(P[::-1], max_iterations=1)
+    assert turned.report["holes_filled"] == 2
+    assert list(_covered(*turned.tessellation_uv(128), spots)) == [True, True, False]
 
 
 def test_a_slot_that_winds_around_a_bend_is_closed_in_the_map_of_its_fan(monkeypatch):
