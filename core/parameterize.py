@@ -3597,18 +3597,21 @@ def trim_distance(param: Parameterization, data: np.ndarray | None = None,
 
 
 def _cloud_hole_lattice(param: Parameterization):
-    """``(lo, h, masks, sizes)``: the holes of a point cloud's domain on a lattice of cells of
+    """``(lo, h, masks, sizes, wide)``: the holes of a point cloud's domain on a lattice of cells of
     side ``h`` from ``lo`` (cell ``[i, j]`` is centred at ``lo + h (j + 1/2, i + 1/2)``),
     ``masks[0][i, j]`` True in a hole, ``masks[1]`` the holes grown by one cell (so that a
     triangle at a hole's rim, farther from the data than the trim distance with the centre of
     its cell nearer, is in one; and some data points at the rim), ``sizes`` the cells of each
-    hole. No data point lies in a hole's cell (its centre is farther than the trim distance
-    from all, twice the cell's half-diagonal). A hole is a 4-connected region of
-    cells farther than :func:`trim_distance` from every data parameter that does not reach
-    the border of the domain (the convex hull: a region that does is a bay or a notch, the
-    shape of the data's outline), and whose box has at most HOLE_MAX_SHARE of the diagonal of
-    the domain's box (a mesh's hole: :func:`_with_holes_filled`; a ring's wide middle is not
-    a hole). Not in method.md."""
+    hole, ``wide`` the largest box diagonal of an empty region too large to be a hole, as a
+    share of the domain's (0.0 when there is none). No data point lies in a hole's cell (its
+    centre is farther than the trim distance from all, twice the cell's half-diagonal). A hole
+    is a 4-connected region of cells farther than :func:`trim_distance` from every data
+    parameter that does not reach the border of the domain (the convex hull: a region that
+    does is a bay or a notch, the shape of the data's outline), and whose box has at most
+    HOLE_MAX_SHARE of the diagonal of the domain's box, both boxes in the model's axes (the
+    plane points of the cells and of the domain polygon: the uv axes turn with the data; a
+    mesh's hole: :func:`_with_holes_filled`; a ring's wide middle is not a hole). Not in
+    method.md."""
     data = np.asarray(param.uv)[np.isfinite(param.uv).all(axis=1)]
     tree = cKDTree(data)
     trim = trim_distance(param, data, tree)
@@ -3630,24 +3633,42 @@ def _cloud_hole_lattice(param: Parameterization):
     border = np.zeros(count + 1, dtype=bool)
     border[labels[outside]] = True
     border[0] = True  # (cells near the data)
-    boxes = ndimage.find_objects(labels)
-    span = np.array([[b[0].stop - b[0].start, b[1].stop - b[1].start] for b in boxes],
-                    dtype=np.float64).reshape(-1, 2)
-    large = np.concatenate([[False], h * np.hypot(span[:, 0], span[:, 1])
-                            > HOLE_MAX_SHARE * float(np.hypot(*extent))])
+    # each region's box in the model's axes (the plane points of its cells' centres)
+    def plane(x):
+        return x @ np.asarray(param.axes)[:2] * param.scale
+
+    cells = labels[1:-1, 1:-1].ravel()
+    which = ~border[cells]
+    at, lab = plane(centres[which]), cells[which]
+    low = np.full((count + 1, 3), np.inf)
+    high = np.full((count + 1, 3), -np.inf)
+    np.minimum.at(low, lab, at)
+    np.maximum.at(high, lab, at)
+    box = plane(poly)
+    share = (np.linalg.norm(np.maximum(high - low, 0.0), axis=1)
+             / float(np.linalg.norm(np.ptp(box, axis=0))))
+    share[border] = 0.0
+    large = share > HOLE_MAX_SHARE
     hole = ~border & ~large
+    wide = float(share.max(initial=0.0)) if large.any() else 0.0
     sizes = np.bincount(labels.ravel(), minlength=count + 1)[hole]
     mask = hole[labels]
     grown = ndimage.binary_dilation(mask, np.ones((3, 3), dtype=bool))
-    return lo, h, (mask[1:-1, 1:-1], grown[1:-1, 1:-1]), sizes.astype(np.int64)
+    return lo, h, (mask[1:-1, 1:-1], grown[1:-1, 1:-1]), sizes.astype(np.int64), wide
 
 
 def cloud_holes(param: Parameterization) -> Parameterization:
     """``param`` (a point cloud's) with ``holes`` set to the cells of each hole of its domain
     (:func:`_cloud_hole_lattice`), or None when it has none: ``fill_holes=True`` for a cloud.
     Its tessellation then covers the holes, where the surface is held by the fairing as
-    between any data, and :meth:`Parameterization.in_holes` finds them."""
+    between any data, and :meth:`Parameterization.in_holes` finds them. A gap inside the
+    cloud too large to be a hole (a ring's middle) is left open, with a RuntimeWarning."""
     lattice = _cloud_hole_lattice(param)
+    if lattice[4]:
+        warnings.warn(
+            f"fill_holes: a gap inside the point cloud {lattice[4]:.2f} times its size across "
+            f"(more than {HOLE_MAX_SHARE:g}: the middle of a ring, not a hole in a scan) is left "
+            "open", RuntimeWarning, stacklevel=4)
     if not len(lattice[3]):
         return param
     param = replace(param, holes=_readonly(lattice[3]))

@@ -1843,7 +1843,8 @@ def test_fill_holes_covers_a_cloud_s_holes_but_not_its_bays(tmp_path):
     where the surface is shown, not the fit) covers the two holes, within a few fit errors of
     the shape there, and leaves the notch, which reaches the cloud's outline, open; the report
     counts the holes, the parameterization finds them (in_holes), a stored surface
-    tessellates as the fitted one and a refine of the points in another order covers them."""
+    tessellates as the fitted one and a refine of the points in another order covers them.
+    A ring's middle is too large to be a hole: left open with a warning."""
     f = lambda x, y: 0.3 * np.sin(2 * x) * np.cos(1.5 * y) + 0.1 * x * y  # noqa: E731
     xy = np.random.default_rng(3).uniform(-1, 1, (12000, 2))
     holes = np.array([[-0.4, 0.3], [0.3, -0.35]]), np.array([0.15, 0.25])
@@ -1873,6 +1874,12 @@ def test_fill_holes_covers_a_cloud_s_holes_but_not_its_bays(tmp_path):
     turned = again.refine(P[::-1], max_iterations=1)
     assert turned.report["holes_filled"] == 2
     assert list(_covered(*turned.tessellation_uv(128), spots)) == [True, True, False]
+    # a ring's middle (a box 0.57 of the square's diagonal) is not a hole: left open, said so
+    ring = xy[np.hypot(*xy.T) > 0.6]
+    with pytest.warns(RuntimeWarning, match=r"a gap inside the point cloud 0.5\d times its "
+                      r"size across .* is left open"):
+        ringed = fit_surface(np.c_[ring, f(*ring.T)], fill_holes=True, max_iterations=1)
+    assert ringed.report["holes_filled"] == 0 and ringed.parameterization.holes is None
 
 
 def test_a_slot_that_winds_around_a_bend_is_closed_in_the_map_of_its_fan(monkeypatch):
