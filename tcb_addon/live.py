@@ -534,6 +534,8 @@ def attach(surface_obj, net_obj, surf, resolution: int, weights=None) -> bpy.typ
         surface_obj.tcb.weights = holder
     else:
         bridge.replace_mesh(holder, mesh, f"{surface_obj.name} Weights")
+        if not holder.name.startswith(f"{surface_obj.name} Weights"):
+            holder.name = f"{surface_obj.name} Weights"  # (the surface renamed: user test)
 
     mod = surface_obj.modifiers.get(MODIFIER_NAME)
     if mod is None:

@@ -210,9 +210,20 @@ def _poll_object_mode(op_cls, context, surface: bool = True) -> bool:
         op_cls.poll_message_set("Switch to Object Mode (Tab) first")
         return False
     if surface and active_surface(context) is None:
-        op_cls.poll_message_set("Select a TCB surface (or its control net)")
+        op_cls.poll_message_set(no_surface_words(context))
         return False
     return True
+
+
+def no_surface_words(context) -> str:
+    """What to select when no TCB surface is active: a net (or another part of a result)
+    whose surface was deleted with X says so (it had said "Select a TCB surface (or its
+    control net)" with the net selected: user test)."""
+    obj = getattr(context, "active_object", None)
+    if obj is not None and obj.tcb.role in {"NET", "DEVIATION", "WEIGHTS"}:
+        return (f"The TCB surface of '{obj.name}' was deleted: select the source and use Fit "
+                "Surface to make a new one")
+    return "Select a TCB surface (or its control net)"
 
 
 def stored_surface(surface_obj, use_net: bool = True):
@@ -1146,6 +1157,9 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         return super().invoke(context, event)
 
     def prepare(self, context):
+        # (the summary's seconds: the engine's alone had said 0.88 s for 3.4 s, without the
+        # reading and Auto Resolution's pass; user test)
+        self._started = time.perf_counter()
         check_settings(self, automatic=True)  # (the engine's words had been shown)
         surface = editable_surface(context, " to refine")
         st = surface.tcb
@@ -1238,8 +1252,9 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         live.relink(surface, surf, st.resolution, self.report)
         store_spline(surface, surf)
         store_stats(st, surf, self._settings)
+        mods = net_modifier_problem(surface)
         warnings = (list(getattr(self, "_warnings", ())) + ([moved] if moved else [])
-                    + _engine_notes(self))
+                    + ([mods] if mods else []) + _engine_notes(self))
         notes = list(getattr(self, "_notes", ()))
         if drop_deviation_points(surface):
             notes.append("the Deviation Points of the previous surface were removed (run "
@@ -1256,7 +1271,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                 warnings.append(f"nothing was refined: the surface already meets the "
                                 f"tolerance {self._settings['tolerance']:.4g}{unit} ({what} "
                                 f"{self._before[0]:.4g}{unit}); set a smaller Tolerance")
-        report_result(self, surf, notes, warnings, auto=st.auto_resolution)
+        report_result(self, surf, notes, warnings, auto=st.auto_resolution,
+                      seconds=time.perf_counter() - self._started)
         return {"FINISHED"}
 
 
@@ -1322,7 +1338,7 @@ class TCB_OT_retessellate(_EngineOperator, bpy.types.Operator):
             store_spline(surface, surf)  # the net was dropped: its edits are kept
         surface.tcb.resolution = self.resolution
         surface.tcb.auto_resolution = False  # (the user's choice: Refine keeps it; review)
-        for problem in (moved, net_vertex_problem(surface)):
+        for problem in (moved, net_vertex_problem(surface), net_modifier_problem(surface)):
             if problem:
                 self.report({"WARNING"}, f"TCB: {problem}")
         return {"FINISHED"}
@@ -1515,15 +1531,20 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
                      else "with no data near them")
             note += f"; {no_data} surface vertices {where} are grey"
         note += "".join(f"; {n}" for n in data.notes)  # e.g. a hidden source read without modifiers
+        rep = surf.report or {}
+        if "rms" in rep and not (changed or rep.get("edited")):
+            # (two RMS of one surface and its data, 2x apart, and nothing said why: user test)
+            note += (f"; these are distances to the closest surface points, the fit's RMS "
+                     f"{rep['rms']:.4g} and max {rep.get('max', float('nan')):.4g} errors at "
+                     "each point's own parameters (never smaller)")
         back = (f"; surface to mesh max {st.deviation_surface_max:.4g}"
                 if data.faces is not None else "")
         self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.deviation_rms:.4g}, max "
                               f"{st.deviation_data_max:.4g}{back}; color range 0 - {vmax:.4g}"
                               f"{note}")  # fmt: skip
-        if moved:
-            self.report({"WARNING"}, f"TCB: {moved}")
-        if changed:
-            self.report({"WARNING"}, f"TCB: {changed}")
+        for problem in (moved, changed, net_modifier_problem(surface)):
+            if problem:
+                self.report({"WARNING"}, f"TCB: {problem}")
         return {"FINISHED"}
 
 
@@ -1626,7 +1647,7 @@ class TCB_OT_toggle_net(bpy.types.Operator):
     def poll(cls, context):
         surface, net = result_objects(getattr(context, "active_object", None))
         if surface is None:
-            cls.poll_message_set("Select a TCB surface (or its control net)")
+            cls.poll_message_set(no_surface_words(context))
         elif net is None:
             cls.poll_message_set(f"'{surface.name}' has no control net")
         return surface is not None and net is not None
@@ -1666,7 +1687,7 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
         # (in Edit Mode too; the others' words when nothing fits: review of a batch script,
         # which got only "poll() failed, context is incorrect")
         if active_surface(context) is None:
-            cls.poll_message_set("Select a TCB surface (or its control net)")
+            cls.poll_message_set(no_surface_words(context))
             return False
         return True
 
@@ -1674,7 +1695,7 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
         try:
             surface = active_surface(context)
             if surface is None:
-                raise bridge.SelectionError("Select a TCB surface (or its control net)")
+                raise bridge.SelectionError(no_surface_words(context))
             if self.filepath.startswith("//") and not bpy.data.filepath:
                 # (an unsaved .blend has no folder: the file had been written to the folder
                 # Blender was started in, reported as "saved rel.npz"; user test)

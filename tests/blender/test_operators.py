@@ -1518,7 +1518,8 @@ def test_refine_removes_deviation_points_of_the_old_surface(clean_scene, capfd):
 
 def test_a_net_whose_surface_was_deleted_enables_no_surface_operator(clean_scene):
     """X on the surface leaves it in bpy.data while its net points to it: with the orphaned
-    net active, Re-tessellate, Refine, Deviation Map, Export and Show/Hide Net were offered."""
+    net active, Re-tessellate, Refine, Deviation Map, Export and Show/Hide Net were offered;
+    they are not, and say why."""
     bpy = clean_scene
     verts, faces = grid(16)
     obj = add_mesh(bpy, "Scan", verts, faces)
@@ -1533,6 +1534,11 @@ def test_a_net_whose_surface_was_deleted_enables_no_surface_operator(clean_scene
         for op in (bpy.ops.tcb.retessellate, bpy.ops.tcb.refine, bpy.ops.tcb.deviation_map,
                    bpy.ops.tcb.export_spline, bpy.ops.tcb.toggle_net):
             assert not op.poll(), op.idname()
+            # (it said "Select a TCB surface (or its control net)" with the net selected:
+            # user test)
+            with pytest.raises(RuntimeError, match=rf"The TCB surface of '{net.name}' was "
+                                                   r"deleted: select the source and use Fit"):
+                op()
     # the other way round: X on the net; Show/Hide Net said it "is not in the current view
     # layer" (user test)
     assert fit(bpy, obj, tolerance=2e-2, max_control_points=150) == {"FINISHED"}
