@@ -440,7 +440,9 @@ def _fit(args) -> int:
         # blamed for 30 stray points, the run spending 20 iterations on them; user test)
         advice = f"{SPIKES_HELD_OFF}: pass --drop-outliers"
     if sag is not None and sag > sag_target(r):  # (the mesh is what the user measures)
-        finer = finer_resolution(resolution, sag, sag_target(r))
+        finer = finer_resolution(resolution, sag, sag_target(r),  # (at half: kept, or cheap)
+                                 surf.tessellation_sag(resolution // 2)
+                                 if resolution >= 4 else None)
         print(f"note: the surface mesh (resolution {resolution}, the finest chosen "
               f"automatically) strays up to {sag:.4g} from the spline, more than the fit's max "
               f"error {r['max']:.4g}: pass --resolution {finer} "

@@ -410,7 +410,9 @@ def resolution_note(surf) -> str | None:
     target = _core().surface.sag_target(surf.report)
     if not sag > target:
         return None
-    finer = _core().surface.finer_resolution(resolution, sag, target)
+    finer = _core().surface.finer_resolution(  # (the sag at half: kept by Auto Resolution)
+        resolution, sag, target, surf.tessellation_sag(resolution // 2) if resolution >= 4
+        else None)
     return (f"the surface mesh (Resolution {resolution}, the finest Auto Resolution takes) "
             f"strays up to {sag:.4g} from the spline, more than the fit's max error "
             f"{float(surf.report['max']):.4g}: Re-tessellate finer (e.g. {finer}) to see the fit "

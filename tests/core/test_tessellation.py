@@ -188,3 +188,22 @@ def test_the_tessellation_sag_falls_with_the_resolution_and_auto_resolution_meet
     flat = np.einsum("tsk,tkj->tsj", w, waves(uv)[tri]).reshape(-1, 3)
     probe = np.nanmax(np.linalg.norm(waves(at) - flat, axis=1))
     assert 0.7 * sags[0] <= probe <= 1.4 * sags[0]
+
+
+def test_finer_resolution_follows_the_measured_fall_of_the_sag():
+    """core.surface.finer_resolution: doublings until the sag meets the target when it falls
+    by the measured ratio per doubling (the sag at half the resolution over the sag), taken
+    between 2x and 4x, 4x without it. A crease makes it fall about 2x (patch-01's fit: 0.996
+    at 128, 0.481 at 256, 0.225 at 512, 0.103 at 1024), where 4x per doubling advised one
+    doubling too few."""
+    from core.surface import MAX_RESOLUTION, finer_resolution
+
+    assert finer_resolution(256, 0.4, 0.12) == 512  # (4x assumed: 0.1 predicted at 512)
+    assert finer_resolution(256, 0.481, 0.12, 0.996) == 1024  # 2.07x: 0.232 at 512
+    assert finer_resolution(256, 0.481, 0.1, 0.996) == 2048  # (0.108 at 1024)
+    assert finer_resolution(256, 0.4, 0.1, 1.6) == 512  # 4x measured: one doubling
+    assert finer_resolution(256, 0.4, 0.1, 100.0) == 512  # (taken as 4x at most)
+    assert finer_resolution(256, 0.4, 0.1, 0.5) == 1024  # (taken as 2x at least)
+    assert finer_resolution(256, 0.4, 0.1, float("nan")) == 512
+    assert finer_resolution(256, 0.05, 0.1, 0.2) == 256  # (already within)
+    assert finer_resolution(2048, 10.0, 0.1, 20.0) == MAX_RESOLUTION
