@@ -13,10 +13,10 @@ vertices over the diagonal, and for the grid the largest distance, over the diag
 the surface and the function at the centres of the removed cells ("in hole"; for the strip,
 the distance of the removed vertices to the surface). Default settings otherwise.
 
-With ``--clouds``: point clouds with round gaps inside them (occlusions), fitted once; the
-share of each gap (over the xy plane) that the surface mesh at resolution 128 covers without and with
-``fill_holes`` (the fit is the same), and the largest and RMS distance between the surface
-and the function over the gap (its tessellation vertices there), against the fit's RMS.
+With ``--clouds``: point clouds with round gaps inside them (occlusions); the share of each
+gap (over the xy plane) that the surface mesh at resolution 128 covers without and with
+``fill_holes`` (the fit is the same), and the largest and RMS vertical distance between the
+mesh and the function over the gap (at its vertices there), against the fit's RMS.
 
     .venv/bin/python benchmarks/holes.py [--quick] [--clouds]
 """

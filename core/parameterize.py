@@ -3597,8 +3597,8 @@ def trim_distance(param: Parameterization, data: np.ndarray | None = None,
 
 
 def _cloud_hole_lattice(param: Parameterization):
-    """``(lo, h, masks, sizes, wide)``: the holes of a point cloud's domain on a lattice of cells of
-    side ``h`` from ``lo`` (cell ``[i, j]`` is centred at ``lo + h (j + 1/2, i + 1/2)``),
+    """``(lo, h, masks, sizes, wide)``: the holes of a point cloud's domain on a lattice of
+    cells of side ``h`` from ``lo`` (cell ``[i, j]`` is centred at ``lo + h (j + 1/2, i + 1/2)``),
     ``masks[0][i, j]`` True in a hole, ``masks[1]`` the holes grown by one cell (so that a
     triangle at a hole's rim, farther from the data than the trim distance with the centre of
     its cell nearer, is in one; and some data points at the rim), ``sizes`` the cells of each
