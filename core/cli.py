@@ -448,6 +448,11 @@ def _fit(args) -> int:
               f"error {r['max']:.4g}: pass --resolution {finer} "
               + ("(the finest)" if finer >= MAX_RESOLUTION else "(or more)")
               + " to write the fit as it is", file=sys.stderr)
+    gaps = surf.open_holes(resolution) if faces is None else 0
+    if gaps:  # (a scan's occlusions came out as holes, the option unknown: user test)
+        print(f"note: the surface mesh leaves {gaps} gap{'s' if gaps > 1 else ''} inside the "
+              f"point cloud open (no points there); pass --fill-holes to cover "
+              f"{'them' if gaps > 1 else 'it'} with the surface", file=sys.stderr)
     flat = _flat_height_field(surf, points) if faces is None else None
     if flat is not None and args.relative and args.tolerance > 0:
         # (terrain "tolerance reached" at RMS 42.7 m on 840 m of relief: 1e-3 of a 44 km

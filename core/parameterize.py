@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -465,11 +466,8 @@ class Parameterization:
         tessellation covers; some data points at a hole's rim are in them)."""
         x = np.atleast_2d(np.asarray(uv, dtype=np.float64))
         if self.holes is not None and self.kind == "plane":
-            lattice = self.__dict__.get("_hole_lattice")
-            if lattice is None:  # (a cache: the parameterization is immutable)
-                lattice = _cloud_hole_lattice(self)
-                object.__setattr__(self, "_hole_lattice", lattice)
-            lo, h, mask = lattice[0], lattice[1], lattice[2][int(bool(grown))]
+            lattice = _cloud_hole_lattice(self)
+            lo, h, mask = lattice.lo, lattice.h, lattice.masks[int(bool(grown))]
             cell = np.floor((x - lo) / h)
             cell = np.where(np.isfinite(cell), cell, -1).astype(np.int64)
             ok = ((cell >= 0) & (cell < [mask.shape[1], mask.shape[0]])).all(axis=1)
@@ -3596,14 +3594,37 @@ def trim_distance(param: Parameterization, data: np.ndarray | None = None,
     return max(4 * spacing, TRIM_GAP_FACTOR * gap)
 
 
-def _cloud_hole_lattice(param: Parameterization):
-    """``(lo, h, masks, sizes, wide)``: the holes of a point cloud's domain on a lattice of
-    cells of side ``h`` from ``lo`` (cell ``[i, j]`` is centred at ``lo + h (j + 1/2, i + 1/2)``),
+class HoleLattice(NamedTuple):
+    """The holes of a point cloud's domain (:func:`_cloud_hole_lattice`)."""
+
+    lo: np.ndarray
+    h: float
+    masks: tuple
+    sizes: np.ndarray
+    wide: float
+    depth: np.ndarray
+    trim: float
+
+
+def _cloud_hole_lattice(param: Parameterization) -> HoleLattice:
+    """Kept on ``param`` (immutable) after the first call: :func:`_hole_lattice`."""
+    lattice = param.__dict__.get("_hole_lattice")
+    if lattice is None:
+        lattice = _hole_lattice(param)
+        object.__setattr__(param, "_hole_lattice", lattice)
+    return lattice
+
+
+def _hole_lattice(param: Parameterization) -> HoleLattice:
+    """:class:`HoleLattice` ``(lo, h, masks, sizes, wide, depth, trim)``: the holes of a point
+    cloud's domain on a lattice of cells of side ``h`` from ``lo`` (cell ``[i, j]`` is centred
+    at ``lo + h (j + 1/2, i + 1/2)``),
     ``masks[0][i, j]`` True in a hole, ``masks[1]`` the holes grown by one cell (so that a
     triangle at a hole's rim, farther from the data than the trim distance with the centre of
     its cell nearer, is in one; and some data points at the rim), ``sizes`` the cells of each
-    hole, ``wide`` the largest box diagonal of an empty region too large to be a hole, as a
-    share of the domain's (0.0 when there is none). No data point lies in a hole's cell (its
+    hole and ``depth`` the largest distance of its cells' centres from the data (uv units),
+    ``wide`` the largest box diagonal of an empty region too large to be a hole, as a share of
+    the domain's (0.0 when there is none). No data point lies in a hole's cell (its
     centre is farther than the trim distance from all, twice the cell's half-diagonal). A hole
     is a 4-connected region of cells farther than :func:`trim_distance` from every data
     parameter that does not reach the border of the domain (the convex hull: a region that
@@ -3654,7 +3675,11 @@ def _cloud_hole_lattice(param: Parameterization):
     sizes = np.bincount(labels.ravel(), minlength=count + 1)[hole]
     mask = hole[labels]
     grown = ndimage.binary_dilation(mask, np.ones((3, 3), dtype=bool))
-    return lo, h, (mask[1:-1, 1:-1], grown[1:-1, 1:-1]), sizes.astype(np.int64), wide
+    inner = hole[cells]
+    depth = np.zeros(count + 1)
+    np.maximum.at(depth, cells[inner], tree.query(centres[inner])[0])
+    return HoleLattice(lo, h, (mask[1:-1, 1:-1], grown[1:-1, 1:-1]), sizes.astype(np.int64),
+                       wide, depth[hole], trim)
 
 
 def cloud_holes(param: Parameterization) -> Parameterization:
@@ -3664,16 +3689,30 @@ def cloud_holes(param: Parameterization) -> Parameterization:
     between any data, and :meth:`Parameterization.in_holes` finds them. A gap inside the
     cloud too large to be a hole (a ring's middle) is left open, with a RuntimeWarning."""
     lattice = _cloud_hole_lattice(param)
-    if lattice[4]:
+    if lattice.wide:
         warnings.warn(
-            f"fill_holes: a gap inside the point cloud {lattice[4]:.2f} times its size across "
+            f"fill_holes: a gap inside the point cloud {lattice.wide:.2f} times its size across "
             f"(more than {HOLE_MAX_SHARE:g}: the middle of a ring, not a hole in a scan) is left "
             "open", RuntimeWarning, stacklevel=4)
-    if not len(lattice[3]):
+    if not len(lattice.sizes):
         return param
-    param = replace(param, holes=_readonly(lattice[3]))
-    object.__setattr__(param, "_hole_lattice", lattice)  # (in_holes' cache)
+    param = replace(param, holes=_readonly(lattice.sizes))
+    object.__setattr__(param, "_hole_lattice", lattice)  # (the same data: its cache)
     return param
+
+
+def open_holes(param: Parameterization, reach: float | None = None) -> int:
+    """How many holes of a point cloud (:func:`_cloud_hole_lattice`, of at least
+    CLOUD_HOLE_MIN_CELLS cells) reach farther than ``reach`` (uv units; default the trim
+    distance) from the data, so that a tessellation that keeps to within ``reach`` of the
+    data leaves them open; 0 for a mesh and for a cloud fitted with ``fill_holes``. About a
+    KD-tree of the data parameters at the first call (0.06 s at 3e4 points, 1.2 s at 1e6)."""
+    if param.kind != "plane" or param.holes is not None:
+        return 0
+    if reach is None:
+        reach = _cloud_hole_lattice(param).trim
+    lattice = _cloud_hole_lattice(param)
+    return int(np.count_nonzero((lattice.sizes >= CLOUD_HOLE_MIN_CELLS) & (lattice.depth > reach)))
 
 
 def parameterize(

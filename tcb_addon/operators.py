@@ -376,10 +376,11 @@ _CHOSEN_RESOLUTION: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 def _as_stored(fn, resolution: int, auto: bool = False):
     """``fn``, returning the spline as :func:`store_spline` keeps it (compact: the data's
     parameters and errors rounded to float32) instead of the engine's, so that the mesh written
-    now is the one a later Re-tessellate or Refine makes from the stored spline; its text and
-    its tessellation at ``resolution`` are made here too, on the job's thread (for 1e6 points
-    the archive took 1.2 s of Blender's main thread). ``auto``: the resolution is chosen
-    (``TCBSurface.auto_resolution``, 0.1-2 s), see :func:`chosen_resolution`."""
+    now is the one a later Re-tessellate or Refine makes from the stored spline; its text,
+    its tessellation at ``resolution`` and a cloud's gaps (``open_holes``) are made here too,
+    on the job's thread (for 1e6 points the archive took 1.2 s of Blender's main thread).
+    ``auto``: the resolution is chosen (``TCBSurface.auto_resolution``, 0.1-2 s), see
+    :func:`chosen_resolution`."""
     def run(**kw):
         result = fn(**kw)
         if (result.report or {}).get("stop_reason") == "cancelled":
@@ -390,6 +391,7 @@ def _as_stored(fn, resolution: int, auto: bool = False):
         if auto:
             _CHOSEN_RESOLUTION[surf] = surf.auto_resolution()
         surf.tessellation_uv(chosen_resolution(surf, resolution))
+        surf.open_holes(chosen_resolution(surf, resolution))  # (kept: the summary's note)
         return surf
     return run
 
@@ -1094,6 +1096,11 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         kind = "mesh" if surf.parameterization.faces is not None else "cloud"
         spanned = [f"the surface spans the {kind}'s {holes} hole{'s' if holes > 1 else ''} "
                    "(Fill Holes)"] if holes else []
+        gaps = surf.open_holes(surface.tcb.resolution)
+        if gaps:  # (a scan's occlusions came out as holes, the option unknown: user test)
+            spanned.append(f"{gaps} gap{'s' if gaps > 1 else ''} inside the point cloud "
+                           f"{'are' if gaps > 1 else 'is'} left open (no points there): turn "
+                           "on Fill Holes to cover them")
         if reused:
             seconds = getattr(self, "_reused_seconds", None)
         else:

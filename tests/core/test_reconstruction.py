@@ -1855,6 +1855,8 @@ def test_fill_holes_covers_a_cloud_s_holes_but_not_its_bays(tmp_path):
     filled = fit_surface(P, tolerance=2e-3, fill_holes=True)
     assert np.array_equal(plain.control_points, filled.control_points)
     assert plain.report["holes_filled"] == 0 and filled.report["holes_filled"] == 2
+    # (what the command line and Blender say without the option: the gaps left open)
+    assert plain.open_holes(128) == 2 and filled.open_holes(128) == 0
     par = filled.parameterization
     spots = par.project(np.c_[np.r_[holes[0], [[0.85, 0.4]]], np.zeros(3)])  # holes, notch
     assert list(par.in_holes(spots)) == [True, True, False]
