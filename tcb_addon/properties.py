@@ -235,7 +235,7 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     rms_area: FloatProperty(name="RMS over area", precision=6)
     seconds: FloatProperty(name="Seconds", precision=2)
     stop_reason: StringProperty(name="Stopped")  # why the adaptive loop stopped
-    holes_filled: IntProperty(name="Holes Spanned")  # a mesh's holes the surface spans
+    holes_filled: IntProperty(name="Holes Spanned")  # holes the surface spans (Fill Holes)
     # the share of a mesh's area where the surface folds over it (core.surface.mesh_folds)
     folded: FloatProperty(name="Folded Over", precision=6)
     # the data's scatter across a smooth surface (core.parameterize.local_noise; 0: not
