@@ -363,7 +363,9 @@ def _fit(args) -> int:
         resolution, sag = surf.auto_resolution(
             least=default_resolution(surf.report["control_points"], surf))
     verts, tris = surf.tessellate(resolution)
-    write_mesh(args.output, verts, tris)
+    # with a UV map: the spline's parameters as texture coordinates
+    write_mesh(args.output, verts, tris,
+               uv=surf.texture_coordinates(surf.tessellation_uv(resolution)[0]))
     if args.net:
         net_points, net_faces = surf.control_net()
         write_mesh(args.net, net_points, net_faces)

@@ -132,17 +132,21 @@ def read_geometry(path: PathLike, *, keep_fill_values: bool = False
     return points, faces
 
 
-def write_mesh(path: PathLike, vertices: np.ndarray, faces: np.ndarray) -> None:
+def write_mesh(path: PathLike, vertices: np.ndarray, faces: np.ndarray,
+               uv: np.ndarray | None = None) -> None:
     """Write a polygon mesh as ``.obj`` (ASCII) or ``.ply`` (binary little endian).
 
     OBJ: ``v x y z`` lines with 17 significant digits (exact round trip of float64) and
     ``f i j k`` lines with 1-based indices. PLY: ``double x, y, z`` vertices and a face list
-    ``uchar`` count / ``int`` indices.
+    ``uchar`` count / ``int`` indices. With ``uv``, a texture coordinate per vertex: OBJ
+    ``vt u v`` lines (9 significant digits) and ``f i/i j/j k/k`` faces, PLY ``float s, t``
+    vertex properties (what Blender, MeshLab and most tools read as a UV map).
 
     Args:
         path: output file; its extension chooses the format.
         vertices: ``(n, 3)`` coordinates.
         faces: ``(f, k)`` 0-based vertex indices, ``k >= 3`` (triangles, quads, ...).
+        uv: ``(n, 2)`` texture coordinates of the vertices, or None.
 
     Raises:
         FileFormatError: unknown extension or the file cannot be written.
@@ -172,11 +176,16 @@ def write_mesh(path: PathLike, vertices: np.ndarray, faces: np.ndarray) -> None:
         )
     if f.shape[1] > 255:
         raise InvalidInputError("faces with more than 255 vertices cannot be written")
+    if uv is not None:
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.shape != (len(v), 2) or not np.all(np.isfinite(uv)):
+            raise InvalidInputError(f"uv must be a finite ({len(v)}, 2) array of texture "
+                                    f"coordinates, one per vertex; got shape {uv.shape}")
     try:
         if ext == ".obj":
-            _write_obj(p, v, f.astype(np.int64))
+            _write_obj(p, v, f.astype(np.int64), uv)
         else:
-            _write_ply(p, v, f.astype(np.int64))
+            _write_ply(p, v, f.astype(np.int64), uv)
     except OSError as exc:
         raise FileFormatError(f"cannot write {str(p)!r}: {exc.strerror or exc}") from None
 
@@ -448,13 +457,19 @@ def _read_obj(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     return verts, _fan_groups(groups, verts)
 
 
-def _write_obj(path: Path, v: np.ndarray, f: np.ndarray) -> None:
-    """ASCII OBJ, bulk formatted with ``np.savetxt``."""
+def _write_obj(path: Path, v: np.ndarray, f: np.ndarray, uv: np.ndarray | None = None) -> None:
+    """ASCII OBJ, bulk formatted with ``np.savetxt``; with ``uv`` a ``vt`` per vertex, the
+    faces ``f i/i j/j ...``."""
     with open(path, "w", encoding="ascii", newline="\n") as fh:
         fh.write("# written by TCB Surface\n")
         np.savetxt(fh, v, fmt="v %.17g %.17g %.17g")
+        if uv is not None:
+            np.savetxt(fh, uv, fmt="vt %.9g %.9g")
         if len(f):
-            np.savetxt(fh, f + 1, fmt="f" + " %d" * f.shape[1])
+            if uv is None:
+                np.savetxt(fh, f + 1, fmt="f" + " %d" * f.shape[1])
+            else:
+                np.savetxt(fh, np.repeat(f + 1, 2, axis=1), fmt="f" + " %d/%d" * f.shape[1])
 
 
 # --------------------------------------------------------------------------------------------
@@ -770,20 +785,26 @@ def _frombuffer(data: bytes, dt: np.dtype, count: int, offset: int, what: str) -
     return np.frombuffer(data, dt, count, offset)
 
 
-def _write_ply(path: Path, v: np.ndarray, f: np.ndarray) -> None:
-    """Binary little-endian PLY: ``double x, y, z``; face list ``uchar`` count, ``int`` index."""
+def _write_ply(path: Path, v: np.ndarray, f: np.ndarray, uv: np.ndarray | None = None) -> None:
+    """Binary little-endian PLY: ``double x, y, z`` (with ``uv``: and ``float s, t``); face
+    list ``uchar`` count, ``int`` index."""
     header = (
         "ply\nformat binary_little_endian 1.0\ncomment written by TCB Surface\n"
         f"element vertex {len(v)}\nproperty double x\nproperty double y\nproperty double z\n"
-        f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n"
+        + ("property float s\nproperty float t\n" if uv is not None else "")
+        + f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n"
     )
+    if uv is not None:
+        rows = np.empty(len(v), dtype=np.dtype([("p", "<f8", (3,)), ("t", "<f4", (2,))]))
+        rows["p"], rows["t"] = v, uv
+        v = rows
     k = f.shape[1]
     rec = np.empty(len(f), dtype=np.dtype([("n", "u1"), ("i", "<i4", (k,))]))
     rec["n"] = k
     rec["i"] = f
     with open(path, "wb") as fh:
         fh.write(header.encode("ascii"))
-        fh.write(np.ascontiguousarray(v, dtype="<f8").tobytes())
+        fh.write(v.tobytes() if uv is not None else np.ascontiguousarray(v, dtype="<f8").tobytes())
         fh.write(rec.tobytes())
 
 

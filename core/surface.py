@@ -668,6 +668,24 @@ class TCBSurface:
             return out, sp.csr_matrix((0, len(self._active)))
         return out, sp.vstack(parts, format="csr")
 
+    def texture_coordinates(self, uv) -> np.ndarray:
+        """Texture coordinates (m, 2) of parameters ``uv`` (m, 2), e.g. those of
+        :meth:`tessellation_uv`: the parameters moved and scaled so that the domain's bounding
+        box has its corner at 0 and its longer side 1 (the aspect kept; a UV map for textures
+        follows the spline's own parameters: a projection for a cloud, the mesh's flattening
+        for a mesh; not in method.md), mirrored (``u -> 1 - u``) for a mesh wound against its
+        canonical winding, so that the triangles of :meth:`tessellate` run counter-clockwise
+        in them as seen from the side their normals face (an image is not shown mirrored)."""
+        x = np.asarray(uv, dtype=np.float64)
+        if x.ndim != 2 or x.shape[1] != 2:
+            raise InvalidInputError(f"uv must be an (M, 2) array; got shape {x.shape}")
+        poly = np.asarray(self._param.domain_polygon, dtype=np.float64)
+        lo, hi = poly.min(axis=0), poly.max(axis=0)
+        t = (x - lo) / max(float(np.max(hi - lo)), 1e-300)
+        if self._param.flipped:
+            t[:, 0] = float(hi[0] - lo[0]) / max(float(np.max(hi - lo)), 1e-300) - t[:, 0]
+        return t
+
     def control_net(self) -> tuple[np.ndarray, np.ndarray]:
         """Control points (n, 3) and the control-net triangles (f, 3) over them (method.md 7:
         the triangles of the centroid triangulation whose three vertices are control points).

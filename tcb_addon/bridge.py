@@ -610,6 +610,16 @@ def new_mesh(name: str, verts: np.ndarray, faces: np.ndarray | None = None) -> b
     return mesh
 
 
+def set_uv_map(mesh, uv: np.ndarray, name: str = "UVMap") -> None:
+    """A UV map ``name`` on ``mesh`` from per-vertex texture coordinates ``uv`` (n, 2): each
+    face corner takes its vertex's."""
+    layer = mesh.uv_layers.get(name) or mesh.uv_layers.new(name=name)
+    corner = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.attributes[".corner_vert"].data.foreach_get("value", corner)
+    layer.data.foreach_set("uv", np.ascontiguousarray(
+        np.asarray(uv, dtype=np.float32)[corner]).ravel())
+
+
 def set_positions(mesh, verts: np.ndarray) -> None:
     mesh.attributes["position"].data.foreach_set(
         "vector", np.ascontiguousarray(verts, dtype=np.float32).ravel()

@@ -513,6 +513,9 @@ def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = No
     local = bridge.to_local(surface_obj, verts)
     name = name or surface_obj.data.name
     mesh = bridge.new_mesh(name, local, faces)
+    # a UV map from the spline's parameters (TCBSurface.texture_coordinates): the surface is
+    # ready for textures (its parameters are the tessellation's, cached on surf)
+    bridge.set_uv_map(mesh, surf.texture_coordinates(surf.tessellation_uv(resolution)[0]))
     mesh.shade_smooth()
     bridge.replace_mesh(surface_obj, mesh, name)
     # the Deviation Map's material shows colours the new mesh does not have (it rendered
@@ -1029,6 +1032,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             verts, faces = surf.tessellate(resolution)
             origin = bridge.local_origin(verts)  # (0, 0, 0) unless far from the world origin
             smesh = bridge.new_mesh(f"{name} TCB Surface", verts - origin, faces)
+            bridge.set_uv_map(smesh, surf.texture_coordinates(surf.tessellation_uv(resolution)[0]))
             smesh.shade_smooth()
             surface = bridge.link_new_object(coll, f"{name} TCB Surface", smesh, origin)
             remember_placement(surface)

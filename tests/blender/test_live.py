@@ -412,3 +412,45 @@ def test_refine_says_its_own_seconds_and_the_weights_follow_a_renamed_surface(cl
     assert (f"these are distances to the closest surface points, the fit's RMS "
             f"{rep['rms']:.4g} and max {rep['max']:.4g} errors at each point's own "
             "parameters (never smaller)") in capfd.readouterr().out
+
+
+def _corner_uv(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """(corners' vertex indices, their UVs) of the mesh's UV map "UVMap"."""
+    corner = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", corner)
+    uv = np.empty(len(mesh.loops) * 2, dtype=np.float32)
+    mesh.uv_layers["UVMap"].data.foreach_get("uv", uv)
+    return corner, uv.reshape(-1, 2).astype(np.float64)
+
+
+def test_the_surface_has_a_uv_map_from_the_spline_s_parameters(clean_scene, addon):
+    """Fit, Refine and Re-tessellate give the surface mesh a UV map "UVMap": each corner its
+    vertex's texture coordinates (TCBSurface.texture_coordinates of the tessellation's
+    parameters: the domain's box to the unit square, aspect kept), every face running
+    counter-clockwise in it as seen from its normal's side (a texture is not mirrored), and the
+    live net's edits keep it."""
+    bpy = clean_scene
+    src, _, _, surface = fitted(bpy)
+    for step in ("fit", "refine", "retessellate"):
+        if step == "refine":
+            assert run(bpy, bpy.ops.tcb.refine, surface, tolerance=1e-3) == {"FINISHED"}
+        elif step == "retessellate":
+            assert run(bpy, bpy.ops.tcb.retessellate, surface, resolution=33) == {"FINISHED"}
+        surf = spline_of(surface)
+        corner, uv = _corner_uv(surface.data)
+        want = surf.texture_coordinates(surf.tessellation_uv(surface.tcb.resolution)[0])
+        assert len(want) == len(surface.data.vertices), step
+        assert np.abs(uv - want[corner]).max() < 1e-6, step
+        assert uv.min() > -1e-6 and uv.max() < 1 + 1e-6 and np.isclose(np.ptp(want, axis=0).max(),
+                                                                         1.0), step
+        tri = corner.reshape(-1, 3)
+        t = want[tri]
+        area = ((t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1])
+                - (t[:, 1, 1] - t[:, 0, 1]) * (t[:, 2, 0] - t[:, 0, 0]))
+        assert (area > 0).all(), step
+    moved = move_net_vertex(bpy, surface.tcb.net, central(surf, surface.tcb.resolution),
+                            (0.0, 0.0, 0.2))
+    assert not np.allclose(evaluated(bpy, surface), positions(surface))  # (the net drives it)
+    shown = surface.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    assert np.abs(_corner_uv(shown)[1] - uv).max() < 1e-6
+    assert len(moved) == len(surf.control_points)

@@ -39,6 +39,11 @@ def test_fit_writes_surface_net_and_spline(tmp_path):
     np.testing.assert_allclose(net_pts, surf.control_points)
     assert surf.report["rms_rel"] <= 2e-3
     assert "RMS over area" not in r.stdout  # a mesh is fitted over its faces' area already
+    # the surface mesh carries a UV map: the spline's parameters as texture coordinates
+    lines = out.read_text().splitlines()
+    vt = np.array([[float(x) for x in s.split()[1:]] for s in lines if s[:3] == "vt "])
+    np.testing.assert_allclose(vt, surf.texture_coordinates(surf.tessellation_uv(32)[0]),
+                               atol=1e-8)
 
 
 def test_point_cloud_input_with_absolute_tolerance(tmp_path):

@@ -95,6 +95,34 @@ def test_write_mesh_rejects_unknown_extension_and_bad_arrays(tmp_path: Path) -> 
         write_mesh(tmp_path / "no" / "such" / "dir" / "m.obj", VERTS, TRIS)
 
 
+def test_write_mesh_with_texture_coordinates(tmp_path: Path) -> None:
+    """``uv=``: OBJ ``vt`` lines, one per vertex, and faces ``i/i``; PLY ``float s, t`` after
+    the coordinates; both read back as the same mesh (the reader takes the vertex index of
+    ``i/j``), the texture coordinates to 9 digits and float32; bad ``uv`` refused."""
+    uv = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 0.5], [0.0, 0.5], [1.0, 0.25]]) + 1e-3
+    write_mesh(tmp_path / "m.obj", VERTS, TRIS, uv=uv)
+    text = (tmp_path / "m.obj").read_text().splitlines()
+    vt = np.array([[float(x) for x in line.split()[1:]] for line in text if line[:3] == "vt "])
+    faces = [line.split()[1:] for line in text if line[:2] == "f "]
+    assert np.abs(vt - uv).max() < 1e-9 and len(faces) == len(TRIS)
+    assert all(a == b for face in faces for a, b in (c.split("/") for c in face))
+    for ext in ("obj", "ply"):
+        if ext == "ply":
+            write_mesh(tmp_path / "m.ply", VERTS, TRIS, uv=uv)
+        pts, tris = read_geometry(tmp_path / f"m.{ext}")
+        np.testing.assert_array_equal(pts, VERTS)
+        np.testing.assert_array_equal(tris, TRIS)
+    raw = (tmp_path / "m.ply").read_bytes()
+    head, body = raw.split(b"end_header\n", 1)
+    assert b"property double z\nproperty float s\nproperty float t\nelement face" in head
+    rows = np.frombuffer(body[: len(VERTS) * 32], dtype=[("p", "<f8", (3,)), ("t", "<f4", (2,))])
+    np.testing.assert_array_equal(rows["p"], VERTS)
+    np.testing.assert_array_equal(rows["t"], uv.astype(np.float32))
+    for bad in (uv[:4], np.c_[uv, uv[:, :1]], np.where(uv > 0.5, np.nan, uv)):
+        with pytest.raises(InvalidInputError, match="uv must be a finite"):
+            write_mesh(tmp_path / "m.obj", VERTS, TRIS, uv=bad)
+
+
 # ---------------------------------------------------------------------------------------------
 # OFF
 # ---------------------------------------------------------------------------------------------

@@ -207,3 +207,37 @@ def test_finer_resolution_follows_the_measured_fall_of_the_sag():
     assert finer_resolution(256, 0.4, 0.1, float("nan")) == 512
     assert finer_resolution(256, 0.05, 0.1, 0.2) == 256  # (already within)
     assert finer_resolution(2048, 10.0, 0.1, 20.0) == MAX_RESOLUTION
+
+
+def test_texture_coordinates_map_the_domain_to_the_unit_square_unmirrored():
+    """TCBSurface.texture_coordinates of the tessellation's parameters: the domain's box goes
+    to [0, 1] on its longer side (the aspect kept); every triangle of tessellate() runs
+    counter-clockwise in them as seen from its normal's side, for a mesh, for its copy wound
+    the other way (its normals reversed, its map mirrored back) and for a cloud, so that an
+    image on the surface is not shown mirrored."""
+    m = 13
+    g = np.linspace(0.0, 2.0, m)
+    x, y = (a.ravel() for a in np.meshgrid(g, 0.5 * g))  # a 2 x 1 patch
+    P = np.c_[x, y, 0.1 * np.sin(2 * x) * y]
+    i = np.arange(m * m).reshape(m, m)
+    a, b, c = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel()
+    d = i[1:, :-1].ravel()
+    F = np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fits = [fit_surface(P, F, max_iterations=1), fit_surface(P, F[:, ::-1], max_iterations=1),
+                fit_surface(P, max_iterations=1)]
+    assert not fits[0].parameterization.flipped and fits[1].parameterization.flipped
+    for k, surf in enumerate(fits):
+        uv, tri = surf.tessellation_uv(24)
+        verts, faces = surf.tessellate(24)
+        t = surf.texture_coordinates(uv)
+        assert t.min(axis=0) == pytest.approx([0, 0], abs=1e-12), k
+        assert t.max() == pytest.approx(1.0) and np.ptp(t, axis=0).min() < 0.9, k
+        e1, e2 = t[faces[:, 1]] - t[faces[:, 0]], t[faces[:, 2]] - t[faces[:, 0]]
+        assert (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] > 0).all(), k
+        n = np.cross(verts[faces[:, 1]] - verts[faces[:, 0]], verts[faces[:, 2]] - verts[faces[:, 0]])
+        up = np.sign(n[:, 2].sum())  # the way the faces face: the given winding's
+        assert up == (-1 if k == 1 else 1) or k == 2, k
+    with pytest.raises(Exception, match=r"uv must be an \(M, 2\) array"):
+        fits[0].texture_coordinates(np.zeros((3, 3)))
