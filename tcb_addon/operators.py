@@ -513,9 +513,7 @@ def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = No
     local = bridge.to_local(surface_obj, verts)
     name = name or surface_obj.data.name
     mesh = bridge.new_mesh(name, local, faces)
-    # a UV map from the spline's parameters (TCBSurface.texture_coordinates): the surface is
-    # ready for textures (its parameters are the tessellation's, cached on surf)
-    bridge.set_uv_map(mesh, surf.texture_coordinates(surf.tessellation_uv(resolution)[0]))
+    set_texture(mesh, surf, resolution)
     mesh.shade_smooth()
     bridge.replace_mesh(surface_obj, mesh, name)
     # the Deviation Map's material shows colours the new mesh does not have (it rendered
@@ -523,6 +521,13 @@ def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = No
     bridge.drop_deviation_material(mesh)
     surface_obj.tcb.has_deviation = False
     remember_placement(surface_obj)
+
+
+def set_texture(mesh, surf, resolution: int) -> None:
+    """A UV map on the surface ``mesh`` (the tessellation of ``surf`` at ``resolution``) from
+    the spline's parameters (TCBSurface.texture_coordinates): ready for textures. The
+    parameters are the tessellation's, cached on ``surf``."""
+    bridge.set_uv_map(mesh, surf.texture_coordinates(surf.tessellation_uv(resolution)[0]))
 
 
 def write_net_mesh(net_obj, surf, name: str | None = None):
@@ -1032,7 +1037,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             verts, faces = surf.tessellate(resolution)
             origin = bridge.local_origin(verts)  # (0, 0, 0) unless far from the world origin
             smesh = bridge.new_mesh(f"{name} TCB Surface", verts - origin, faces)
-            bridge.set_uv_map(smesh, surf.texture_coordinates(surf.tessellation_uv(resolution)[0]))
+            set_texture(smesh, surf, resolution)
             smesh.shade_smooth()
             surface = bridge.link_new_object(coll, f"{name} TCB Surface", smesh, origin)
             remember_placement(surface)
