@@ -2216,21 +2216,21 @@ def _split_vertices(tris: np.ndarray, edge_id: np.ndarray) -> np.ndarray:
     return np.flatnonzero(fans > 1)
 
 
-def _mean_value_weights(p: np.ndarray, tris: np.ndarray, n: int) -> sp.csr_matrix:
+def _mean_value_weights(p: np.ndarray, tris: np.ndarray, n: int, terms=None) -> sp.csr_matrix:
     """Floater's mean-value weights ``W`` (``(n, n)`` CSR, positive on mesh edges).
 
     ``w_ij = (tan(alpha_ij / 2) + tan(beta_ij / 2)) / |p_j - p_i|`` where ``alpha_ij, beta_ij``
     are the angles at ``p_i`` of the two triangles sharing edge ``ij`` (one on the boundary).
     Computed per triangle corner with ``tan(theta / 2) = |e1 x e2| / (|e1||e2| + e1 . e2)``,
-    which is accurate for small angles (method.md section 4).
+    which is accurate for small angles (method.md section 4; ``terms``: :func:`_corner_terms`
+    when known).
     """
     i, j, k = tris[:, 0], tris[:, 1], tris[:, 2]
+    cross3, dot3, l13, l23 = _corner_terms(p, tris) if terms is None else terms
     rows, cols, vals = [], [], []
-    for a, b, c in ((i, j, k), (j, k, i), (k, i, j)):
-        e1, e2 = p[b] - p[a], p[c] - p[a]
-        l1, l2 = np.linalg.norm(e1, axis=1), np.linalg.norm(e2, axis=1)
-        cross = np.linalg.norm(np.cross(e1, e2), axis=1)
-        den = l1 * l2 + np.einsum("ij,ij->i", e1, e2)
+    for corner, (a, b, c) in enumerate(((i, j, k), (j, k, i), (k, i, j))):
+        l1, l2, cross = l13[:, corner], l23[:, corner], cross3[:, corner]
+        den = l1 * l2 + dot3[:, corner]
         tan_half = cross / np.maximum(den, 1e-12 * l1 * l2)
         rows += [a, a]
         cols += [b, c]
@@ -2375,23 +2375,38 @@ def _pinch(q: np.ndarray, edge: np.ndarray, stretch: np.ndarray, k: int = 12,
     return float(ratio[steps > apart].max(initial=0.0))
 
 
-def corner_angles(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """The 3D angle (f, 3) of each triangle at each of its corners ``tris[:, j]``:
-    ``atan2(|e_1 x e_2|, e_1 . e_2)`` of the edges ``e_1, e_2`` leaving it."""
-    out = np.empty(tris.shape)
+def _corner_terms(p: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, ...]:
+    """At each corner ``tris[:, j]`` of each triangle, with the edges ``e_1 = p[tris[:, j +
+    1]] - p[tris[:, j]]`` and ``e_2 = p[tris[:, j + 2]] - p[tris[:, j]]`` (indices mod 3)
+    leaving it: ``(|e_1 x e_2|, e_1 . e_2, |e_1|, |e_2|)``, each (f, 3). The terms of the
+    corner angles (:func:`corner_angles`), of the cotangent weights
+    (:func:`_cotan_weights`) and of the mean-value weights (:func:`_mean_value_weights`),
+    computed once for the three (method.md section 4's map: they were 3 passes over the
+    corners, 7.3 s of a 1e6-vertex mesh's map on a busy machine); the same operations as
+    each computed alone, so the same values to the last bit."""
+    cross, dot, l1, l2 = (np.empty(tris.shape) for _ in range(4))
     for j in range(3):
         a = p[tris[:, j]]
         e1, e2 = p[tris[:, (j + 1) % 3]] - a, p[tris[:, (j + 2) % 3]] - a
-        out[:, j] = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1),
-                               np.einsum("ij,ij->i", e1, e2))
-    return out
+        cross[:, j] = np.linalg.norm(np.cross(e1, e2), axis=1)
+        dot[:, j] = np.einsum("ij,ij->i", e1, e2)
+        l1[:, j], l2[:, j] = np.linalg.norm(e1, axis=1), np.linalg.norm(e2, axis=1)
+    return cross, dot, l1, l2
 
 
-def _angle_sums(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
+def corner_angles(p: np.ndarray, tris: np.ndarray, terms=None) -> np.ndarray:
+    """The 3D angle (f, 3) of each triangle at each of its corners ``tris[:, j]``:
+    ``atan2(|e_1 x e_2|, e_1 . e_2)`` of the edges ``e_1, e_2`` leaving it. ``terms``:
+    :func:`_corner_terms` when known."""
+    cross, dot = (_corner_terms(p, tris) if terms is None else terms)[:2]
+    return np.arctan2(cross, dot)
+
+
+def _angle_sums(p: np.ndarray, tris: np.ndarray, terms=None) -> np.ndarray:
     """Sum (n,) of the 3D corner angles of the triangles at each vertex:
     ``theta_i = sum atan2(|e_1 x e_2|, e_1 . e_2)`` over the corners at ``i``
-    (:func:`corner_angles`)."""
-    angle = corner_angles(p, tris)
+    (:func:`corner_angles`; ``terms``: :func:`_corner_terms` when known)."""
+    angle = corner_angles(p, tris, terms)
     total = np.zeros(len(p))
     for j in range(3):  # (corner by corner: the sums as they were, to the last bit)
         total += np.bincount(tris[:, j], weights=angle[:, j], minlength=len(p))
@@ -2519,17 +2534,18 @@ class _OrderedLU:
         return x
 
 
-def _cotan_weights(p: np.ndarray, tris: np.ndarray, n: int) -> sp.csr_matrix:
+def _cotan_weights(p: np.ndarray, tris: np.ndarray, n: int, terms=None) -> sp.csr_matrix:
     """The cotangent weights ``C`` (``(n, n)`` CSR, symmetric): ``c_ij = (cot alpha_ij +
     cot beta_ij) / 2``, ``alpha_ij, beta_ij`` the angles opposite edge ``ij`` in its two
     triangles (one on the boundary); ``L = diag(C 1) - C`` is the Dirichlet energy's matrix
-    of the piecewise linear functions on the mesh."""
+    of the piecewise linear functions on the mesh. ``cot = e_1 . e_2 / |e_1 x e_2|`` at each
+    corner (``terms``: :func:`_corner_terms` when known)."""
+    cross, dot = (_corner_terms(p, tris) if terms is None else terms)[:2]
     rows, cols, vals = [], [], []
-    for a, b, c in ((tris[:, 0], tris[:, 1], tris[:, 2]), (tris[:, 1], tris[:, 2], tris[:, 0]),
-                    (tris[:, 2], tris[:, 0], tris[:, 1])):
-        e1, e2 = p[b] - p[a], p[c] - p[a]
-        cross = np.linalg.norm(np.cross(e1, e2), axis=1)
-        half_cot = 0.5 * np.einsum("ij,ij->i", e1, e2) / np.maximum(cross, 1e-300)
+    for j, (a, b, c) in enumerate(((tris[:, 0], tris[:, 1], tris[:, 2]),
+                                   (tris[:, 1], tris[:, 2], tris[:, 0]),
+                                   (tris[:, 2], tris[:, 0], tris[:, 1]))):
+        half_cot = 0.5 * dot[:, j] / np.maximum(cross[:, j], 1e-300)
         rows += [b, c]
         cols += [c, b]
         vals += [half_cot, half_cot]
@@ -2537,14 +2553,15 @@ def _cotan_weights(p: np.ndarray, tris: np.ndarray, n: int) -> sp.csr_matrix:
                          shape=(n, n)).tocsr()
 
 
-def _cotan_carried(p, tris, loop, interior, defect, order=None) -> np.ndarray | None:
+def _cotan_carried(p, tris, loop, interior, defect, order=None, c=None) -> np.ndarray | None:
     """:func:`_carried_curvature` by the cotangent Laplacian, or None when its system is
     singular or its solution not finite. Factored with SuperLU's minimum-degree ordering of
     ``A^T + A`` (MMD_AT_PLUS_A; the matrix is symmetric), not its default COLAMD: on a
     450x450 grid mesh 1.9x less time and 44% less fill (21.6e6 entries of L + U against
     38.3e6), the same solution to 4e-14 (relative); ``order``: the ordering of
-    :func:`_dissection_order` instead (:class:`_OrderedLU`)."""
-    c = _cotan_weights(p, tris, len(p))[interior]
+    :func:`_dissection_order` instead (:class:`_OrderedLU`); ``c``: the rows ``interior`` of
+    the weights (:func:`_cotan_weights`) when known."""
+    c = _cotan_weights(p, tris, len(p))[interior] if c is None else c
     lap = sp.diags(np.asarray(c.sum(axis=1)).ravel()) - c[:, interior]
     try:
         with warnings.catch_warnings():
@@ -3256,12 +3273,19 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
         at[ii] = np.arange(len(ii))
         inner = (at[ea] >= 0) & (at[eb] >= 0)
         order = _dissection_order(at[ea[inner]], at[eb[inner]], p[ii])
-    if FLAT_BOUNDARY:  # (the cotangent solve of _flattened_map first, its factor freed)
-        theta = _angle_sums(p, tris)
-        known = (theta, _cotan_carried(p, tris, loop, ii, 2.0 * np.pi - theta[ii], order)
-                 if len(ii) else np.zeros(len(loop)))
+    # the corner terms of the angle sums and of both weights, once (_corner_terms)
+    terms = _corner_terms(p, tris) if (FLAT_BOUNDARY or len(ii)) else None
     if len(ii):
-        w = _mean_value_weights(p, tris, n)[ii]
+        w = _mean_value_weights(p, tris, n, terms)[ii]
+    if FLAT_BOUNDARY:  # (the cotangent solve of _flattened_map first, its factor freed)
+        theta = _angle_sums(p, tris, terms)
+        cot = _cotan_weights(p, tris, n, terms)[ii] if len(ii) else None
+        terms = None
+        known = (theta, _cotan_carried(p, tris, loop, ii, 2.0 * np.pi - theta[ii], order,
+                                       cot) if len(ii) else np.zeros(len(loop)))
+        cot = None
+    terms = None
+    if len(ii):
         a = sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w[:, ii]
         rhs = w[:, loop] @ uv[loop]
         try:
