@@ -2375,30 +2375,35 @@ def _pinch(q: np.ndarray, edge: np.ndarray, stretch: np.ndarray, k: int = 12,
     return float(ratio[steps > apart].max(initial=0.0))
 
 
-def _corner_terms(p: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, ...]:
+def _corner_terms(p: np.ndarray, tris: np.ndarray, lengths: bool = True
+                  ) -> tuple[np.ndarray, ...]:
     """At each corner ``tris[:, j]`` of each triangle, with the edges ``e_1 = p[tris[:, j +
     1]] - p[tris[:, j]]`` and ``e_2 = p[tris[:, j + 2]] - p[tris[:, j]]`` (indices mod 3)
-    leaving it: ``(|e_1 x e_2|, e_1 . e_2, |e_1|, |e_2|)``, each (f, 3). The terms of the
-    corner angles (:func:`corner_angles`), of the cotangent weights
-    (:func:`_cotan_weights`) and of the mean-value weights (:func:`_mean_value_weights`),
-    computed once for the three (method.md section 4's map: they were 3 passes over the
-    corners, 7.3 s of a 1e6-vertex mesh's map on a busy machine); the same operations as
-    each computed alone, so the same values to the last bit."""
-    cross, dot, l1, l2 = (np.empty(tris.shape) for _ in range(4))
+    leaving it: ``(|e_1 x e_2|, e_1 . e_2, |e_1|, |e_2|)``, each (f, 3) (the first two
+    without ``lengths``). The terms of the corner angles (:func:`corner_angles`), of the
+    cotangent weights (:func:`_cotan_weights`) and of the mean-value weights
+    (:func:`_mean_value_weights`), computed once for the three (method.md section 4's map:
+    three passes over the corners were 7.3 s of a 1e6-vertex mesh's map on a busy machine,
+    this one 1.5 s). From the three edge vectors ``d_j = p[tris[:, j + 1]] - p[tris[:, j]]``
+    of each triangle: ``e_1 = d_j``, ``e_2 = -d_{j+2}``; negation is exact, so each term is
+    the same to the last bit as from ``e_1, e_2`` formed apart."""
+    d = [p[tris[:, (j + 1) % 3]] - p[tris[:, j]] for j in range(3)]
+    cross, dot = np.empty(tris.shape), np.empty(tris.shape)
     for j in range(3):
-        a = p[tris[:, j]]
-        e1, e2 = p[tris[:, (j + 1) % 3]] - a, p[tris[:, (j + 2) % 3]] - a
+        e1, e2 = d[j], d[(j + 2) % 3]  # (e_2 = -e2: |e_1 x e_2| and -e_1 . e_2 the same)
         cross[:, j] = np.linalg.norm(np.cross(e1, e2), axis=1)
-        dot[:, j] = np.einsum("ij,ij->i", e1, e2)
-        l1[:, j], l2[:, j] = np.linalg.norm(e1, axis=1), np.linalg.norm(e2, axis=1)
-    return cross, dot, l1, l2
+        dot[:, j] = -np.einsum("ij,ij->i", e1, e2)
+    if not lengths:
+        return cross, dot
+    size = np.column_stack([np.linalg.norm(e, axis=1) for e in d])
+    return cross, dot, size, size[:, [2, 0, 1]]
 
 
 def corner_angles(p: np.ndarray, tris: np.ndarray, terms=None) -> np.ndarray:
     """The 3D angle (f, 3) of each triangle at each of its corners ``tris[:, j]``:
     ``atan2(|e_1 x e_2|, e_1 . e_2)`` of the edges ``e_1, e_2`` leaving it. ``terms``:
     :func:`_corner_terms` when known."""
-    cross, dot = (_corner_terms(p, tris) if terms is None else terms)[:2]
+    cross, dot = (_corner_terms(p, tris, lengths=False) if terms is None else terms)[:2]
     return np.arctan2(cross, dot)
 
 
@@ -2430,25 +2435,34 @@ def _closed_polygon(length: np.ndarray, turning: np.ndarray) -> np.ndarray | Non
     return np.vstack([[0.0, 0.0], np.cumsum(closed[:-1, None] * T[:-1], axis=0)])
 
 
-def _map_energy(p: np.ndarray, tris: np.ndarray, uv: np.ndarray) -> float:
+def _energy_frames(p: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The 3D part of :func:`_map_energy`, the same for every map of the mesh: the triangles
+    of positive area (mask, (f,)) and of those ``l_1``, the area, ``x_2`` and ``y_2`` (the
+    3D edges ``(l_1, 0)`` and ``(x_2, y_2)`` in each triangle's plane)."""
+    e1, e2 = p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]]
+    l1 = np.linalg.norm(e1, axis=1)
+    area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+    ok = area > 0
+    l1, area, e1, e2 = l1[ok], area[ok], e1[ok], e2[ok]
+    x2 = np.einsum("ij,ij->i", e1, e2) / l1
+    return ok, l1, area, x2, 2.0 * area / l1
+
+
+def _map_energy(p: np.ndarray, tris: np.ndarray, uv: np.ndarray, frames=None) -> float:
     """Distortion of the map of the triangles ``tris`` from 3D (``p``) to ``uv``: the
     area-weighted mean of the symmetric Dirichlet energy ``(s_1^2 + s_2^2 + s_1^-2 + s_2^-2)
     / 4`` of each triangle's linear map (singular values ``s``), after scaling ``uv`` to the
     3D area; 1 for an isometry, infinite if a uv triangle is flipped or flat. Per triangle
     ``|J|_F^2 = |f_1|^2 / l_1^2 + |f_2 - f_1 x_2 / l_1|^2 / y_2^2`` (``f`` the uv edges,
     ``(l_1, 0)`` and ``(x_2, y_2)`` the 3D edges in the triangle's plane) and
-    ``|J^-1|_F^2 = |J|_F^2 / det J^2``, ``det J = area_uv / area_3D``."""
-    e1, e2 = p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]]
+    ``|J^-1|_F^2 = |J|_F^2 / det J^2``, ``det J = area_uv / area_3D``. ``frames``: its 3D
+    part (:func:`_energy_frames`) when known (a mesh's maps are compared on it)."""
     f1, f2 = uv[tris[:, 1]] - uv[tris[:, 0]], uv[tris[:, 2]] - uv[tris[:, 0]]
     area_uv = 0.5 * (f1[:, 0] * f2[:, 1] - f1[:, 1] * f2[:, 0])
     if not (area_uv > 0).all():
         return float("inf")
-    l1 = np.linalg.norm(e1, axis=1)
-    area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
-    ok = area > 0
-    l1, area, e1, e2, f1, f2, area_uv = (a[ok] for a in (l1, area, e1, e2, f1, f2, area_uv))
-    x2 = np.einsum("ij,ij->i", e1, e2) / l1
-    y2 = 2.0 * area / l1
+    ok, l1, area, x2, y2 = _energy_frames(p, tris) if frames is None else frames
+    f1, f2, area_uv = f1[ok], f2[ok], area_uv[ok]
     s2 = area.sum() / area_uv.sum()  # uv scaled to the 3D area
     col2 = f2 - f1 * (x2 / l1)[:, None]
     frob = s2 * (np.einsum("ij,ij->i", f1, f1) / l1**2 + np.einsum("ij,ij->i", col2, col2) / y2**2)
@@ -2540,7 +2554,7 @@ def _cotan_weights(p: np.ndarray, tris: np.ndarray, n: int, terms=None) -> sp.cs
     triangles (one on the boundary); ``L = diag(C 1) - C`` is the Dirichlet energy's matrix
     of the piecewise linear functions on the mesh. ``cot = e_1 . e_2 / |e_1 x e_2|`` at each
     corner (``terms``: :func:`_corner_terms` when known)."""
-    cross, dot = (_corner_terms(p, tris) if terms is None else terms)[:2]
+    cross, dot = (_corner_terms(p, tris, lengths=False) if terms is None else terms)[:2]
     rows, cols, vals = [], [], []
     for j, (a, b, c) in enumerate(((tris[:, 0], tris[:, 1], tris[:, 2]),
                                    (tris[:, 1], tris[:, 2], tris[:, 0]),
@@ -2657,7 +2671,7 @@ def _inside_boundary(p, tris, edge, loop, interior, w, lu, inner=None) -> np.nda
     return None if _pinch(p[loop], uv[loop], stretch[loop]) > FLAT_PINCH else uv
 
 
-def _projected_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
+def _projected_map(p, tris, loop, interior, w, lu, frames=None) -> np.ndarray | None:
     """The mesh's map with its boundary projected onto a plane (method.md section 4's
     projection of point clouds; not in method.md), or None: ``x_b = (p_b - o) . [e_1, e_2]``
     for a unit normal ``n`` and ``e_1, e_2`` completing it to an orthonormal frame, turned
@@ -2677,7 +2691,9 @@ def _projected_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
     benchmarks/mesh_maps.py). Mean-value weights inside a boundary that is not convex may
     flip triangles (a comb on 1.5 sin 3x cos 2y), and they strain a steep one (0.8 sin 3x
     cos 2y: 1.37 against 1.18 projected whole, 569 control points against 199); the
-    projection of a height field along its mean normal flips none."""
+    projection of a height field along its mean normal flips none. ``frames``: the 3D part
+    of the distortion (:func:`_energy_frames`) when known."""
+    frames = _energy_frames(p, tris) if frames is None else frames
     ids = np.concatenate([loop, interior])
     centre = p[ids].mean(axis=0)
     facing = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]]).sum(axis=0)
@@ -2697,7 +2713,7 @@ def _projected_map(p, tris, loop, interior, w, lu) -> np.ndarray | None:
             edge[:, 1] = -edge[:, 1]
         for kind, inner in (("mean-value", None), ("projected", (p[interior] - centre) @ frame)):
             uv = _inside_boundary(p, tris, edge, loop, interior, w, lu, inner)
-            energy = np.inf if uv is None else _map_energy(p, tris, uv)
+            energy = np.inf if uv is None else _map_energy(p, tris, uv, frames)
             if energy < best[kind][0]:
                 best[kind] = (energy, uv)
     (smooth, smooth_uv), (flat, flat_uv) = best["mean-value"], best["projected"]
@@ -3305,10 +3321,14 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
 
     # the boundary's own shape instead, when that distorts the triangles less (FLAT_GAIN)
     flat = _flattened_map(p, tris, loop, ii, w, lu, known) if FLAT_BOUNDARY else None
+    frames = None  # (the 3D part of the distortion, once for the maps compared)
     if flat is None and FLAT_BOUNDARY and PROJECTED_BOUNDARY:
-        flat = _projected_map(p, tris, loop, ii, w, lu)
+        frames = _energy_frames(p, tris)
+        flat = _projected_map(p, tris, loop, ii, w, lu, frames)
     if flat is not None:
-        fixed_energy, flat_energy = _map_energy(p, tris, uv), _map_energy(p, tris, flat)
+        frames = _energy_frames(p, tris) if frames is None else frames
+        fixed_energy = _map_energy(p, tris, uv, frames)
+        flat_energy = _map_energy(p, tris, flat, frames)
         if flat_energy - 1.0 < FLAT_GAIN * (fixed_energy - 1.0) - FLAT_MIN_GAIN:
             uv = flat
 
