@@ -2567,20 +2567,29 @@ def _cotan_weights(p: np.ndarray, tris: np.ndarray, n: int, terms=None) -> sp.cs
                          shape=(n, n)).tocsr()
 
 
-def _cotan_carried(p, tris, loop, interior, defect, order=None, c=None) -> np.ndarray | None:
+def _cotan_system(p, tris, loop, interior, terms=None) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """The cotangent Laplacian of the ``interior`` vertices, ``L_II = diag(C_I 1) - C_II``,
+    and the weights ``C_IB`` of their edges to the boundary ``loop``
+    (:func:`_cotan_weights`; ``terms``: :func:`_corner_terms` when known); the whole ``C``
+    is not kept."""
+    c = _cotan_weights(p, tris, len(p), terms)[interior]
+    return sp.diags(np.asarray(c.sum(axis=1)).ravel()) - c[:, interior], c[:, loop]
+
+
+def _cotan_carried(p, tris, loop, interior, defect, order=None, system=None
+                   ) -> np.ndarray | None:
     """:func:`_carried_curvature` by the cotangent Laplacian, or None when its system is
     singular or its solution not finite. Factored with SuperLU's minimum-degree ordering of
     ``A^T + A`` (MMD_AT_PLUS_A; the matrix is symmetric), not its default COLAMD: on a
     450x450 grid mesh 1.9x less time and 44% less fill (21.6e6 entries of L + U against
     38.3e6), the same solution to 4e-14 (relative); ``order``: the ordering of
-    :func:`_dissection_order` instead (:class:`_OrderedLU`); ``c``: the rows ``interior`` of
-    the weights (:func:`_cotan_weights`) when known."""
-    c = _cotan_weights(p, tris, len(p))[interior] if c is None else c
-    lap = sp.diags(np.asarray(c.sum(axis=1)).ravel()) - c[:, interior]
+    :func:`_dissection_order` instead (:class:`_OrderedLU`); ``system``: ``(L_II, C_IB)``
+    (:func:`_cotan_system`) when made already."""
+    lap, c_loop = _cotan_system(p, tris, loop, interior) if system is None else system
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # (a singular factor is caught below)
-            carried = c[:, loop].T @ _OrderedLU(lap, order).solve(defect)
+            carried = c_loop.T @ _OrderedLU(lap, order).solve(defect)
         if np.isfinite(carried).all():
             return carried
     except RuntimeError:
@@ -2916,16 +2925,13 @@ def mesh_spikes(p: np.ndarray, tris: np.ndarray, edges=None) -> tuple[np.ndarray
     i, j = np.r_[edges[0], edges[1]], np.r_[edges[1], edges[0]]  # i's neighbour j
     # offsets from the vertex itself first (no cancellation at coordinates of 1e6 and more)
     rel = p[j] - p[i]
-    spike, height = _ring_spikes(i, rel, n, 3)
+    spike, height, (deg, c, r) = _ring_spikes(i, rel, n, 3, stats=True)
     # the ring without the neighbour farthest from its centroid, then without the next one
     # (at least 3 left each time): adjacent spikes see each other in their rings, which are
     # bent, and none was found. Tested where the vertex is farther from its ring's centroid
     # than half the ring's size (a spike with m of its k neighbours raised: k / 2m, at least
     # 1.25 for the k >= m + 3 tested; a flat grid's inner vertices 0, its border ones 0.6)
-    deg = np.bincount(i, minlength=n)
-    c = (np.column_stack([np.bincount(i, rel[:, k], n) for k in range(3)])
-         / np.maximum(deg, 1)[:, None])
-    r = np.bincount(i, np.linalg.norm(rel - c[i], axis=1), n) / np.maximum(deg, 1)
+    # (deg, c, r: the degrees, ring centroids and ring sizes, as _ring_spikes found them)
     sub = (deg >= 4)[i] & (np.linalg.norm(c, axis=1) > 0.5 * r)[i]
     ii, rr = i[sub], rel[sub]
     keep = np.ones(len(ii), dtype=bool)
@@ -2962,15 +2968,25 @@ def mesh_spikes(p: np.ndarray, tris: np.ndarray, edges=None) -> tuple[np.ndarray
 
 
 def _ring_spikes(i: np.ndarray, rel: np.ndarray, n: int, least: int,
-                 slope_of_3: float = _MESH_SPIKE_SLOPE) -> tuple[np.ndarray, np.ndarray]:
+                 slope_of_3: float = _MESH_SPIKE_SLOPE, stats: bool = False):
     """:func:`mesh_spikes`' test at each of the ``n`` vertices with at least ``least`` of the
     neighbours given (``rel``: vertex ``i``'s neighbour minus the vertex), steeper than
     _MESH_SPIKE_SLOPE (``slope_of_3`` where exactly 3 are given): whether it is a spike (n,)
-    and its height above the plane of those neighbours (n,; 0 where not tested)."""
+    and its height above the plane of those neighbours (n,; 0 where not tested); with
+    ``stats`` also ``(deg, c, r)``: each vertex's number of neighbours given, their
+    centroid (n, 3; relative to the vertex) and their mean distance from it (n,), which
+    :func:`mesh_spikes` uses next. Neighbours of fewer than a quarter of the vertices (the
+    rings without neighbours, the corners): tested on those vertices alone (the same sums
+    in the same order, so the same values; not arrays of all ``n`` for a few rings)."""
+    if not stats and 4 * len(i) < n:
+        u, local = np.unique(i, return_inverse=True)
+        spike, height = np.zeros(n, dtype=bool), np.zeros(n)
+        spike[u], height[u] = _ring_spikes(local.reshape(-1), rel, len(u), least, slope_of_3)
+        return spike, height
     deg = np.bincount(i, minlength=n)
     at = np.flatnonzero(deg >= least)
     spike, height = np.zeros(n, dtype=bool), np.zeros(n)
-    if len(at) == 0:
+    if len(at) == 0 and not stats:
         return spike, height
     c = (np.column_stack([np.bincount(i, rel[:, k], n) for k in range(3)])
          / np.maximum(deg, 1)[:, None])
@@ -2981,13 +2997,15 @@ def _ring_spikes(i: np.ndarray, rel: np.ndarray, n: int, least: int,
             cov[:, a, b] = cov[:, b, a] = np.bincount(i, x[:, a] * x[:, b], n)
     cov /= np.maximum(deg, 1)[:, None, None]
     r = np.bincount(i, np.linalg.norm(x, axis=1), n) / np.maximum(deg, 1)
+    if len(at) == 0:
+        return spike, height, (deg, c, r)
     w, v = np.linalg.eigh(cov[at])
     s = np.sqrt(np.maximum(w[:, 0], 0.0))
     d = np.abs(np.einsum("ij,ij->i", c[at], v[:, :, 0]))  # (the vertex is at 0: -c off)
     slope = np.where(deg[at] == 3, slope_of_3, _MESH_SPIKE_SLOPE)
     spike[at] = (d > slope * r[at]) & (d > _MESH_SPIKE_FLAT * s)
     height[at] = d
-    return spike, height
+    return (spike, height, (deg, c, r)) if stats else (spike, height)
 
 
 def _dissolved(p: np.ndarray, tris: np.ndarray, spikes: np.ndarray) -> np.ndarray:
@@ -3164,6 +3182,8 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     graph = sp.coo_matrix((np.ones(len(ea)), (ea, eb)), shape=(n, n))
     _, label = connected_components(graph, directed=False)
     n_pieces = len(np.unique(label[used]))
+    graph = label = None  # (freed: the arrays of the edges and half-edges are most of what
+    # a large mesh's map holds besides its factors, 0.9 GB at 1e6 vertices)
     if n_pieces > 1:
         welded = _welded_pieces(p, tris)
         if welded < n_pieces / 2:  # STL-style: corners not shared
@@ -3199,6 +3219,7 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
         )
     bf, bt = he_from[on_boundary], he_to[on_boundary]
     pinched = _split_vertices(tris, edge_id)
+    he_from = he_to = key = edge_id = ecount = on_boundary = None  # (freed)
     if len(pinched):
         # a vertex duplicated at the same position, some of its faces on each copy: a slit
         # that meets the border at a vertex of equal position (user test)
@@ -3264,6 +3285,7 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     seg = np.linalg.norm(p[np.roll(loop, -1)] - p[loop], axis=1)
     elen = np.linalg.norm(p[eb] - p[ea], axis=1)
     n_zero = int(np.count_nonzero(elen <= 0.0))
+    elen = None
     if n_zero:
         raise InvalidInputError(
             f"the mesh has {n_zero} zero-length edges (coincident vertices); merge vertices by "
@@ -3295,11 +3317,11 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
         w = _mean_value_weights(p, tris, n, terms)[ii]
     if FLAT_BOUNDARY:  # (the cotangent solve of _flattened_map first, its factor freed)
         theta = _angle_sums(p, tris, terms)
-        cot = _cotan_weights(p, tris, n, terms)[ii] if len(ii) else None
+        system = _cotan_system(p, tris, loop, ii, terms) if len(ii) else None
         terms = None
         known = (theta, _cotan_carried(p, tris, loop, ii, 2.0 * np.pi - theta[ii], order,
-                                       cot) if len(ii) else np.zeros(len(loop)))
-        cot = None
+                                       system) if len(ii) else np.zeros(len(loop)))
+        system = None
     terms = None
     if len(ii):
         a = sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w[:, ii]
