@@ -1968,7 +1968,8 @@ def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return out
 
 
-def mesh_samples(points, uv, faces, count: int, seed: int = 0, curved: bool = True):
+def mesh_samples(points, uv, faces, count: int, seed: int = 0, curved: bool = True,
+                 vertex_normals=None, area_table=None):
     """Points sampled on the triangles of a parameterized mesh, with their parameters.
 
     ``count`` samples, allotted to the faces in proportion to their 3D area; each at random
@@ -1983,15 +1984,17 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0, curved: bool = Tr
     of a sphere of 55 vertices took 743 control points and ended 4.7e-3 of its diagonal (RMS)
     from the sphere; on point-normal triangles (:func:`curved_points`, C^0 across the edges in
     the parameters) 146 and 1.0e-3; on the C^1 surface 146 and 3.6e-4
-    (benchmarks/coarse_meshes.py).
+    (benchmarks/coarse_meshes.py). ``vertex_normals``: :func:`_vertex_normals` of ``(points,
+    faces)`` and ``area_table``: :func:`_area_table` when known (the fit's fold check uses
+    them too).
     """
-    face, bary = _area_samples(points, faces, count, seed)
+    face, bary = _area_samples(points, faces, count, seed, area_table)
     tri = faces[face]
     x = np.einsum("nk,nkj->nj", bary, uv[tri])
     if curved and len(face):
         if count >= SMOOTH_SAMPLES_PER_FACE * len(faces):
-            return smooth_points(points, uv, faces, face, bary), x
-        return curved_points(points, faces, face, bary), x
+            return smooth_points(points, uv, faces, face, bary, vertex_normals), x
+        return curved_points(points, faces, face, bary, vertex_normals), x
     return np.einsum("nk,nkj->nj", bary, points[tri]), x
 
 
@@ -2033,7 +2036,7 @@ CREASE_ANGLE = 20.0
 FLAT_ANGLE = 0.1
 
 
-def curved_points(points, faces, face, bary):
+def curved_points(points, faces, face, bary, vertex_normals=None):
     """Points at barycentric coordinates ``bary`` (n, 3) on the faces ``face`` (n,) of the
     mesh ``(points, faces)``, on its curved point-normal triangles (PN triangles, Vlachos,
     Peters, Boyd and Mitchell 2001): the cubic Bezier triangle through the face's corners
@@ -2047,8 +2050,10 @@ def curved_points(points, faces, face, bary):
     corners; the point is ``sum 3! / (i! j! k!) w^i u^j v^k b_ijk`` with ``(w, u, v)`` the
     barycentric coordinates of ``P_1, P_2, P_3``. Flat faces (all their normals the face's)
     stay flat; a face of no area, or a vertex whose normals cancel, has straight edges there.
-    Adjacent faces share each edge's curve where neither end is a crease corner."""
-    own_corner, normal, unit = flat_corners(points, faces, normals=True)
+    Adjacent faces share each edge's curve where neither end is a crease corner.
+    ``vertex_normals``: :func:`_vertex_normals` when known."""
+    own_corner, normal, unit = flat_corners(points, faces, normals=True,
+                                            vertex_normals=vertex_normals)
     own = unit[face]
     tri = faces[face]
     P = points[tri]  # (n, 3 corners, 3)
@@ -2069,14 +2074,15 @@ def curved_points(points, faces, face, bary):
             + 6.0 * b111 * w * u * v)
 
 
-def flat_corners(points, faces, normals: bool = False):
+def flat_corners(points, faces, normals: bool = False, vertex_normals=None):
     """The corners (f, 3) bool of the faces that keep the face's own plane in the curved
     samples (:func:`curved_points`, :func:`smooth_points`): a corner whose vertex normal (unit,
     :func:`_vertex_normals`) turns more than :data:`CREASE_ANGLE` from the face's normal, and
     every corner of a face with a corner whose faces are all within :data:`FLAT_ANGLE` of the
     vertex's normal (a flat region). With ``normals``, also the vertices' unit normals (n, 3)
-    and the faces' (f, 3)."""
-    corner, normal = _vertex_normals(points, faces)
+    and the faces' (f, 3). ``vertex_normals``: :func:`_vertex_normals` when known."""
+    corner, normal = (_vertex_normals(points, faces) if vertex_normals is None
+                      else vertex_normals)
     normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     unit = corner / np.maximum(np.linalg.norm(corner, axis=1, keepdims=True), 1e-300)
     turn = np.einsum("fkj,fj->fk", normal[faces], unit)
@@ -2087,7 +2093,7 @@ def flat_corners(points, faces, normals: bool = False):
     return (own, normal, unit) if normals else own
 
 
-def smooth_points(points, uv, faces, face, bary):
+def smooth_points(points, uv, faces, face, bary, vertex_normals=None):
     """Points at barycentric coordinates ``bary`` (n, 3) in the faces ``face`` (n,) of the mesh
     ``(points, faces)`` parameterized by ``uv``, on the C^1 Clough-Tocher interpolant of its
     map (:mod:`core.smooth_faces`). The gradient at a face's corner is the face's own linear
@@ -2102,8 +2108,8 @@ def smooth_points(points, uv, faces, face, bary):
     meet: they had parted, up to 1.1e-3 of the diagonal on patch-01.off and 2.9e-2 on a
     5 x 5 bump (review); giving all faces at such a vertex their own gradients closed that
     too but faceted coarse meshes (an 8 x 8 grid of waves: 502 control points instead of
-    180)."""
-    own = flat_corners(points, faces)
+    180). ``vertex_normals``: :func:`_vertex_normals` when known."""
+    own = flat_corners(points, faces, vertex_normals=vertex_normals)
     n = len(points)
     mean = mean_gradients(points, uv, faces)
     gradients = vertex_gradients(points, uv, faces, mean=mean)
@@ -2130,16 +2136,12 @@ def smooth_points(points, uv, faces, face, bary):
     return clough_tocher_points(points, uv, faces, face, bary, gradients, straight)
 
 
-def _area_samples(points, faces, count: int, seed: int = 0):
-    """``count`` random points (seeded) on the triangles ``faces`` of ``points``, in proportion
-    to their 3D area: the face (count,) of each and its barycentric coordinates (count, 3)
-    (``s = sqrt(r_1)``: ``(1 - s, s (1 - r_2), s r_2)``, uniform on the triangle); none if
-    the faces have no area. The draws do not depend on the order of the vertices, of the faces
-    or of a face's corners (each face is started at its corner of least coordinates, x first,
-    and the faces are drawn from in the order of their corners' coordinates): the same mesh
-    stored another way gets the same points (a half sphere of 65 vertices, its faces shuffled
-    as Blender's Sort Elements does, had got nets of 184 to 494 control points: user test)."""
-    rng = np.random.default_rng(seed)
+def _area_table(points, faces):
+    """The faces as :func:`_area_samples` draws from them: ``order`` (f,), the faces in the
+    order of their corners' coordinates, ``first`` (f,), each face's corner of least
+    coordinates (x first), and ``area`` (f,), the 3D areas of the faces in that order. The
+    same for every draw on a mesh (the fit's samples and its fold check's, 1-1.5 s each at
+    2e6 faces): made once there."""
     faces = np.asarray(faces)
     rank = np.empty(len(points), dtype=np.int64)
     order = coordinate_order(points)  # (the lexicographic order; None: already in it)
@@ -2151,16 +2153,30 @@ def _area_samples(points, faces, count: int, seed: int = 0):
     order = np.lexsort(ranks.T[::-1])
     canon = faces[rows, turn][order]
     a, b, c = (points[canon[:, j]] for j in range(3))
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    return order, first, 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def _area_samples(points, faces, count: int, seed: int = 0, table=None):
+    """``count`` random points (seeded) on the triangles ``faces`` of ``points``, in proportion
+    to their 3D area: the face (count,) of each and its barycentric coordinates (count, 3)
+    (``s = sqrt(r_1)``: ``(1 - s, s (1 - r_2), s r_2)``, uniform on the triangle); none if
+    the faces have no area. The draws do not depend on the order of the vertices, of the faces
+    or of a face's corners (each face is started at its corner of least coordinates, x first,
+    and the faces are drawn from in the order of their corners' coordinates): the same mesh
+    stored another way gets the same points (a half sphere of 65 vertices, its faces shuffled
+    as Blender's Sort Elements does, had got nets of 184 to 494 control points: user test).
+    ``table``: :func:`_area_table` of the mesh when made already."""
+    rng = np.random.default_rng(seed)
+    order, first, area = _area_table(points, faces) if table is None else table
     if not area.sum() > 0:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-    pick = rng.choice(len(canon), size=count, p=area / area.sum())
+    pick = rng.choice(len(area), size=count, p=area / area.sum())
     r1, r2 = rng.random(count), rng.random(count)
     s = np.sqrt(r1)
     drawn = np.stack([1 - s, s * (1 - r2), s * r2], axis=1)  # of the turned corners
     face = order[pick]
     bary = np.empty_like(drawn)
-    bary[np.arange(count)[:, None], turn[face]] = drawn
+    bary[np.arange(count)[:, None], (first[face][:, None] + np.arange(3)) % 3] = drawn
     return face, bary
 
 
@@ -2176,7 +2192,8 @@ FOLDED_SHARE = 1e-3
 
 
 def mesh_folds(space, control_points, points, uv, faces, seed: int = 0,
-               count: int = FOLD_SAMPLES, smooth: np.ndarray | None = None) -> float:
+               count: int = FOLD_SAMPLES, smooth: np.ndarray | None = None,
+               vertex_normals=None, area_table=None) -> float:
     """The share of a mesh's area where the surface ``space`` with ``control_points`` faces
     against the mesh (``points``, ``uv`` its parameters, ``faces`` counter-clockwise in
     ``uv``): at ``count`` points sampled on the faces by area (:func:`_area_samples`, seed
@@ -2206,8 +2223,10 @@ def mesh_folds(space, control_points, points, uv, faces, seed: int = 0,
       and the planes of 25 vertices turn with it too;
     - with noise 0.3-0.5%, 0.6-1.0% reported where the surface turned on none; now 0;
     - a fit of a 41 x 41 grid with noise 1% that does turn over on 2.0%: 1.6%, now 1.9%.
-    Requiring the faces' and vertices' normals as well missed most of that last one (0.35%)."""
-    face, bary = _area_samples(points, faces, count, seed + 1)
+    Requiring the faces' and vertices' normals as well missed most of that last one (0.35%).
+    ``vertex_normals``: :func:`_vertex_normals` of ``(points, faces)`` and ``area_table``:
+    :func:`_area_table` when known."""
+    face, bary = _area_samples(points, faces, count, seed + 1, area_table)
     if not len(face):
         return 0.0
     tri = faces[face]
@@ -2218,23 +2237,25 @@ def mesh_folds(space, control_points, points, uv, faces, seed: int = 0,
         against = np.einsum("ij,ij->i", surface_normal,
                             np.einsum("nk,nkj->nj", bary, smooth[tri])) < 0.0
         return float(np.mean(against))
-    corner, normal = _vertex_normals(points, faces)
+    corner, normal = (_vertex_normals(points, faces) if vertex_normals is None
+                      else vertex_normals)
     n = np.einsum("nk,nkj->nj", bary, normal[tri])
     against = ((np.einsum("ij,ij->i", surface_normal, n) < 0.0)
                & (np.einsum("ij,ij->i", surface_normal, corner[face]) < 0.0))
     return float(np.mean(against))
 
 
-def smooth_normals(points, faces, used, planes) -> np.ndarray:
+def smooth_normals(points, faces, used, planes, vertex_normals=None) -> np.ndarray:
     """Vertex normals (n, 3) of a noisy mesh, smooth over the noise: the normals of the planes
     fitted to each used vertex and its nearest (``planes``: :func:`_local_planes` of the used
     vertices ``points[used]``, ``used`` a mask or indices), each turned to agree with the sum of
     the angle-weighted vertex normals (:func:`_vertex_normals`) over its neighbourhood; 0 at
-    the vertices not used."""
+    the vertices not used. ``vertex_normals``: :func:`_vertex_normals` when known."""
     normal, _, _, idx = planes
     used = np.asarray(used)
     pick = np.flatnonzero(used) if used.dtype == bool else used
-    summed = _vertex_normals(np.asarray(points, dtype=np.float64), faces)[1][pick][idx].sum(axis=1)
+    summed = (_vertex_normals(np.asarray(points, dtype=np.float64), faces)
+              if vertex_normals is None else vertex_normals)[1][pick][idx].sum(axis=1)
     out = np.zeros((len(points), 3))
     out[pick] = normal * np.where(np.einsum("ij,ij->i", normal, summed) < 0, -1.0, 1.0)[:, None]
     return out
@@ -2317,13 +2338,22 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
              if param.faces is not None and options.tolerance > 0 else None)
     noisy = noise is not None and mesh_noise_counts(noise, options, diag_norm, norm.scale)
     counts = noisy and not subsampled
+    # a mesh's vertex normals (on its normalized vertices) and the table its faces are drawn
+    # from by area, once for its samples and its fold check (0.8-1.7 and 1-1.5 s each at 1e6
+    # vertices)
+    at = vertex_normals = area_table = None
+    if param.faces is not None:
+        at = norm.apply(points)
+        vertex_normals = _vertex_normals(at, np.asarray(param.faces))
+        area_table = _area_table(at, np.asarray(param.faces))
     if param.faces is not None:
         # fit the mesh's surface: vertices plus points sampled on its faces, curved through the
         # vertices unless the vertices are noisy (their normals turn with the noise)
         # (of the vertices in faces: loose ones had changed the draws, review)
         count = mesh_sample_count(len(kept), options.max_control_points)
-        sp_, su_ = mesh_samples(norm.apply(points), np.asarray(param.uv), param.faces, count,
-                                seed=options.seed, curved=not noisy)
+        sp_, su_ = mesh_samples(at, np.asarray(param.uv), param.faces, count,
+                                seed=options.seed, curved=not noisy,
+                                vertex_normals=vertex_normals, area_table=area_table)
         fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
     # the vertices' normals, smooth over the noise: the errors across the surface, and the
     # fold check's
@@ -2345,11 +2375,13 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         where the surface folds over: :func:`mesh_folds`). Made on another thread while the
         swing check runs: they read the fit's control points and errors only."""
         if param.faces is not None:  # (a mesh's faces hold one layer)
-            at, faces = norm.apply(points), np.asarray(param.faces)
+            faces = np.asarray(param.faces)
             return None, None, mesh_folds(
                 fit_state.space, fit_state.fit.control_points, at, np.asarray(param.uv), faces,
                 options.seed,
-                smooth=None if planes is None else smooth_normals(at, faces, kept, planes))
+                smooth=None if planes is None else smooth_normals(at, faces, kept, planes,
+                                                                  vertex_normals),
+                vertex_normals=vertex_normals, area_table=area_table)
         if param.axes is None:
             return None, None, None
         C = norm.undo(fit_state.fit.control_points)
