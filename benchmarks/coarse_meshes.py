@@ -133,8 +133,8 @@ def run(mesh, truth, variant: str, seeds: int) -> dict:
         return original(*args, **{**kwargs, "curved": variant != "flat" and
                                   kwargs.get("curved", True)})
 
-    def point_normal(points, uv, faces, face, bary):
-        return surface_module.curved_points(points, faces, face, bary)
+    def point_normal(points, uv, faces, face, bary, vertex_normals=None):
+        return surface_module.curved_points(points, faces, face, bary, vertex_normals)
 
     surface_module.mesh_samples = samples
     if variant == "pn":

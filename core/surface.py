@@ -1993,8 +1993,9 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0, curved: bool = Tr
     x = np.einsum("nk,nkj->nj", bary, uv[tri])
     if curved and len(face):
         if count >= SMOOTH_SAMPLES_PER_FACE * len(faces):
-            return smooth_points(points, uv, faces, face, bary, vertex_normals), x
-        return curved_points(points, faces, face, bary, vertex_normals), x
+            return smooth_points(points, uv, faces, face, bary,
+                                 vertex_normals=vertex_normals), x
+        return curved_points(points, faces, face, bary, vertex_normals=vertex_normals), x
     return np.einsum("nk,nkj->nj", bary, points[tri]), x
 
 
