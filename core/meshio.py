@@ -179,8 +179,10 @@ def write_mesh(path: PathLike, vertices: np.ndarray, faces: np.ndarray,
     if uv is not None:
         uv = np.asarray(uv, dtype=np.float64)
         if uv.shape != (len(v), 2) or not np.all(np.isfinite(uv)):
-            raise InvalidInputError(f"uv must be a finite ({len(v)}, 2) array of texture "
-                                    f"coordinates, one per vertex; got shape {uv.shape}")
+            raise InvalidInputError(
+                f"uv must be a finite ({len(v)}, 2) array of texture coordinates, one per "
+                f"vertex; got shape {uv.shape}"
+                + ("" if uv.shape != (len(v), 2) else " with NaN or infinite values"))
     try:
         if ext == ".obj":
             _write_obj(p, v, f.astype(np.int64), uv)

@@ -3623,9 +3623,6 @@ TRIM_LATTICE = 100
 # the holes of a cloud (cloud_holes) are found on a lattice of cells of half the trim distance,
 # at most this many along the longer side of the domain's box
 CLOUD_HOLE_CELLS = 1024
-# ... and a hole of fewer cells (a square of the trim distance's side) is a void between random
-# points rather than a gap in the scan: covered, but not counted (report["holes_filled"])
-CLOUD_HOLE_MIN_CELLS = 4
 
 
 def trim_distance(param: Parameterization, data: np.ndarray | None = None,
@@ -3642,14 +3639,22 @@ def trim_distance(param: Parameterization, data: np.ndarray | None = None,
     quartile is about an eighth of it. (Not for clouds spread in two directions: a thin
     L-shaped cloud or a road round a bend covers so little of its hull that the quartile
     falls in the empty part; review.) ``data``: the finite rows of ``param.uv`` and
-    ``tree`` a KD-tree of them (made when not given)."""
+    ``tree`` a KD-tree of them (made when not given). The sample of the points measured is
+    taken in the order of their coordinates (:func:`core.geometry.coordinate_order`), so the
+    same cloud stored in another order gets the same distance (a gap had been a hole in some
+    orders and not in others: review), and the spacing is to the nearest point at another
+    place (a cloud of doubled points had a spacing, so a reach, of 0: its mesh fell apart into
+    404 pieces at resolution 128; review)."""
     if data is None:
         data = np.asarray(param.uv)[np.isfinite(param.uv).all(axis=1)]
     if tree is None:
         tree = cKDTree(data)
-    sample = data[:: max(1, len(data) // 5000)]
+    order = coordinate_order(data)
+    sample = (data if order is None else data[order])[:: max(1, len(data) // 5000)]
     dist, nb = tree.query(sample, k=min(9, len(data)))
-    spacing = float(np.median(dist[:, 1])) if dist.shape[1] > 1 else 0.0
+    apart = np.where(dist[:, 1:] > 0, dist[:, 1:], np.inf).min(axis=1, initial=np.inf)
+    apart = apart[np.isfinite(apart)]
+    spacing = float(np.median(apart)) if len(apart) else 0.0
     if nb.shape[1] < 3:
         return 4 * spacing
     X = data[nb]
@@ -3697,31 +3702,38 @@ def _hole_lattice(param: Parameterization) -> HoleLattice:
     ``masks[0][i, j]`` True in a hole, ``masks[1]`` the holes grown by one cell (so that a
     triangle at a hole's rim, farther from the data than the trim distance with the centre of
     its cell nearer, is in one; and some data points at the rim), ``sizes`` the cells of each
-    hole and ``depth`` the largest distance of its cells' centres from the data (uv units),
+    hole and ``depth`` about the largest distance of its cells' centres from the data (uv
+    units; from a distance transform of the lattice, to a cell),
     ``wide`` the largest box diagonal of an empty region too large to be a hole, as a share of
     the domain's (0.0 when there is none). No data point lies in a hole's cell (its
-    centre is farther than the trim distance from all, twice the cell's half-diagonal). A hole
-    is a 4-connected region of cells farther than :func:`trim_distance` from every data
-    parameter that does not reach the border of the domain (the convex hull: a region that
+    centre is farther than its half-diagonal from all). A hole is a 4-connected region of cells
+    whose centres are farther than :func:`trim_distance` less the cells' half-diagonal from
+    every data parameter (so every point farther than the trim distance is in one of them)
+    that does not reach the border of the domain (the convex hull: a region that
     does is a bay or a notch, the shape of the data's outline), and whose box has at most
     HOLE_MAX_SHARE of the diagonal of the domain's box, both boxes in the model's axes (the
     plane points of the cells and of the domain polygon: the uv axes turn with the data; a
     mesh's hole: :func:`_with_holes_filled`; a ring's wide middle is not a hole). Not in
     method.md."""
     data = np.asarray(param.uv)[np.isfinite(param.uv).all(axis=1)]
-    tree = cKDTree(data)
+    tree = cKDTree(data, balanced_tree=False, compact_nodes=False)  # (2.5x faster to make)
     trim = trim_distance(param, data, tree)
     poly = np.asarray(param.domain_polygon, dtype=np.float64)
     lo, hi = poly.min(axis=0), poly.max(axis=0)
     extent = hi - lo
     h = max(trim / 2, float(extent.max()) / CLOUD_HOLE_CELLS, 1e-12)
+    # a cell is empty when its centre is farther than this from the data: then every point
+    # farther than trim is in an empty cell (its centre within h / sqrt 2 of it: a gap
+    # narrower than a cell had left a pinhole at resolution 256; review), and no data point
+    # is (within h / sqrt 2 of the centre)
+    reach = max(trim - h / np.sqrt(2), h / np.sqrt(2))
     nu, nv = (np.ceil(extent / h).astype(int) + 1).tolist()
     cu = lo[0] + h * (np.arange(nu) + 0.5)
     cv = lo[1] + h * (np.arange(nv) + 0.5)
     centres = np.stack(np.meshgrid(cu, cv), -1).reshape(-1, 2)
     inside = param.contains(centres)
     far = np.ones(len(centres), dtype=bool)
-    far[inside] = tree.query(centres[inside], distance_upper_bound=trim)[0] > trim
+    far[inside] = tree.query(centres[inside], distance_upper_bound=reach)[0] > reach
     # a ring of cells outside the lattice: regions touching its edge reach the border
     empty = np.pad(far.reshape(nv, nu), 1, constant_values=True)
     outside = np.pad(~inside.reshape(nv, nu), 1, constant_values=True)
@@ -3750,9 +3762,13 @@ def _hole_lattice(param: Parameterization) -> HoleLattice:
     sizes = np.bincount(labels.ravel(), minlength=count + 1)[hole]
     mask = hole[labels]
     grown = ndimage.binary_dilation(mask, np.ones((3, 3), dtype=bool))
-    inner = hole[cells]
+    # how far each hole reaches from the data: from its cells' distance (in cells) to the
+    # nearest cell near the data (a query of every hole cell took 2.6 s for a hole of radius
+    # 0.45 in 1e6 points; review)
+    steps = ndimage.distance_transform_edt(empty)
     depth = np.zeros(count + 1)
-    np.maximum.at(depth, cells[inner], tree.query(centres[inner])[0])
+    inner = hole[labels]
+    np.maximum.at(depth, labels[inner], reach + h * (steps[inner] - 1.0))
     return HoleLattice(lo, h, (mask[1:-1, 1:-1], grown[1:-1, 1:-1]), sizes.astype(np.int64),
                        wide, depth[hole], trim)
 
@@ -3776,18 +3792,27 @@ def cloud_holes(param: Parameterization) -> Parameterization:
     return param
 
 
+def gaps_beyond(param: Parameterization, reach: float | None = None) -> int:
+    """How many holes of a point cloud (:func:`_cloud_hole_lattice`) reach farther than
+    ``reach`` (uv units; at least the trim distance, its default) from the data: the gaps a
+    tessellation that keeps to within ``reach`` of the data leaves open, or with
+    ``fill_holes`` covers (``report["holes_filled"]``; the voids between random points
+    nearer than that, which the lattice finds too, are covered but not counted). 0 for a
+    mesh. About a KD-tree of the data parameters at the first call (0.06 s at 3e4 points,
+    1.3 s at 1e6; cached on ``param``)."""
+    if param.kind != "plane":
+        return 0
+    lattice = _cloud_hole_lattice(param)
+    reach = lattice.trim if reach is None else max(float(reach), lattice.trim)
+    return int(np.count_nonzero(lattice.depth > reach))
+
+
 def open_holes(param: Parameterization, reach: float | None = None) -> int:
-    """How many holes of a point cloud (:func:`_cloud_hole_lattice`, of at least
-    CLOUD_HOLE_MIN_CELLS cells) reach farther than ``reach`` (uv units; default the trim
-    distance) from the data, so that a tessellation that keeps to within ``reach`` of the
-    data leaves them open; 0 for a mesh and for a cloud fitted with ``fill_holes``. About a
-    KD-tree of the data parameters at the first call (0.06 s at 3e4 points, 1.2 s at 1e6)."""
+    """How many holes of a point cloud reach farther than ``reach`` (see :func:`gaps_beyond`)
+    and are left open: 0 for a mesh and for a cloud fitted with ``fill_holes``."""
     if param.kind != "plane" or param.holes is not None:
         return 0
-    if reach is None:
-        reach = _cloud_hole_lattice(param).trim
-    lattice = _cloud_hole_lattice(param)
-    return int(np.count_nonzero((lattice.sizes >= CLOUD_HOLE_MIN_CELLS) & (lattice.depth > reach)))
+    return gaps_beyond(param, reach)
 
 
 def parameterize(

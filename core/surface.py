@@ -42,7 +42,7 @@ from .parameterize import (
     Parameterization, _as_points, _check_finite, _edge_pairs, _local_planes, box_normalization,
     _parameterize_mesh, corner_angles, fill_value_rows, fill_value_words, huge_rows, huge_words,
     local_noise, local_scatter, normalize, open_holes, parameterize, spike_points,
-    trim_distance, CLOUD_HOLE_MIN_CELLS, _cloud_hole_lattice,
+    trim_distance, gaps_beyond, _cloud_hole_lattice,
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
                      check_callback, prefetch_swing_triangles, swing_places)
@@ -515,7 +515,8 @@ class TCBSurface:
 
     def _domain_triangles(self, uv, d, tree, trim, lattice=None) -> np.ndarray:
         """CCW Delaunay triangles of ``uv`` inside the domain (and, for clouds, within ``trim``
-        of the data parameters in ``tree``), without zero-area ones.
+        of the data parameters in ``tree`` or, with ``fill_holes``, over a hole of the cloud:
+        :meth:`Parameterization.in_holes`), without zero-area ones.
 
         ``lattice``: ``(cells, rest, in_cells)`` from :func:`_lattice`: the triangles of the
         grid cells deep inside the domain are given, only the points ``rest`` (the boundary
@@ -673,9 +674,10 @@ class TCBSurface:
         :meth:`tessellation_uv`: the parameters moved and scaled so that the domain's bounding
         box has its corner at 0 and its longer side 1 (the aspect kept; a UV map for textures
         follows the spline's own parameters: a projection for a cloud, the mesh's flattening
-        for a mesh; not in method.md), mirrored (``u -> 1 - u``) for a mesh wound against its
-        canonical winding, so that the triangles of :meth:`tessellate` run counter-clockwise
-        in them as seen from the side their normals face (an image is not shown mirrored)."""
+        for a mesh; not in method.md), mirrored (``u -> w - u``, ``w`` the box's width in them)
+        for a mesh wound against its canonical winding, so that the triangles of
+        :meth:`tessellate` run counter-clockwise in them as seen from the side their normals
+        face (an image is not shown mirrored)."""
         x = np.asarray(uv, dtype=np.float64)
         if x.ndim != 2 or x.shape[1] != 2:
             raise InvalidInputError(f"uv must be an (M, 2) array; got shape {x.shape}")
@@ -1615,10 +1617,13 @@ def _same_map(new: Parameterization, old: Parameterization) -> bool:
         return False  # (the other canonical winding: the mirrored map)
     if int(np.count_nonzero(new.used)) != int(np.count_nonzero(old.used)):
         return False
-    for a, b in ((new.faces, old.faces), (new.boundary, old.boundary), (new.holes, old.holes)):
-        if (a is None) != (b is None) or (a is not None and len(a) != len(b)
-                                          and new.kind == "disk"):
-            return False  # (a cloud's holes: found on a sample of its points, order-dependent)
+    # (a cloud's holes are not its map: the lattice of cloud_holes, where a hole at the
+    # threshold may come and go with the rounding of a compact file's parameters)
+    pairs = ((new.faces, old.faces), (new.boundary, old.boundary)) + (
+        ((new.holes, old.holes),) if new.kind == "disk" else ())
+    for a, b in pairs:
+        if (a is None) != (b is None) or (a is not None and len(a) != len(b)):
+            return False
     if np.shape(new.domain_polygon) != np.shape(old.domain_polygon):
         return False
     for a, b in ((np.asarray(new.uv)[np.asarray(new.used, dtype=bool)],
@@ -2436,7 +2441,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # holes of a mesh that the surface spans, of a cloud that its tessellation covers
         # (fill_holes=True)
         "holes_filled": 0 if param.holes is None else int(len(param.holes))
-        if param.kind == "disk" else int(np.count_nonzero(param.holes >= CLOUD_HOLE_MIN_CELLS)),
+        if param.kind == "disk" else gaps_beyond(param),
         "knots": int(len(best.knots)),
         "interior_knots": int(best.n_interior),
         "control_points": int(best.n_control),
@@ -2953,7 +2958,8 @@ def fit_surface(
         parts of the domain far from all points, covers the gaps inside the cloud that do not
         reach its outline (occlusions, dropouts; at most half its size:
         ``core.parameterize.cloud_holes``), where the surface is held by the fairing;
-        ``report["holes_filled"]`` counts them.
+        ``report["holes_filled"]`` counts those reaching farther from the points than the
+        reach of a cloud's tessellation (``core.parameterize.gaps_beyond``).
 
     Counts (``degree``, ``max_control_points``, ...) are whole numbers (``2.0`` is 2), flags
     (``relative``, ``feature_sensitive``) Python or numpy bools; anything else is refused.

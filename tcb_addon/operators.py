@@ -183,7 +183,7 @@ def editable_surface(context, what: str = ""):
     :class:`bridge.SelectionError` saying what is missing otherwise."""
     surface = active_surface(context)
     if surface is None:
-        raise bridge.SelectionError(f"Select a TCB surface (or its control net){what}")
+        raise bridge.SelectionError(no_surface_words(context, what))
     problem = linked_problem(surface, surface.tcb.net) or converted_problem(surface)
     if problem:
         raise bridge.SelectionError(problem[0].upper() + problem[1:])
@@ -215,15 +215,15 @@ def _poll_object_mode(op_cls, context, surface: bool = True) -> bool:
     return True
 
 
-def no_surface_words(context) -> str:
-    """What to select when no TCB surface is active: a net (or another part of a result)
-    whose surface was deleted with X says so (it had said "Select a TCB surface (or its
-    control net)" with the net selected: user test)."""
+def no_surface_words(context, what: str = "") -> str:
+    """What to select when no TCB surface is active (``what``: for what, e.g. " to refine"):
+    a net (or another part of a result) whose surface was deleted with X says so (it had said
+    "Select a TCB surface (or its control net)" with the net selected: user test)."""
     obj = getattr(context, "active_object", None)
     if obj is not None and obj.tcb.role in {"NET", "DEVIATION", "WEIGHTS"}:
         return (f"The TCB surface of '{obj.name}' was deleted: select the source and use Fit "
                 "Surface to make a new one")
-    return "Select a TCB surface (or its control net)"
+    return f"Select a TCB surface (or its control net){what}"
 
 
 def stored_surface(surface_obj, use_net: bool = True):
@@ -1109,7 +1109,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         if gaps:  # (a scan's occlusions came out as holes, the option unknown: user test)
             spanned.append(f"{gaps} gap{'s' if gaps > 1 else ''} inside the point cloud "
                            f"{'are' if gaps > 1 else 'is'} left open (no points there): turn "
-                           "on Fill Holes to cover them")
+                           f"on Fill Holes to cover {'them' if gaps > 1 else 'it'}")
         if reused:
             seconds = getattr(self, "_reused_seconds", None)
         else:

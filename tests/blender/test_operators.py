@@ -944,7 +944,7 @@ def test_a_mesh_with_a_hole_is_refused_unless_fill_holes_is_on(clean_scene, addo
         out = capfd.readouterr().out
         said = "the surface spans the cloud's 1 hole (Fill Holes)" in out
         left = ("1 gap inside the point cloud is left open (no points there): turn on Fill "
-                "Holes to cover them") in out
+                "Holes to cover it") in out
         v = positions(bpy.context.view_layer.objects.active)
         near = np.hypot(v[:, 0] - 0.2, v[:, 1] + 0.1) < 0.15
         assert said == fill != left and near.any() == fill, (fill, said, left, near.sum())

@@ -242,3 +242,27 @@ def test_texture_coordinates_map_the_domain_to_the_unit_square_unmirrored():
         assert up == (-1 if k == 1 else 1) or k == 2, k
     with pytest.raises(Exception, match=r"uv must be an \(M, 2\) array"):
         fits[0].texture_coordinates(np.zeros((3, 3)))
+
+
+def test_the_reach_of_a_cloud_s_mesh_ignores_the_order_and_doubles_of_its_points():
+    """core.parameterize.trim_distance (how far from the data a cloud's tessellation reaches)
+    of 8000 points is the same for the points in another order (its sample was taken by
+    place in the array: a gap had been a hole in some orders and not in others) and for every
+    point doubled (the spacing was 0 and the mesh fell apart into hundreds of pieces)."""
+    from core.parameterize import parameterize, trim_distance
+
+    xy = np.random.default_rng(4).random((8000, 2))
+    P = np.c_[xy, 0.1 * np.sin(3 * xy[:, 0])]
+    base = trim_distance(parameterize(P))
+    perm = np.random.default_rng(5).permutation(len(P))
+    assert trim_distance(parameterize(P[perm])) == pytest.approx(base, rel=1e-9)
+    doubled = parameterize(np.r_[P, P])
+    assert trim_distance(doubled) == pytest.approx(base, rel=0.05)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        surf = fit_surface(np.r_[P, P], max_iterations=1)
+    uv, tri = surf.tessellation_uv(128)
+    edges = np.sort(np.r_[tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=1)
+    _, count = np.unique(edges, axis=0, return_counts=True)
+    border = np.count_nonzero(count == 1)  # one loop around the square: about 4 x 128 edges
+    assert border < 4 * 128 * 1.5, border
