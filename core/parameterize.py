@@ -455,19 +455,18 @@ class Parameterization:
         inside = _points_in_polygon(x, self.domain_polygon, tol)
         return bool(inside[0]) if single else inside
 
-    def in_holes(self, uv: np.ndarray, grown: bool = False) -> np.ndarray:
+    def in_holes(self, uv: np.ndarray) -> np.ndarray:
         """Mask (m,) of the parameters ``uv`` (m, 2) inside one of the holes that were filled
         for the map (``holes``; ``fill_holes=True``): there the surface spans a gap, with no
         data under it. The holes are the loops of the faces' border edges (edges of one face)
         besides the outer ``boundary``, all tested at once by the even-odd rule
         (:func:`_points_in_polygon`); a point on a hole's border may count either way. All
         False when no hole was filled. A point cloud's holes (:func:`cloud_holes`) are cells
-        of a lattice (computed at the first call); ``grown``: grown by one cell (what its
-        tessellation covers; some data points at a hole's rim are in them)."""
+        of a lattice (computed at the first call), where no data point is."""
         x = np.atleast_2d(np.asarray(uv, dtype=np.float64))
         if self.holes is not None and self.kind == "plane":
             lattice = _cloud_hole_lattice(self)
-            lo, h, mask = lattice.lo, lattice.h, lattice.masks[int(bool(grown))]
+            lo, h, mask = lattice.lo, lattice.h, lattice.mask
             cell = np.floor((x - lo) / h)
             cell = np.where(np.isfinite(cell), cell, -1).astype(np.int64)
             ok = ((cell >= 0) & (cell < [mask.shape[1], mask.shape[0]])).all(axis=1)
@@ -3679,7 +3678,7 @@ class HoleLattice(NamedTuple):
 
     lo: np.ndarray
     h: float
-    masks: tuple
+    mask: np.ndarray
     sizes: np.ndarray
     wide: float
     depth: np.ndarray
@@ -3696,13 +3695,10 @@ def _cloud_hole_lattice(param: Parameterization) -> HoleLattice:
 
 
 def _hole_lattice(param: Parameterization) -> HoleLattice:
-    """:class:`HoleLattice` ``(lo, h, masks, sizes, wide, depth, trim)``: the holes of a point
+    """:class:`HoleLattice` ``(lo, h, mask, sizes, wide, depth, trim)``: the holes of a point
     cloud's domain on a lattice of cells of side ``h`` from ``lo`` (cell ``[i, j]`` is centred
-    at ``lo + h (j + 1/2, i + 1/2)``),
-    ``masks[0][i, j]`` True in a hole, ``masks[1]`` the holes grown by one cell (so that a
-    triangle at a hole's rim, farther from the data than the trim distance with the centre of
-    its cell nearer, is in one; and some data points at the rim), ``sizes`` the cells of each
-    hole and ``depth`` about the largest distance of its cells' centres from the data (uv
+    at ``lo + h (j + 1/2, i + 1/2)``), ``mask[i, j]`` True in a hole, ``sizes`` the cells of
+    each hole and ``depth`` about the largest distance of its cells' centres from the data (uv
     units; from a distance transform of the lattice, to a cell),
     ``wide`` the largest box diagonal of an empty region too large to be a hole, as a share of
     the domain's (0.0 when there is none). No data point lies in a hole's cell (its
@@ -3761,7 +3757,6 @@ def _hole_lattice(param: Parameterization) -> HoleLattice:
     wide = float(share.max(initial=0.0)) if large.any() else 0.0
     sizes = np.bincount(labels.ravel(), minlength=count + 1)[hole]
     mask = hole[labels]
-    grown = ndimage.binary_dilation(mask, np.ones((3, 3), dtype=bool))
     # how far each hole reaches from the data: from its cells' distance (in cells) to the
     # nearest cell near the data (a query of every hole cell took 2.6 s for a hole of radius
     # 0.45 in 1e6 points; review)
@@ -3769,8 +3764,7 @@ def _hole_lattice(param: Parameterization) -> HoleLattice:
     depth = np.zeros(count + 1)
     inner = hole[labels]
     np.maximum.at(depth, labels[inner], reach + h * (steps[inner] - 1.0))
-    return HoleLattice(lo, h, (mask[1:-1, 1:-1], grown[1:-1, 1:-1]), sizes.astype(np.int64),
-                       wide, depth[hole], trim)
+    return HoleLattice(lo, h, mask[1:-1, 1:-1], sizes.astype(np.int64), wide, depth[hole], trim)
 
 
 def cloud_holes(param: Parameterization) -> Parameterization:

@@ -550,7 +550,7 @@ class TCBSurface:
             cen = uv[tri].mean(axis=1)
             near = tree.query(cen, distance_upper_bound=trim * (1 + 1e-9))[0] <= trim
             if self._param.holes is not None:  # (fill_holes: a cloud's holes are covered)
-                near[~near] = self._param.in_holes(cen[~near], grown=True)
+                near[~near] = self._param.in_holes(cen[~near])
             tri = tri[near]
         return tri
 
