@@ -42,7 +42,7 @@ from .parameterize import (
     Parameterization, _as_points, _check_finite, _edge_pairs, _local_planes, box_normalization,
     _parameterize_mesh, corner_angles, fill_value_rows, fill_value_words, huge_rows, huge_words,
     local_noise, local_scatter, normalize, open_holes, parameterize, spike_points,
-    trim_distance, gaps_beyond, _cloud_hole_lattice,
+    trim_distance, gaps_beyond,
 )
 from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
                      check_callback, prefetch_swing_triangles, swing_places)
@@ -560,11 +560,10 @@ class TCBSurface:
         data than the trim distance or 1.5 grid steps; 0 for a mesh and with ``fill_holes``
         (the command line and Blender say so, naming the option: a scan's occlusions had come
         out as holes in the mesh with no word of it; user test)."""
-        if self._param.kind != "plane" or self._param.holes is not None:
+        if self._param.kind != "plane":
             return 0
-        reach = max(_cloud_hole_lattice(self._param).trim,
-                    1.5 * tessellation_step(self._param, resolution))
-        return open_holes(self._param, reach)
+        # (gaps_beyond takes the larger of this and the trim distance)
+        return open_holes(self._param, 1.5 * tessellation_step(self._param, resolution))
 
     def tessellate(self, resolution: int = 64, callback=None) -> tuple[np.ndarray, np.ndarray]:
         """Vertices (V, 3) and triangles (F, 3) of the surface over the data's domain.
