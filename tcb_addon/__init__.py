@@ -5,7 +5,8 @@ extension's own subpackage). Modules:
 
 - ``bridge``: read the selection into numpy arrays, write meshes and attributes;
 - ``properties``: fit settings (scene) and result data (``object.tcb``);
-- ``operators``: ``bpy.ops.tcb.*`` (fit, refine, re-tessellate, deviation map, net, export);
+- ``operators``: ``bpy.ops.tcb.*`` (fit, refine, re-tessellate, deviation map, net, export,
+  import; File > Import > TCB Spline);
 - ``ui``: the View3D > Sidebar > TCB panels.
 """
 
@@ -19,11 +20,12 @@ def _classes():
 def register():
     import bpy
 
-    from . import live, properties
+    from . import live, operators, properties
 
     for cls in _classes():
         bpy.utils.register_class(cls)
     properties.register_props()
+    bpy.types.TOPBAR_MT_file_import.append(operators.menu_import)
     if live.on_load not in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.append(live.on_load)
     if live.on_save not in bpy.app.handlers.save_pre:
@@ -51,6 +53,7 @@ def unregister():
     if bpy.app.timers.is_registered(_upgrade_open_file):
         bpy.app.timers.unregister(_upgrade_open_file)
     operators.clear_cache()
+    bpy.types.TOPBAR_MT_file_import.remove(operators.menu_import)
     properties.unregister_props()
     for cls in reversed(_classes()):
         bpy.utils.unregister_class(cls)

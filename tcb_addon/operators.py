@@ -1,4 +1,5 @@
-"""Operators (``bpy.ops.tcb.*``): fit, refine, re-tessellate, deviation map, net, export.
+"""Operators (``bpy.ops.tcb.*``): fit, refine, re-tessellate, deviation map, net, export,
+import.
 
 Thin: the fit is ``core.fit_surface`` / ``TCBSurface.refine``; this module reads the selection
 (``bridge``), runs the engine and writes the results. Long runs: ``invoke`` starts the engine
@@ -19,7 +20,7 @@ import weakref
 import bpy
 import numpy as np
 from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
-from bpy_extras.io_utils import ExportHelper
+from bpy_extras.io_utils import ExportHelper, ImportHelper
 
 from . import bridge, live
 from .properties import (DEFAULT_SMOOTHNESS, FIT_KEYS, MAX_RESOLUTION, MIN_BUDGET, FitSettings,
@@ -428,6 +429,11 @@ def folded_over(tcb) -> bool:
 
 
 def source_data(context, surface_obj) -> bridge.InputData:
+    if not len(surface_obj.tcb.sources):  # (only Import Spline makes a result without one)
+        raise bridge.SelectionError(
+            f"'{surface_obj.name}' was imported without its source object: refining and the "
+            "deviation map need the input data (select the scan it was fitted to, in the "
+            "file's coordinates, and import the spline again)")
     sources = [s.object for s in surface_obj.tcb.sources]
     # deleted (X): in no collection, kept alive by the pointer (user test: the deleted scan
     # was measured, and called hidden)
@@ -437,6 +443,37 @@ def source_data(context, surface_obj) -> bridge.InputData:
             "map need the input data"
         )
     return bridge.read_selection(context, sources)
+
+
+def source_mismatch(surf, data: bridge.InputData):
+    """``(faces, what)``: the faces of ``data`` as the fit of ``surf`` read them, and how
+    ``data`` differ from the data ``surf`` was fitted to, in words ("12 points then, 10 now",
+    "other coordinates: moved, transformed or edited", "other faces"), or None when they are
+    the same (rounding, another order of the same points and faces, and a mirrored source's
+    turned faces are no change). Refine refuses other data; Import Spline links only the same
+    as the source."""
+    key = (surf.report or {}).get("faces_digest")  # (a mesh's; None for clouds, older files)
+    digest = _core().surface.faces_digest
+    faces = data.faces
+    if key is not None and faces is not None and digest(faces) != key and (
+            digest(faces[:, ::-1]) == key):
+        # a mirrored source fitted before its faces were read turned (bridge._world_faces):
+        # its faces as they were read then (review: "changed since ... (other faces)")
+        faces = np.ascontiguousarray(faces[:, ::-1])
+    # the same values in any order (a sort and a digest): the same data stored in another
+    # order (Sort Elements: "changed since ... (other faces)" or "(other coordinates ...)",
+    # nothing having moved; user test) are the same, with the same faces renumbered; the
+    # engine parameterizes them again (TCBSurface.reordered) on the job's thread
+    same_set = surf.same_data_set(data.points)
+    same_points = same_set or surf.fitted_to(data.points, data.rounding)
+    faces_changed = key is not None and (faces is None or not surf.same_faces(
+        faces, data.points if same_set else None))
+    if same_points and not faces_changed:
+        return faces, None
+    then, now = len(surf.parameterization.uv), len(data.points)
+    return faces, (f"{then} points then, {now} now" if then != now
+                   else "other coordinates: moved, transformed or edited" if not same_points
+                   else "other faces")
 
 
 def store_stats(tcb, surf, settings: dict) -> None:
@@ -902,6 +939,53 @@ def _new_net(coll, name: str, surf, origin):
     return net
 
 
+def _new_result(coll, name: str, surf, resolution: int):
+    """A new surface object (``surf`` tessellated at ``resolution``, with its UV map) and
+    control net, named after ``name``, in ``coll``; both at an origin near the data when it is
+    far from the world origin (``bridge.local_origin``)."""
+    verts, faces = surf.tessellate(resolution)
+    origin = bridge.local_origin(verts)  # (0, 0, 0) unless far from the world origin
+    smesh = bridge.new_mesh(f"{name} TCB Surface", verts - origin, faces)
+    set_texture(smesh, surf, resolution)
+    smesh.shade_smooth()
+    surface = bridge.link_new_object(coll, f"{name} TCB Surface", smesh, origin)
+    remember_placement(surface)
+    return surface, _new_net(coll, f"{name} TCB Net", surf, origin)
+
+
+def set_up_result(context, surface, net, surf, sources, settings: dict, live_net: bool,
+                  show_net: bool) -> None:
+    """Make ``surface`` and ``net`` (written from ``surf``) a TCB result: its spline stored,
+    roles, ``sources``, links, statistics and ``settings`` (:func:`store_stats`), the live
+    net attached (or a replaced result's detached), the net shown or hidden and the surface
+    shown, selected and active (Fit Surface, Import Spline)."""
+    # a replaced surface hidden by the user is shown, as a new one is (it had stayed
+    # hidden, and only its net came back: user test)
+    for obj, hide in ((net, not show_net), (surface, False)):
+        try:
+            obj.hide_set(hide)
+        except RuntimeError:  # a replaced result's object outside the current view layer
+            pass
+    store_spline(surface, surf)
+    st = surface.tcb
+    st.role = "SURFACE"
+    st.sources.clear()
+    for src in sources:
+        st.sources.add().object = src
+    st.net = net
+    net.tcb.role = "NET"
+    net.tcb.surface = surface
+    store_stats(st, surf, settings)
+    if live_net:
+        live.attach(surface, net, surf, settings["resolution"])
+    else:
+        live.detach(surface)  # (a replaced result's live link)
+    for obj in context.selected_objects:
+        obj.select_set(False)
+    surface.select_set(True)
+    context.view_layer.objects.active = surface
+
+
 class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types.Operator):
     """Fit a smooth TCB-spline surface and its control net to the selected meshes / point clouds"""
 
@@ -1034,14 +1118,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         if previous is None:
             if coll is None:
                 coll = bridge.result_collection(context, f"TCB {name}")
-            verts, faces = surf.tessellate(resolution)
-            origin = bridge.local_origin(verts)  # (0, 0, 0) unless far from the world origin
-            smesh = bridge.new_mesh(f"{name} TCB Surface", verts - origin, faces)
-            set_texture(smesh, surf, resolution)
-            smesh.shade_smooth()
-            surface = bridge.link_new_object(coll, f"{name} TCB Surface", smesh, origin)
-            remember_placement(surface)
-            net = _new_net(coll, f"{name} TCB Net", surf, origin)
+            surface, net = _new_result(coll, name, surf, resolution)
         else:  # the same objects, rewritten (as Refine does), at the data
             surface = previous
             write_surface_mesh(surface, surf, resolution)
@@ -1053,18 +1130,10 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 net = _new_net(coll, f"{name} TCB Net", surf, np.zeros(3))
                 net.matrix_world = surface.matrix_world.copy()  # the surface's frame
             write_net_mesh(net, surf)  # (in its own frame)
-            surface.tcb.sources.clear()
             replaced.append(f"replaced the previous result '{surface.name}' (Ctrl+Z brings "
                             "it back; turn off Replace Previous Result to keep both)")
             if drop_deviation_points(surface):
                 replaced.append("its Deviation Points were removed (run Deviation Map again)")
-        # a replaced surface hidden by the user is shown, as a new one is (it had stayed
-        # hidden, and only its net came back: user test)
-        for obj, hide in ((net, not self.show_net), (surface, False)):
-            try:
-                obj.hide_set(hide)
-            except RuntimeError:  # a replaced result's object outside the current view layer
-                pass
         surface[FITTED_KEY] = time.time()  # (the latest of several results is replaced)
         # the stale nets go once the new result exists (an error before would have left
         # neither: review); their deleted surfaces, used by nothing then, go with them, and
@@ -1078,25 +1147,10 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             live.drop_deleted_results()
             surface.name, net.name = f"{name} TCB Surface", f"{name} TCB Net"
 
-        store_spline(surface, surf)
-        st = surface.tcb
-        st.role = "SURFACE"
-        for src in data.sources:
-            st.sources.add().object = src
-        st.net = net
-        net.tcb.role = "NET"
-        net.tcb.surface = surface
-        store_stats(st, surf, {k: getattr(self, k) for k in FIT_KEYS}
-                    | {"resolution": resolution, "auto_resolution": auto})
-        if self.live_net:
-            live.attach(surface, net, surf, resolution)
-        else:
-            live.detach(surface)  # (a replaced result's live link)
-
-        for obj in context.selected_objects:
-            obj.select_set(False)
-        surface.select_set(True)
-        context.view_layer.objects.active = surface
+        set_up_result(context, surface, net, surf, data.sources,
+                      {k: getattr(self, k) for k in FIT_KEYS}
+                      | {"resolution": resolution, "auto_resolution": auto},
+                      live_net=self.live_net, show_net=self.show_net)
         if live.drop_orphaned_weights() or stale:  # (of surfaces deleted with X; the view
             context.view_layer.update()  # layer lists a removed object as None until updated)
         reused = ["the same input and settings as the last fit: its result was reused (the "
@@ -1209,34 +1263,15 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         data = source_data(context, surface)
         self._notes = data.notes
         surf = with_net_edits(surface, stored)
-        key = rep.get("faces_digest")  # (a mesh's faces; None for clouds and older files)
-        digest = _core().surface.faces_digest
-        faces = data.faces
-        if key is not None and faces is not None and digest(faces) != key and (
-                digest(faces[:, ::-1]) == key):
-            # a mirrored source fitted before its faces were read turned (bridge._world_faces):
-            # its faces as they were read then (review: "changed since ... (other faces)")
-            faces = np.ascontiguousarray(faces[:, ::-1])
-        # the same values in any order (a sort and a digest): the same data stored in another
-        # order (Sort Elements: "changed since ... (other faces)" or "(other coordinates ...)",
-        # nothing having moved; user test) are the same, with the same faces renumbered; the
-        # engine parameterizes them again (TCBSurface.reordered) on the job's thread
-        same_set = surf.same_data_set(data.points)
-        same_points = same_set or surf.fitted_to(data.points, data.rounding)
-        faces_changed = key is not None and (faces is None or not surf.same_faces(
-            faces, data.points if same_set else None))
-        if (not same_points or faces_changed) and data.unmodified:
+        faces, what = source_mismatch(surf, data)
+        if what is not None and data.unmodified:
             # (nothing was moved: "changed since ... (other coordinates: moved, ...)" had led;
             # user test)
             raise bridge.SelectionError(
                 f"{'; '.join(data.unmodified)}: Refine needs the shape '{surface.name}' was "
                 "fitted to")
-        if not same_points or faces_changed:
+        if what is not None:
             names = ", ".join(repr(o.name) for o in data.sources)
-            then, now = len(surf.parameterization.uv), len(data.points)
-            what = (f"{then} points then, {now} now" if then != now
-                    else "other coordinates: moved, transformed or edited" if not same_points
-                    else "other faces")
             hidden = "".join(f"; {n}" for n in data.notes)
             # (one turned off since the fit: user test)
             mods = data.modifier_note(applied_only=False)
@@ -1246,9 +1281,10 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                 "continues the fit of the same data; select the source and use Fit Surface to "
                 "fit it as it is now"
             )
-        # Refine fits the data again: edits of the net are not kept, and the user is told
-        moved = np.any(surf.control_points != stored.control_points, axis=1)
-        edited = int(moved.sum())
+        # Refine fits the data again: edits of the net are not kept, and the user is told (also
+        # those kept in the stored spline: an imported edited one, a net dropped by
+        # Re-tessellate)
+        edited = int(surf.report.get("edited", 0))
         self._warnings = [f"{edited} edited control point{' was' if edited == 1 else 's were'} "
                           "replaced (Refine fits the data again; Ctrl+Z brings the edits back)"
                           ] if edited else []
@@ -1714,14 +1750,7 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
             surface = active_surface(context)
             if surface is None:
                 raise bridge.SelectionError(no_surface_words(context))
-            if self.filepath.startswith("//") and not bpy.data.filepath:
-                # (an unsaved .blend has no folder: the file had been written to the folder
-                # Blender was started in, reported as "saved rel.npz"; user test)
-                raise bridge.SelectionError(
-                    f"'{self.filepath}' is relative to the .blend file, which is not saved "
-                    "yet: save the .blend file first, or give the file's full path")
-            # ('//' is relative to the .blend: it had been written to the filesystem's root)
-            path = os.path.abspath(os.path.expanduser(bpy.path.abspath(self.filepath)))
+            path = _file_path(self.filepath)
             stored_surface(surface).save(path)
         except _user_errors() as ex:
             self.report({"ERROR"}, str(ex))
@@ -1735,6 +1764,142 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
         return {"FINISHED"}
 
 
+def _file_path(filepath: str) -> str:
+    """The full path of a file path given to Export or Import Spline: ``//`` is relative to
+    the .blend (it had been taken from the filesystem's root), and refused while the .blend
+    is not saved (the file had been written to the folder Blender was started in, reported as
+    "saved rel.npz"; user test)."""
+    if filepath.startswith("//") and not bpy.data.filepath:
+        raise bridge.SelectionError(
+            f"'{filepath}' is relative to the .blend file, which is not saved yet: save the "
+            ".blend file first, or give the file's full path")
+    return os.path.abspath(os.path.expanduser(bpy.path.abspath(filepath)))
+
+
+def _import_sources(context, surf, label: str):
+    """``(sources, notes)`` of an imported spline: the selected objects (the add-on's results
+    left out) when they are the data it was fitted to (:func:`source_mismatch`, as Refine
+    takes them), else none, with a note saying why and what Refine and the Deviation Map
+    then need. ``label``: the file's name, for the notes."""
+    without = ("it has no source object, which Refine and the Deviation Map need (select the "
+               "scan it was fitted to, in the file's coordinates, and import again)")
+    chosen = [o for o in context.selected_objects if not bridge._is_result(o)]
+    if not chosen:
+        return [], [without]
+    try:
+        data = bridge.read_selection(context)
+    except bridge.SelectionError as ex:
+        return [], [f"the selection was not taken as its source ({ex}); {without}"]
+    names = ", ".join(repr(o.name) for o in data.sources)
+    cloud = surf.parameterization.faces is None
+    if cloud != (data.faces is None):
+        what = ("a point cloud then, a mesh now" if cloud
+                else "a mesh then, a point cloud now")
+    else:
+        what = source_mismatch(surf, data)[1]
+    if what is None:
+        return list(data.sources), [f"linked to its source {names}"]
+    axes = (" (Blender's OBJ importer turns the file's axes by default: import the scan with "
+            "Forward Y and Up Z to keep its coordinates)"
+            if what.startswith("other coordinates") else "")
+    return [], [f"{names} {'is' if len(data.sources) == 1 else 'are'} not the data '{label}' "
+                f"was fitted to ({what}){axes}: not taken as its source; {without}"]
+
+
+class TCB_OT_import_spline(bpy.types.Operator, ImportHelper):
+    """Make a TCB surface and its control net from a spline saved as .npz (Export Spline, the
+    command line's --spline, TCBSurface.save); the selected scan it was fitted to becomes its
+    source"""
+
+    bl_idname = "tcb.import_spline"
+    bl_label = "Import Spline (.npz)"
+    bl_options = {"REGISTER", "UNDO"}
+    filename_ext = ".npz"
+    filter_glob: StringProperty(default="*.npz", options={"HIDDEN"})
+    resolution: IntProperty(name="Resolution", default=64, soft_min=2, soft_max=512,
+                            description="Grid steps of the surface mesh along the domain's "
+                            "longer side (with Auto Resolution off)")  # fmt: skip
+    auto_resolution: BoolProperty(
+        name="Auto Resolution", default=True,
+        description="The coarsest of 64, 128 and 256 whose flat triangles stay within the "
+        "fit's max error of the spline",
+    )  # fmt: skip
+    live_net: BoolProperty(
+        name="Live Net", default=True,
+        description="Moving control-net vertices updates the surface (Geometry Nodes modifier)",
+    )  # fmt: skip
+    show_net: BoolProperty(name="Show Net", default=True)
+
+    @classmethod
+    def poll(cls, context):
+        return context.mode == "OBJECT"
+
+    def _auto_resolution(self) -> bool:
+        """Auto Resolution, unless a script gave a Resolution and not it (as Fit Surface)."""
+        props = self.properties
+        if props.is_property_set("resolution") and not props.is_property_set("auto_resolution"):
+            return False
+        return bool(self.auto_resolution)
+
+    def execute(self, context):
+        started = time.perf_counter()
+        core = _core()
+        try:
+            check_settings(self)
+            path = _file_path(self.filepath)
+            auto = self._auto_resolution()
+            # as a fit's result is stored (compact), tessellated and its resolution chosen
+            try:
+                surf = _as_stored(lambda: core.TCBSurface.load(path), self.resolution, auto)()
+            except core.FileFormatError as ex:
+                if "not a TCB surface file" in str(ex):  # (which files are, in Blender's words)
+                    ex.args = (f"{ex}: Import Spline reads the .npz files that Export Spline, "
+                               "the command line's --spline and TCBSurface.save write",)
+                raise
+            label = os.path.basename(path)
+            sources, notes = _import_sources(context, surf, label)
+        except _user_errors() as ex:
+            self.report({"ERROR"}, str(ex))
+            return {"CANCELLED"}
+        except OSError as ex:
+            self.report({"ERROR"}, f"Could not read {self.filepath}: {ex.strerror or ex}")
+            return {"CANCELLED"}
+        resolution = chosen_resolution(surf, self.resolution) if auto else self.resolution
+        name = os.path.splitext(label)[0] or "Spline"
+        coll = bridge.result_collection(context, f"TCB {name}")
+        surface, net = _new_result(coll, name, surf, resolution)
+        opts = surf.options
+        settings = dict(
+            tolerance=float(opts.tolerance), relative=bool(opts.relative),
+            criterion=str(opts.criterion).upper(), max_control_points=int(opts.max_control_points),
+            max_iterations=int(opts.max_iterations), degree=str(surf.degree),
+            mode=str(surf.mode).upper(), auto_smoothness=opts.smoothness == "auto",
+            smoothness=0.0 if opts.smoothness == "auto" else float(opts.smoothness),
+            resolution=resolution, auto_resolution=auto,
+        )  # fmt: skip
+        set_up_result(context, surface, net, surf, sources, settings, live_net=self.live_net,
+                      show_net=self.show_net)
+        edited = int(surf.report.get("edited", 0))
+        if edited:
+            notes.append(f"{edited} of its control points {'was' if edited == 1 else 'were'} "
+                         "edited after the fit (Refine fits the data again and replaces them)")
+        stray = resolution_note(surf) if auto else None
+        rep = surf.report
+        text = (f"TCB: imported '{label}' as '{surface.name}': {len(surf.control_points)} "
+                f"control points, RMS {rep.get('rms', float('nan')):.4g}, max "
+                f"{rep.get('max', float('nan')):.4g} of its fit, mesh Resolution {resolution}, "
+                f"{time.perf_counter() - started:.2f} s")
+        warn = bool(stray) or not sources
+        self.report({"WARNING"} if warn else {"INFO"},
+                    text + "".join(f"; {n}" for n in notes + ([stray] if stray else [])))
+        return {"FINISHED"}
+
+
+def menu_import(self, context):
+    """File > Import > TCB Spline (.npz)."""
+    self.layout.operator(TCB_OT_import_spline.bl_idname, text="TCB Spline (.npz)")
+
+
 classes = (
     TCB_OT_fit_surface,
     TCB_OT_refine,
@@ -1742,4 +1907,5 @@ classes = (
     TCB_OT_deviation_map,
     TCB_OT_toggle_net,
     TCB_OT_export_spline,
+    TCB_OT_import_spline,
 )

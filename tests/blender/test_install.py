@@ -85,6 +85,7 @@ def test_operators_and_panels_registered(installed):
         "deviation_map",
         "toggle_net",
         "export_spline",
+        "import_spline",
     ):
         assert hasattr(bpy.ops.tcb, op), op
         assert getattr(bpy.ops.tcb, op).get_rna_type().identifier.startswith("TCB_OT_")
@@ -106,9 +107,18 @@ def test_unregister_and_register_again(installed, addon):
     assert not hasattr(bpy.ops.tcb, "fit_surface") or not _op_registered(bpy, "TCB_OT_fit_surface")
     assert not hasattr(bpy.types, "TCB_PT_fit")
     assert not hasattr(bpy.types.Scene, "tcb_settings")
+    assert not _import_menu_entries(bpy)  # (File > Import > TCB Spline goes with it)
     addon.register()
     assert _op_registered(bpy, "TCB_OT_fit_surface")
     assert hasattr(bpy.types, "TCB_PT_fit")
+    assert len(_import_menu_entries(bpy)) == 1
+
+
+def _import_menu_entries(bpy) -> list:
+    """The functions of File > Import that the extension added (its Import Spline entry)."""
+    return [f for f in bpy.types.TOPBAR_MT_file_import._dyn_ui_initialize()
+            if getattr(f, "__name__", "") == "menu_import"
+            and "tcb_surface" in getattr(f, "__module__", "")]
 
 
 def test_disable_and_enable_through_preferences(installed):
