@@ -190,3 +190,39 @@ def test_a_georeferenced_spline_is_imported_near_its_data(clean_scene, tmp_path)
     v, _ = spline_of(surface).tessellate(16)
     assert np.abs(positions(surface) + origin - v).max() < 1e-4  # (float32 at 4e6: 0.5)
     assert np.abs(positions(surface.tcb.net) + origin - fitted.control_points).max() < 1e-4
+
+
+def test_the_command_line_s_spline_of_a_scan_file_links_to_blender_s_import_of_it(
+        clean_scene, tmp_path, capfd):
+    """The workflow it is for: the command line fits a scan file (on a server, say) and writes
+    --spline; Blender imports the same file and the spline, which takes it as its source. PLY
+    keeps the file's coordinates; Blender's OBJ importer turns Y-up into Z-up unless told not
+    to, which the report names."""
+    import importlib
+
+    bpy = clean_scene
+    core = core_module()
+    meshio = importlib.import_module(core.__name__ + ".meshio")
+    cli = importlib.import_module(core.__name__ + ".cli")
+    verts, faces = grid(14, f=lambda x, y: 0.25 * np.sin(2 * x + y), triangles=True)
+    for ext in ("ply", "obj"):
+        meshio.write_mesh(tmp_path / f"scan.{ext}", verts, faces)
+    assert cli.main(["fit", str(tmp_path / "scan.ply"), "-o", str(tmp_path / "s.obj"),
+                          "--spline", str(tmp_path / "scan.npz"), "--tolerance", "3e-3"]) == 0
+    spline = tmp_path / "scan.npz"
+    for ext, axes, linked in (("ply", {}, True), ("obj", {}, False),
+                              ("obj", dict(forward_axis="Y", up_axis="Z"), True)):
+        for o in list(bpy.context.scene.objects):
+            bpy.data.objects.remove(o)
+        getattr(bpy.ops.wm, f"{ext}_import")(filepath=str(tmp_path / f"scan.{ext}"), **axes)
+        scan = bpy.context.selected_objects[0]
+        capfd.readouterr()
+        assert import_spline(bpy, spline, scan) == {"FINISHED"}
+        out = capfd.readouterr().out
+        surface = bpy.context.view_layer.objects.active
+        assert [s.object for s in surface.tcb.sources] == ([scan] if linked else []), (ext, out)
+        if not linked:
+            assert "import the scan with Forward Y and Up Z" in out
+            continue
+        with bpy.context.temp_override(**select(bpy, surface)):
+            assert bpy.ops.tcb.refine(tolerance=1e-3) == {"FINISHED"}
