@@ -11,6 +11,7 @@ world origin (georeferenced data) are written relative to an object origin near 
 
 from __future__ import annotations
 
+import base64
 import hashlib
 from dataclasses import dataclass, field
 
@@ -106,6 +107,8 @@ def _kind(obj) -> str:
 
 def selection_problem(context) -> str | None:
     """A cheap check for the panel (no evaluation): why the Fit button is disabled, or None."""
+    if context.mode == "EDIT_MESH":
+        return None  # (Fit Surface fits the selected faces; the panel says so)
     if context.mode != "OBJECT":
         return "Switch to Object Mode to fit"
     selected = list(getattr(context, "selected_objects", None) or [])
@@ -146,18 +149,21 @@ def read_positions(data) -> np.ndarray:
     return buf.reshape(n, 3)
 
 
-def read_triangles(mesh, matrix=None, positions=None) -> np.ndarray:
+def read_triangles(mesh, matrix=None, positions=None, polygons: bool = False):
     """(t, 3) int32 vertex indices of the mesh's triangulated faces (Blender's triangulation,
     with quads cut along the diagonal their shape gives in world space (``matrix``, the
     object's; ``positions``: the mesh's :func:`read_positions` when already read;
     :func:`_quads_by_shape`) and n-gons that cut the same diagonal triangulated again:
-    :func:`_untangle_diagonals`)."""
+    :func:`_untangle_diagonals`); with ``polygons``, also the polygon of each triangle (t,)."""
     tris = mesh.loop_triangles
     buf = np.empty(len(tris) * 3, dtype=np.int32)
+    poly = np.empty(len(tris), dtype=np.int32)
     if len(tris):
         tris.foreach_get("vertices", buf)
+        tris.foreach_get("polygon_index", poly)
     tris = _quads_by_shape(mesh, buf.reshape(-1, 3), matrix, positions)
-    return _untangle_diagonals(mesh, tris)
+    tris, poly = _untangle_diagonals(mesh, tris, poly)
+    return (tris, poly) if polygons else tris
 
 
 # quads whose diagonals' squared lengths differ by at most this share keep Blender's cut (a
@@ -201,7 +207,7 @@ def _quads_by_shape(mesh, tris: np.ndarray, matrix=None, positions=None) -> np.n
     return out
 
 
-def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
+def _untangle_diagonals(mesh, tris: np.ndarray, poly: np.ndarray):
     """Blender triangulates each n-gon on its own: two bent n-gons that share a chain through a
     vertex of no other face (Limited Dissolve leaves these; so does Suzanne) can both cut the
     diagonal across that vertex, which then has four triangles, and a disk read as
@@ -214,17 +220,18 @@ def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
     disk's parameterization needs its topology, not flat n-gons. An n-gon without a free corner
     keeps Blender's triangles (a loop over the few n-gons concerned). Edges of the mesh itself
     in more than two faces, and crowded diagonals that no fan resolves, are left for the
-    engine to name."""
+    engine to name. ``poly``: the polygon of each of ``tris`` (Blender's
+    ``polygon_index``); returned with the triangles, in their new order."""
     n = len(mesh.vertices)
     if len(tris) == len(mesh.polygons):  # all triangles: no diagonals (most scans; no sort)
-        return tris
+        return tris, poly
     t = tris.astype(np.int64)
     ends = np.sort(np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1), axis=2)
     key = ends[..., 0] * n + ends[..., 1]  # (t, 3)
     uniq, count = np.unique(key, return_counts=True)
     crowded = uniq[count > 2]
     if not len(crowded):
-        return tris
+        return tris, poly
     ev = np.empty(len(mesh.edges) * 2, dtype=np.int32)
     if len(mesh.edges):
         mesh.edges.foreach_get("vertices", ev)
@@ -232,14 +239,12 @@ def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
     real = ev[:, 0] * n + ev[:, 1]
     diagonals = np.setdiff1d(crowded, real)
     if not len(diagonals):
-        return tris
-    poly = np.empty(len(tris), dtype=np.int32)
-    mesh.loop_triangles.foreach_get("polygon_index", poly)
+        return tris, poly
     redo = np.unique(poly[np.isin(key, diagonals).any(axis=1)])
     keep = ~np.isin(poly, redo)
     used = set(key[keep].ravel().tolist()) | set(real.tolist())
     pos = read_positions(mesh).astype(np.float64)
-    out = [tris[keep]]
+    out, out_poly = [tris[keep]], [poly[keep]]
     for p in redo.tolist():
         vs = np.array(mesh.polygons[p].vertices)
         m = len(vs)
@@ -271,7 +276,8 @@ def _untangle_diagonals(mesh, tris: np.ndarray) -> np.ndarray:
         else:
             used |= best[1]
             out.append(best[2].astype(np.int32))
-    return np.vstack(out)
+        out_poly.append(np.full(len(out[-1]), p, dtype=np.int32))
+    return np.vstack(out), np.concatenate(out_poly)
 
 
 def _clip_ears(vs, corners, normal, used, n):
@@ -554,6 +560,90 @@ def read_selection(context, objects=None) -> InputData:
     return InputData(points=pts, faces=None if tri is None else tri.astype(np.int64),
                      sources=list(wanted.values()), counts=counts, notes=notes,
                      modifiers=modifiers)  # fmt: skip
+
+
+# --- a part of a mesh: the faces (or vertices) selected in Edit Mode -------------------------------
+
+
+def edit_selection(obj) -> tuple[str, np.ndarray]:
+    """``(kind, mask)`` of the part of mesh ``obj`` selected in Edit Mode: ``"FACES"`` and a
+    mask over its polygons when a face is selected, else ``"VERTICES"`` and a mask over its
+    vertices (fitted as a point cloud); a :class:`SelectionError` when nothing is. The edit
+    mesh is loaded into the mesh first (``update_from_editmode``)."""
+    obj.update_from_editmode()
+    mesh = obj.data
+    faces = np.zeros(len(mesh.polygons), dtype=bool)
+    if len(faces):
+        mesh.polygons.foreach_get("select", faces)
+    if faces.any():
+        return "FACES", faces
+    verts = np.zeros(len(mesh.vertices), dtype=bool)
+    if len(verts):
+        mesh.vertices.foreach_get("select", verts)
+    if verts.any():
+        return "VERTICES", verts
+    raise SelectionError(
+        f"Nothing is selected in '{obj.name}' (Edit Mode): select the faces to fit (or "
+        "vertices, fitted as a point cloud), or switch to Object Mode (Tab) to fit the whole "
+        "object")
+
+
+def read_part(obj, kind: str, mask: np.ndarray) -> InputData:
+    """World-space points (and faces) of the part of mesh ``obj`` that ``mask`` selects
+    (:func:`edit_selection`): the selected polygons, triangulated as :func:`read_triangles`
+    does, with their vertices only, or (``"VERTICES"``) the selected vertices as a point
+    cloud. Read from the mesh itself, without its modifiers (the selection is of its own
+    faces: a modifier may make others), a note says so when it has any. A
+    :class:`SelectionError` when the mesh no longer has as many polygons or vertices as
+    ``mask``."""
+    mesh = obj.data
+    faces = kind == "FACES"
+    what = "faces" if faces else "vertices"
+    n = len(mesh.polygons) if faces else len(mesh.vertices)
+    if n != len(mask):
+        raise SelectionError(f"'{obj.name}' has {n} {what} now, {len(mask)} when its selected "
+                             f"{what} were fitted")
+    pts = read_positions(mesh)
+    matrix = obj.matrix_world
+    tris = None
+    if faces:
+        tris, poly = read_triangles(mesh, matrix, pts, polygons=True)
+        tris = tris[mask[poly]]
+        used = np.unique(tris)
+        where = np.full(len(pts), -1, dtype=np.int64)
+        where[used] = np.arange(len(used))
+        pts, tris = pts[used], where[tris]
+    else:
+        pts = pts[mask]
+    bad = int((~np.isfinite(pts).all(axis=1)).sum())
+    if bad:
+        raise SelectionError(
+            f"'{obj.name}': {bad} of its {len(pts)} selected vertices "
+            f"{'has' if bad == 1 else 'have'} NaN or infinite coordinates: delete or fix them "
+            "and try again")
+    notes = [f"the {int(mask.sum())} selected {what} of '{obj.name}'"
+             + (", as a point cloud" if not faces else "")]
+    if any(m.show_viewport for m in getattr(obj, "modifiers", ())):
+        notes.append(f"'{obj.name}': {UNMODIFIED} (a selection is of the mesh's own {what})")
+    _rounding_note(obj, pts, notes)
+    return InputData(points=_world_checked(obj, pts, matrix),
+                     faces=None if tris is None else _world_faces(tris, matrix).astype(np.int64),
+                     sources=[obj], counts={obj.name: len(pts)}, notes=notes)
+
+
+def part_text(kind: str, mask: np.ndarray) -> str:
+    """``kind`` and ``mask`` as text (a surface keeps it: Refine and the Deviation Map read
+    the same part again, Fit Surface replaces the result of the same part):
+    ``"FACES:<count>:<base64 of the packed bits>"``; 125 kB for a million faces."""
+    bits = base64.b64encode(np.packbits(mask.astype(bool)).tobytes()).decode("ascii")
+    return f"{kind}:{len(mask)}:{bits}"
+
+
+def part_of_text(text: str) -> tuple[str, np.ndarray]:
+    """The ``(kind, mask)`` of :func:`part_text`."""
+    kind, n, bits = text.split(":", 2)
+    packed = np.frombuffer(base64.b64decode(bits), dtype=np.uint8)
+    return kind, np.unpackbits(packed, count=int(n)).astype(bool)
 
 
 def _faces_or_cloud(obj, pts, tris, notes):

@@ -34,6 +34,9 @@ SPLINE_KEY = "tcb_spline"
 # the surface object's world matrix when its mesh was last written from the spline (16 floats)
 PLACED_KEY = "tcb_placed_at"
 DEVIATION_ATTR = "tcb_deviation"
+# the part of its source a surface was fitted to, when a part (faces selected in Edit Mode):
+# bridge.part_text; absent for all of it
+PART_KEY = "tcb_source_part"
 
 
 def _core():
@@ -442,6 +445,14 @@ def source_data(context, surface_obj) -> bridge.InputData:
             f"The source object of '{surface_obj.name}' was deleted: refining and the deviation "
             "map need the input data"
         )
+    part = surface_obj.get(PART_KEY)
+    if part and len(sources) == 1 and sources[0].type == "MESH":
+        obj = sources[0]
+        if obj.mode == "EDIT":
+            raise bridge.SelectionError(
+                f"'{obj.name}' is in Edit Mode, where its mesh cannot be read: switch it to "
+                "Object Mode (Tab) and try again")
+        return bridge.read_part(obj, *bridge.part_of_text(str(part)))
     return bridge.read_selection(context, sources)
 
 
@@ -894,16 +905,17 @@ class _EngineOperator:
 FITTED_KEY = "tcb_fitted_at"
 
 
-def previous_result(context, sources, linked: list | None = None):
+def previous_result(context, sources, linked: list | None = None, part: str = ""):
     """The surface object of the view layer fitted to exactly the objects ``sources`` (the
-    latest fitted when there are several), or None. (One in an excluded collection stays as
-    it is: it cannot be made active; so does one linked from another file, whose name is
-    added to ``linked``.)"""
+    latest fitted when there are several), or None; and to the same ``part`` of them (faces
+    selected in Edit Mode, ``bridge.part_text``; "" for all: a patch's result and the whole
+    mesh's are two). (One in an excluded collection stays as it is: it cannot be made active;
+    so does one linked from another file, whose name is added to ``linked``.)"""
     want = sorted(o.as_pointer() for o in sources)
     found = [ob for ob in context.view_layer.objects
              if ob.tcb.role == "SURFACE" and ob.type == "MESH"
              and sorted(s.object.as_pointer() for s in ob.tcb.sources if s.object is not None)
-             == want and len(ob.tcb.sources) == len(want)]
+             == want and len(ob.tcb.sources) == len(want) and ob.get(PART_KEY, "") == part]
     if linked is not None:
         linked += [ob.name for ob in found if linked_problem(ob, ob.tcb.net)]
     found = [ob for ob in found if not linked_problem(ob, ob.tcb.net)]
@@ -912,19 +924,21 @@ def previous_result(context, sources, linked: list | None = None):
     return max(found, key=lambda ob: (float(ob.get(FITTED_KEY, 0.0)), ob.name))
 
 
-def stale_nets(context, sources) -> list:
+def stale_nets(context, sources, part: str = "") -> list:
     """The control nets in the view layer whose surface was deleted (X: the net's pointer
     keeps it in the file, in no collection) and was fitted to exactly the objects
     ``sources``: what Replace Previous Result replaces when there is no surface to replace
     (the old net had stayed beside the new result, which went to a second collection: user
-    test). Nets linked from another file are left alone."""
+    test); of the same ``part`` (:func:`previous_result`). Nets linked from another file are
+    left alone."""
     want = sorted(o.as_pointer() for o in sources)
     return [ob for ob in context.view_layer.objects
             if ob.tcb.role == "NET" and ob.library is None and ob.tcb.surface is not None
             and live.deleted(ob.tcb.surface)
             and sorted(s.object.as_pointer() for s in ob.tcb.surface.tcb.sources
                        if s.object is not None) == want
-            and len(ob.tcb.surface.tcb.sources) == len(want)]
+            and len(ob.tcb.surface.tcb.sources) == len(want)
+            and ob.tcb.surface.get(PART_KEY, "") == part]
 
 
 def _new_net(coll, name: str, surf, origin):
@@ -954,11 +968,12 @@ def _new_result(coll, name: str, surf, resolution: int):
 
 
 def set_up_result(context, surface, net, surf, sources, settings: dict, live_net: bool,
-                  show_net: bool) -> None:
+                  show_net: bool, part: str = "") -> None:
     """Make ``surface`` and ``net`` (written from ``surf``) a TCB result: its spline stored,
-    roles, ``sources``, links, statistics and ``settings`` (:func:`store_stats`), the live
-    net attached (or a replaced result's detached), the net shown or hidden and the surface
-    shown, selected and active (Fit Surface, Import Spline)."""
+    roles, ``sources`` (and ``part``, the faces of the source fitted: ``bridge.part_text``,
+    "" for all of it), links, statistics and ``settings`` (:func:`store_stats`), the live net
+    attached (or a replaced result's detached), the net shown or hidden and the surface shown,
+    selected and active (Fit Surface, Import Spline)."""
     # a replaced surface hidden by the user is shown, as a new one is (it had stayed
     # hidden, and only its net came back: user test)
     for obj, hide in ((net, not show_net), (surface, False)):
@@ -972,6 +987,10 @@ def set_up_result(context, surface, net, surf, sources, settings: dict, live_net
     st.sources.clear()
     for src in sources:
         st.sources.add().object = src
+    if part:
+        surface[PART_KEY] = part
+    elif PART_KEY in surface:
+        del surface[PART_KEY]
     st.net = net
     net.tcb.role = "NET"
     net.tcb.surface = surface
@@ -996,7 +1015,9 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
     @classmethod
     def poll(cls, context):
         # Permissive on purpose: a wrong selection gets a specific error message (the panel
-        # disables the button and shows the reason).
+        # disables the button and shows the reason). In a mesh's Edit Mode: its selected faces
+        if context.mode == "EDIT_MESH":
+            return True
         return _poll_object_mode(cls, context, surface=False)
 
     def _fit_kwargs(self):
@@ -1016,7 +1037,15 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
     def prepare(self, context):
         self._started = time.perf_counter()
         check_settings(self)
-        data = bridge.read_selection(context)
+        self._part = ""
+        edit = context.mode == "EDIT_MESH"
+        if edit:  # the selected faces (or vertices) of the mesh in Edit Mode
+            obj = context.edit_object
+            kind, mask = bridge.edit_selection(obj)
+            data = bridge.read_part(obj, kind, mask)
+            self._part = bridge.part_text(kind, mask)
+        else:
+            data = bridge.read_selection(context)
         self._data = data
         kwargs = self._fit_kwargs()
         self._ignored = []
@@ -1103,6 +1132,11 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         return bool(self.auto_resolution)
 
     def finish(self, context, surf):
+        if context.mode == "EDIT_MESH":
+            # the result is made in Object Mode, and its undo step (an error or Esc leaves the
+            # selection as it was, in Edit Mode): Tab, select other faces and Fit again for
+            # another patch
+            bpy.ops.object.mode_set(mode="OBJECT")
         data = self._data
         name = data.name
         auto = self._auto_resolution()
@@ -1110,10 +1144,12 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             _CHOSEN_RESOLUTION[surf] = surf.auto_resolution()
         resolution = chosen_resolution(surf, self.resolution) if auto else self.resolution
         kept = []
-        previous = previous_result(context, data.sources, kept) if self.replace else None
+        part = getattr(self, "_part", "")
+        previous = previous_result(context, data.sources, kept, part) if self.replace else None
         replaced = [f"'{kept[0]}' is linked from another file and was kept: this result is a "
                     "new one"] if kept and previous is None else []
-        stale = stale_nets(context, data.sources) if self.replace and previous is None else []
+        stale = (stale_nets(context, data.sources, part) if self.replace and previous is None
+                 else [])
         coll = next((c for n in stale for c in n.users_collection), None)
         if previous is None:
             if coll is None:
@@ -1150,7 +1186,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         set_up_result(context, surface, net, surf, data.sources,
                       {k: getattr(self, k) for k in FIT_KEYS}
                       | {"resolution": resolution, "auto_resolution": auto},
-                      live_net=self.live_net, show_net=self.show_net)
+                      live_net=self.live_net, show_net=self.show_net, part=part)
         if live.drop_orphaned_weights() or stale:  # (of surfaces deleted with X; the view
             context.view_layer.update()  # layer lists a removed object as None until updated)
         reused = ["the same input and settings as the last fit: its result was reused (the "

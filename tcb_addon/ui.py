@@ -41,6 +41,8 @@ class TCB_PT_fit(_TCBPanel, bpy.types.Panel):
             setattr(op, key, getattr(settings, key))
         if problem:
             layout.label(text=problem, icon="INFO")
+        elif context.mode == "EDIT_MESH":
+            layout.label(text="Fits the selected faces (or vertices)", icon="INFO")
         # a spline saved by Export Spline, the command line or a script, as a result
         layout.operator("tcb.import_spline", icon="IMPORT")
 

@@ -2176,8 +2176,11 @@ def test_a_source_left_in_edit_mode_is_named(clean_scene):
     surface = bpy.context.view_layer.objects.active
     with bpy.context.temp_override(**select(bpy, scan)):
         assert bpy.ops.object.mode_set(mode="EDIT") == {"FINISHED"}
-        # and the scan active in Edit Mode (F3 search, a script): poll says what to do
-        with pytest.raises(RuntimeError, match=r"Switch to Object Mode \(Tab\) first"):
+        bpy.ops.mesh.select_all(action="DESELECT")
+        # and the scan active in Edit Mode (F3 search, a script): Fit fits its selected faces
+        # (test_parts), and says when there are none
+        with pytest.raises(RuntimeError, match=r"Nothing is selected in 'Wave' \(Edit Mode\): "
+                                               "select the faces to fit"):
             bpy.ops.tcb.fit_surface()
     for o in bpy.context.view_layer.objects:
         o.select_set(False)

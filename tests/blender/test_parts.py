@@ -1,0 +1,177 @@
+"""Fit Surface in a mesh's Edit Mode fits the selected faces (or, with none, the selected
+vertices as a point cloud): a patch of a closed scan, which as a whole cannot be mapped to a
+disk. Refine and the Deviation Map read the same part again; Fit on the same part replaces its
+result, on another part makes a new one; undo takes it back to the selection in Edit Mode."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from scenes import add_mesh, select, spline_of  # noqa: E402
+
+from test_operators import draw_panels, snapshot  # noqa: E402
+
+
+def sphere(bpy, name="Ball", segments=32, rings=16):
+    """A closed UV sphere of radius 1 (no border: as a whole it is refused)."""
+    import bmesh
+
+    mesh = bpy.data.meshes.new(name)
+    bm = bmesh.new()
+    bmesh.ops.create_uvsphere(bm, u_segments=segments, v_segments=rings, radius=1.0)
+    bm.to_mesh(mesh)
+    bm.free()
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def select_faces(obj, keep) -> np.ndarray:
+    """Select (in the mesh data, Object Mode) the faces whose centre satisfies ``keep``, their
+    edges and vertices, and nothing else; the mask of faces."""
+    mesh = obj.data
+    centres = np.array([p.center for p in mesh.polygons])
+    faces = keep(centres)
+    mesh.polygons.foreach_set("select", faces)
+    verts = np.zeros(len(mesh.vertices), bool)
+    for p in np.flatnonzero(faces):
+        verts[list(mesh.polygons[p].vertices)] = True
+    mesh.vertices.foreach_set("select", verts)
+    edges = np.array([verts[list(e.vertices)].all() for e in mesh.edges])
+    mesh.edges.foreach_set("select", edges)
+    return faces
+
+
+def edit_fit(bpy, obj, **props):
+    """Fit Surface with ``obj`` in Edit Mode (its selection as set in the mesh data)."""
+    props.setdefault("tolerance", 3e-3)
+    props.setdefault("max_control_points", 400)
+    props.setdefault("resolution", 24)
+    with bpy.context.temp_override(**select(bpy, obj)):
+        bpy.ops.object.mode_set(mode="EDIT")
+        assert bpy.context.mode == "EDIT_MESH"
+        return bpy.ops.tcb.fit_surface(**props)
+
+
+def surfaces(bpy) -> list:
+    return sorted(o.name for o in bpy.data.objects if o.tcb.role == "SURFACE")
+
+
+def test_the_selected_faces_of_a_closed_scan_are_fitted_refined_and_mapped(clean_scene, capfd):
+    bpy = clean_scene
+    ball = sphere(bpy)
+    with bpy.context.temp_override(**select(bpy, ball)):
+        with pytest.raises(RuntimeError, match="the mesh is closed"):
+            bpy.ops.tcb.fit_surface(tolerance=3e-3)
+    cap = select_faces(ball, lambda c: c[:, 2] > 0.3)
+    before = snapshot(ball)
+    capfd.readouterr()
+    assert edit_fit(bpy, ball) == {"FINISHED"}
+    assert "the %d selected faces of 'Ball'" % cap.sum() in capfd.readouterr().out
+    # the result is made in Object Mode, active; the source is as it was
+    assert bpy.context.mode == "OBJECT" and ball.mode == "OBJECT"
+    surface = bpy.context.view_layer.objects.active
+    assert surface.tcb.role == "SURFACE" and [s.object for s in surface.tcb.sources] == [ball]
+    assert snapshot(ball) == before
+    # the surface is the cap: within the tolerance of the sphere, over the cap only
+    surf = spline_of(surface)
+    verts, _ = surf.tessellate(32)
+    r = np.linalg.norm(verts, axis=1)
+    assert np.abs(r - 1).max() < 0.02
+    assert verts[:, 2].min() > 0.3 - 0.2  # (the cap's border ring of vertices: z >= 0.38 * ...)
+    n_cap = len({v for p in np.flatnonzero(cap) for v in ball.data.polygons[p].vertices})
+    assert len(surf.parameterization.uv) == n_cap
+
+    # Refine and the Deviation Map read the same faces again
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.refine(tolerance=1e-3, max_control_points=800) == {"FINISHED"}
+        assert bpy.ops.tcb.deviation_map() == {"FINISHED"}
+    assert surface.tcb.rms_rel <= 1e-3 * 1.05 and surface.tcb.has_deviation
+
+    # the same faces again: that result is replaced; other faces: a new one
+    first = surface.name
+    assert edit_fit(bpy, ball, tolerance=5e-3) == {"FINISHED"}
+    assert surfaces(bpy) == [first]
+    select_faces(ball, lambda c: c[:, 2] < -0.3)
+    assert edit_fit(bpy, ball) == {"FINISHED"}
+    assert len(surfaces(bpy)) == 2
+    other = bpy.context.view_layer.objects.active
+    assert other.name != first and spline_of(other)(np.zeros((1, 2)))[0, 2] < 0
+
+    # the mesh edited since: Refine says what changed
+    import bmesh
+
+    bm = bmesh.new()
+    bm.from_mesh(ball.data)
+    bm.faces.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[bm.faces[0]], context="FACES_ONLY")
+    bm.to_mesh(ball.data)
+    bm.free()
+    with bpy.context.temp_override(**select(bpy, other)):
+        with pytest.raises(RuntimeError, match=r"'Ball' has \d+ faces now, \d+ when its "
+                                               "selected faces were fitted"):
+            bpy.ops.tcb.refine()
+
+
+def test_selected_vertices_of_a_vertex_scan_are_fitted_as_a_point_cloud(clean_scene):
+    bpy = clean_scene
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(-1, 1, (1500, 2))
+    pts = np.c_[xy, 0.2 * np.sin(2 * xy[:, 0]) * xy[:, 1]]
+    scan = add_mesh(bpy, "Points", pts)
+    chosen = pts[:, 0] < 0.2
+    scan.data.vertices.foreach_set("select", chosen)
+    assert edit_fit(bpy, scan) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    surf = spline_of(surface)
+    assert surf.parameterization.faces is None and len(surf.parameterization.uv) == chosen.sum()
+    verts, _ = surf.tessellate(24)
+    assert verts[:, 0].max() < 0.2 + 0.05  # the part, not the whole scan
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.refine(tolerance=1e-3) == {"FINISHED"}
+
+
+def test_nothing_selected_in_edit_mode_is_an_error_that_keeps_edit_mode(clean_scene):
+    bpy = clean_scene
+    ball = sphere(bpy)
+    select_faces(ball, lambda c: np.zeros(len(c), bool))
+    with pytest.raises(RuntimeError, match="Nothing is selected in 'Ball' \\(Edit Mode\\)"):
+        edit_fit(bpy, ball)
+    assert ball.mode == "EDIT" and surfaces(bpy) == []
+    log = draw_panels(bpy, [ball])  # (in Edit Mode: the button is on, and says what it fits)
+    assert ("operator", "tcb.fit_surface", True) in log
+    assert any(e[0] == "label" and "Fits the selected faces" in e[1] for e in log)
+    with bpy.context.temp_override(**select(bpy, ball)):
+        bpy.ops.object.mode_set(mode="OBJECT")
+    # an engine error (a band of faces: two borders) also leaves the selection in Edit Mode
+    select_faces(ball, lambda c: np.abs(c[:, 2]) < 0.3)
+    with pytest.raises(RuntimeError, match="the 128 selected faces of 'Ball'"):
+        edit_fit(bpy, ball)
+    assert ball.mode == "EDIT" and surfaces(bpy) == []
+    with bpy.context.temp_override(**select(bpy, ball)):
+        bpy.ops.object.mode_set(mode="OBJECT")
+
+
+def test_undo_of_an_edit_mode_fit_leaves_nothing_behind(clean_scene):
+    bpy = clean_scene
+    bpy.ops.ed.undo_push(message="clean scene")
+    ball = sphere(bpy)
+    select_faces(ball, lambda c: c[:, 2] > 0.3)
+    bpy.ops.ed.undo_push(message="add the ball")
+    objects = sorted(o.name for o in bpy.data.objects)
+    with bpy.context.temp_override(**select(bpy, ball)):
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.ed.undo_push(message="edit mode")
+        assert bpy.ops.tcb.fit_surface("EXEC_DEFAULT", True, tolerance=3e-3,
+                                       resolution=16) == {"FINISHED"}
+    assert len(surfaces(bpy)) == 1
+    assert bpy.ops.ed.undo() == {"FINISHED"}
+    assert surfaces(bpy) == [] and sorted(o.name for o in bpy.data.objects) == objects
+    assert bpy.data.objects["Ball"].mode == "EDIT"
+    with bpy.context.temp_override(**select(bpy, bpy.data.objects["Ball"])):
+        bpy.ops.object.mode_set(mode="OBJECT")
