@@ -1005,6 +1005,12 @@ def set_up_result(context, surface, net, surf, sources, settings: dict, live_net
     context.view_layer.objects.active = surface
 
 
+# the engine's words for a mesh that is no disk as a whole, where a patch of it may be one (Fit
+# Surface then says how to fit one: Edit Mode's selected faces)
+_NO_DISK = ("the mesh is closed", "separate pieces (connected components)",
+            "the mesh is not a disk", "patch with exactly one border is needed, and")
+
+
 class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types.Operator):
     """Fit a smooth TCB-spline surface and its control net to the selected meshes / point clouds"""
 
@@ -1094,6 +1100,11 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                     data.points, ex.indices, data.label,
                     advice="turn on Drop Outliers in the fit settings") from None
             except core.InvalidInputError as ex:  # the shape may be the modifiers' doing
+                # a closed scan, a tube, pieces: a patch of it can be fitted as it is (holes:
+                # Fill Holes, which the engine's words name)
+                no_disk = (isinstance(ex, core.TopologyError)
+                           and not isinstance(ex, core.HolesError)
+                           and any(w in str(ex) for w in _NO_DISK))
                 if isinstance(ex, core.HolesError):  # (in Blender's words)
                     ex = core.parameterize.holes_error(
                         ex.loops, advice="turn on Fill Holes in the fit settings")
@@ -1103,6 +1114,12 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 # and how the selection was read (a mesh with loose vertices fitted as a point
                 # cloud, objects merged: user test, the error spoke of a cloud only)
                 extra += list(data.notes)
+                if no_disk:
+                    extra.append(
+                        "to fit a patch of it, select a disk-like part's faces (one border, "
+                        "no handles) in Edit Mode and press Fit Surface" if self._part else
+                        "or fit a patch of it as it is: select the patch's faces in Edit Mode "
+                        "and press Fit Surface (the mesh is not changed)")
                 if str(ex).startswith("at least 10 points are needed") and data.faces is not None:
                     # (the default Plane, 4 vertices: the bare count; user test)
                     extra.append("a mesh of so few vertices can be subdivided first (Edit Mode "
