@@ -126,10 +126,11 @@ def parse_args(args: list[str]) -> argparse.Namespace:
                     help="spline degree (default 2)")
     ap.add_argument("--mode", choices=("tcb", "dcb"), default="tcb",
                     help="spline space: tcb or dcb (default %(default)s)")
-    ap.add_argument("--smoothness", type=smoothness_arg, default=1e-4,
-                    help="weight of the smoothing term, or 'auto' (chosen by cross-validation; "
-                    "default 1e-4, which on sparse clouds, under 2 points per control point, "
-                    "is cross-validated as in Blender's panel)")
+    ap.add_argument("--smoothness", type=smoothness_arg, default=None,
+                    help="weight of the smoothing term, or 'auto' (chosen by cross-validation); "
+                    "without it 1e-4, which on sparse clouds, under 2 points per control point, "
+                    "is cross-validated as in Blender's panel left at its default (a value "
+                    "given, 1e-4 too, is used as it is)")
     ap.add_argument("--drop-outliers", action="store_true",
                     help="leave out points far from all others (point clouds; a mesh is fitted "
                     "without it, with a note)")
@@ -384,11 +385,12 @@ def fit(bpy, objs, ns):
         tolerance=ns.tolerance, relative=ns.relative, criterion=ns.criterion.upper(),
         max_control_points=ns.max_control_points, max_iterations=ns.max_iterations,
         degree=str(ns.degree), mode=ns.mode.upper(),
-        smoothness=1e-4 if ns.smoothness == "auto" else ns.smoothness,
         auto_smoothness=ns.smoothness == "auto", drop_outliers=ns.drop_outliers,
         fill_holes=ns.fill_holes, projection=ns.projection.upper(),
         resolution=ns.resolution, show_net=True, live_net=ns.live_net,
     )  # fmt: skip
+    if ns.smoothness not in (None, "auto"):  # (a Smoothness set is used as it is, 1e-4 too)
+        props["smoothness"] = ns.smoothness
     override = dict(selected_objects=list(objs), active_object=objs[0], object=objs[0])
     try:
         with bpy.context.temp_override(**override):

@@ -1028,8 +1028,10 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
 
     def _fit_kwargs(self):
         smoothness = "auto" if self.auto_smoothness else self.smoothness
-        if smoothness == DEFAULT_SMOOTHNESS:  # left at the default (float32 of 1e-4): the
-            smoothness = _core().fit.DEFAULT_SMOOTHNESS  # core cross-validates it on sparse clouds
+        if smoothness == DEFAULT_SMOOTHNESS and not self.smoothness_set:
+            # left at the default (float32 of 1e-4, never set): the core cross-validates it on
+            # sparse clouds
+            smoothness = _core().fit.DEFAULT_SMOOTHNESS
         return dict(
             # (0, as the property's old hard limit made it: a tolerance too small to reach)
             degree=int(self.degree), mode=self.mode.lower(), tolerance=max(self.tolerance, 1e-9),

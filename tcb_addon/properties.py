@@ -23,9 +23,17 @@ from bpy.props import (
     StringProperty,
 )
 
-# the Smoothness default as Blender stores it (a 32-bit float): a property still at this value
-# was left at the default, which the engine cross-validates on sparse clouds
+# the Smoothness default as Blender stores it (a 32-bit float): a property at this value and
+# never set (FitSettings.smoothness_set) was left at the default, which the engine
+# cross-validates on sparse clouds
 DEFAULT_SMOOTHNESS = struct.unpack("f", struct.pack("f", 1e-4))[0]
+
+
+def _smoothness_set(self, _context) -> None:
+    """The Smoothness field's update: it was set (FitSettings.smoothness_set). Blender calls it
+    for a value typed in, set by a script (also an operator's keyword argument) or copied by
+    the panel's button, the same value too."""
+    self.smoothness_set = True
 
 
 # the finest tessellation offered (Fit's and Re-tessellate's Resolution)
@@ -95,11 +103,17 @@ class FitSettings:
     smoothness: FloatProperty(
         name="Smoothness",
         description="Weight of the smoothing term of the least-squares fit (0 = none); used "
-        "when Auto Smoothness is off. At its default (0.0001) on a sparse cloud (under 2 "
-        "points per control point), or when the error stopped falling above the tolerance, "
-        "it is chosen by cross-validation",
+        "when Auto Smoothness is off. Left at its default (0.0001, never set) on a sparse "
+        "cloud (under 2 points per control point), or when the error stopped falling above "
+        "the tolerance, it is chosen by cross-validation; a value set, 0.0001 too, is used as "
+        "it is",
         default=DEFAULT_SMOOTHNESS, soft_min=0.0, soft_max=1.0, precision=6, step=0.001,
+        update=_smoothness_set,
     )  # fmt: skip
+    # the Smoothness was set (typed, by a script, or copied by the panel from a field that was):
+    # its value is the user's even when it is the default's (it had been cross-validated on a
+    # sparse cloud as the default is, with no way to ask for 0.0001 itself)
+    smoothness_set: BoolProperty(default=False, options={"HIDDEN"})
     auto_smoothness: BoolProperty(
         name="Auto Smoothness",
         description=(
@@ -172,6 +186,7 @@ FIT_KEYS = (
     "tolerance", "relative", "criterion", "max_control_points", "max_iterations", "degree", "mode",
     "smoothness", "auto_smoothness", "drop_outliers", "fill_holes", "projection", "resolution",
     "auto_resolution",
+    "smoothness_set",  # (after "smoothness": copying that one sets it; the panel copies in order)
 )  # fmt: skip
 
 

@@ -199,6 +199,29 @@ def test_a_sparse_cloud_left_at_the_default_smoothness_gets_it_cross_validated(c
     assert surf.report["smoothness"] == pytest.approx(1e-3) and "smoothness_selection" not in surf.report
     assert not surface.tcb.smoothness_cross_validated
 
+    # 1e-4 set by hand is used as it is too (it had been taken for the default); as the
+    # panel's button passes the sidebar's settings: left alone, the default; typed, as typed
+    def sidebar_fit():
+        props = sys.modules[ADDON + ".tcb_addon.properties"]
+        settings = bpy.context.scene.tcb_settings
+        with bpy.context.temp_override(**select(bpy, cloud)):
+            assert bpy.ops.tcb.fit_surface(**{k: getattr(settings, k) for k in props.FIT_KEYS},
+                                           replace=False) == {"FINISHED"}
+        return spline_of(bpy.context.view_layer.objects.active).report
+
+    assert fit(bpy, cloud, smoothness=1e-4) == {"FINISHED"}
+    surf = spline_of(bpy.context.view_layer.objects.active)
+    assert surf.report["smoothness"] == pytest.approx(1e-4) and "smoothness_selection" not in surf.report
+    assert "sparse data" in sidebar_fit()["smoothness_selection"]["why"]
+    settings = bpy.context.scene.tcb_settings
+    settings.smoothness = 1e-4  # (typed in: the same value)
+    try:
+        rep = sidebar_fit()
+        assert rep["smoothness"] == pytest.approx(1e-4) and "smoothness_selection" not in rep
+    finally:
+        settings.property_unset("smoothness")
+        settings.property_unset("smoothness_set")
+
 
 def test_results_are_not_input_and_a_hidden_source_still_works(clean_scene, addon):
     """After Select All the add-on's own results are left out of the input (they had been
