@@ -1431,6 +1431,10 @@ class TCBSurface:
         try:
             version = int(arrays["format_version"])
         except KeyError:
+            if "elevation" in arrays:  # (a DEM grid that core.meshio reads as input)
+                raise FileFormatError(
+                    f"{what} is a DEM grid ('elevation'), not a TCB surface file: fit it "
+                    "(python -m core fit FILE -o OUT --spline SPLINE.npz) to get one") from None
             raise FileFormatError(f"{what} is not a TCB surface file (no format version)") from None
         if version > FORMAT_VERSION:
             raise FileFormatError(
@@ -1479,7 +1483,16 @@ class TCBSurface:
             if "smoothness_is_default" in arrays and bool(arrays["smoothness_is_default"]):
                 fields["smoothness"] = DEFAULT_SMOOTHNESS
             options = RefineOptions(**fields)
+            options.validate()
+            for lvl in range(degree + 1):  # (out of range: an IndexError at the first use)
+                for name in (f"triangles_{lvl}", f"interior_{lvl}"):
+                    idx = np.asarray(arrays[name])
+                    if idx.size and (idx.dtype.kind not in "iu" or idx.min() < 0
+                                     or idx.max() >= len(knots)):
+                        raise FileFormatError(f"{what} is damaged or incomplete (its {name} "
+                                              "are no indices of its knots)")
             report = json.loads(str(arrays["report"]))
+            _check_report(report, what)
             surf = cls(space, arrays["control_points"], param, arrays["errors"], report,
                        int(arrays["n_interior"]), options)
             if "fitted_control_points" in arrays:  # (an edited surface: to_bytes)
@@ -1497,6 +1510,9 @@ class TCBSurface:
             return surf
         except FileFormatError:
             raise
+        except KeyError as exc:
+            raise FileFormatError(f"{what} is damaged or incomplete (it has no {exc} entry)"
+                                  ) from None
         except Exception as exc:
             raise FileFormatError(f"{what} is damaged or incomplete ({type(exc).__name__}: {exc})") from None
 
@@ -1547,6 +1563,8 @@ class TCBSurface:
     def load(cls, path) -> "TCBSurface":
         """Read a surface written by :meth:`save` (``path`` as for :meth:`save`)."""
         path = _user_path(path)
+        if path.is_dir():  # (it had said "no such file": user test)
+            raise FileFormatError(f"{path} is a folder: give the name of a .npz file")
         if not path.is_file():
             raise FileFormatError(f"no such file: {path}")
         return cls.from_bytes(path.read_bytes(), what=str(path))
@@ -1558,6 +1576,31 @@ class TCBSurface:
             f"control_points={len(self._active)}, rms_rel={r.get('rms_rel', float('nan')):.3g}"
             + (f" of the fit, {r['edited']} edited" if r.get("edited") else "") + ")"
         )
+
+
+# a stored report's entries that are numbers (floats) and whole numbers, when present: a file
+# whose report had a string there loaded, and Blender's import failed on it (user test)
+_REPORT_FLOATS = ("rms", "max", "rms_rel", "max_rel", "diagonal", "seconds", "smoothness",
+                  "rms_area", "noise", "noise_rel", "folded")
+_REPORT_WHOLE = ("knots", "control_points", "functions", "iterations", "edited", "holes_filled",
+                 "outliers", "loose_vertices")
+
+
+def _check_report(report, what: str) -> None:
+    """A :class:`FileFormatError` when a stored ``report`` is no dict or one of its
+    :data:`_REPORT_FLOATS` is no number (NaN is one), or of its :data:`_REPORT_WHOLE` no
+    nonnegative whole number."""
+    if not isinstance(report, dict):
+        raise FileFormatError(f"{what} is damaged or incomplete (its report is no dictionary)")
+    for key in _REPORT_FLOATS + _REPORT_WHOLE:
+        value = report.get(key)
+        if value is None:
+            continue
+        whole = key in _REPORT_WHOLE
+        ok = isinstance(value, int) and value >= 0 if whole else isinstance(value, (int, float))
+        if not ok or isinstance(value, bool):
+            raise FileFormatError(f"{what} is damaged or incomplete (its report's {key!r} is "
+                                  f"{value!r})")
 
 
 def _moved_rows(coefficients: np.ndarray, fitted: np.ndarray) -> int:

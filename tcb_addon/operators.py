@@ -37,6 +37,9 @@ DEVIATION_ATTR = "tcb_deviation"
 # the part of its source a surface was fitted to, when a part (faces selected in Edit Mode):
 # bridge.part_text; absent for all of it
 PART_KEY = "tcb_source_part"
+# a surface made by Import Spline: the file's path (Fit Surface with Replace Previous Result
+# leaves it and makes a new result: it may be a long fit's, made elsewhere)
+IMPORTED_KEY = "tcb_imported_from"
 
 
 def _core():
@@ -400,6 +403,15 @@ def _as_stored(fn, resolution: int, auto: bool = False):
     return run
 
 
+def auto_resolution_of(op) -> bool:
+    """Auto Resolution of Fit Surface or Import Spline ``op``, unless a script gave a
+    Resolution and not it (the panel gives both)."""
+    props = op.properties
+    if props.is_property_set("resolution") and not props.is_property_set("auto_resolution"):
+        return False
+    return bool(op.auto_resolution)
+
+
 def chosen_resolution(surf, resolution: int) -> int:
     """The resolution :func:`_as_stored` chose for ``surf`` (Auto Resolution), else
     ``resolution``."""
@@ -449,9 +461,7 @@ def source_data(context, surface_obj) -> bridge.InputData:
     if part and len(sources) == 1 and sources[0].type == "MESH":
         obj = sources[0]
         if obj.mode == "EDIT":
-            raise bridge.SelectionError(
-                f"'{obj.name}' is in Edit Mode, where its mesh cannot be read: switch it to "
-                "Object Mode (Tab) and try again")
+            raise bridge.SelectionError(bridge.in_edit_mode(obj))
         return bridge.read_part(obj, *bridge.part_of_text(str(part)))
     return bridge.read_selection(context, sources)
 
@@ -910,15 +920,21 @@ def previous_result(context, sources, linked: list | None = None, part: str = ""
     latest fitted when there are several), or None; and to the same ``part`` of them (faces
     selected in Edit Mode, ``bridge.part_text``; "" for all: a patch's result and the whole
     mesh's are two). (One in an excluded collection stays as it is: it cannot be made active;
-    so does one linked from another file, whose name is added to ``linked``.)"""
+    so does one linked from another file, and one made by Import Spline: ``linked`` gets a
+    sentence for each.)"""
     want = sorted(o.as_pointer() for o in sources)
     found = [ob for ob in context.view_layer.objects
              if ob.tcb.role == "SURFACE" and ob.type == "MESH"
              and sorted(s.object.as_pointer() for s in ob.tcb.sources if s.object is not None)
              == want and len(ob.tcb.sources) == len(want) and ob.get(PART_KEY, "") == part]
     if linked is not None:
-        linked += [ob.name for ob in found if linked_problem(ob, ob.tcb.net)]
-    found = [ob for ob in found if not linked_problem(ob, ob.tcb.net)]
+        linked += [f"'{ob.name}' is linked from another file and was kept: this result is a "
+                   "new one" for ob in found if linked_problem(ob, ob.tcb.net)]
+        linked += [f"'{ob.name}' was imported (Import Spline) and was kept: this result is a "
+                   "new one" for ob in found if ob.get(IMPORTED_KEY)
+                   and not linked_problem(ob, ob.tcb.net)]
+    found = [ob for ob in found if not linked_problem(ob, ob.tcb.net)
+             and not ob.get(IMPORTED_KEY)]
     if not found:
         return None
     return max(found, key=lambda ob: (float(ob.get(FITTED_KEY, 0.0)), ob.name))
@@ -953,11 +969,12 @@ def _new_net(coll, name: str, surf, origin):
     return net
 
 
-def _new_result(coll, name: str, surf, resolution: int):
-    """A new surface object (``surf`` tessellated at ``resolution``, with its UV map) and
-    control net, named after ``name``, in ``coll``; both at an origin near the data when it is
-    far from the world origin (``bridge.local_origin``)."""
-    verts, faces = surf.tessellate(resolution)
+def _new_result(coll, name: str, surf, resolution: int, tessellation=None):
+    """A new surface object (``surf`` tessellated at ``resolution``, with its UV map;
+    ``tessellation``: its ``(verts, faces)`` made already) and control net, named after
+    ``name``, in ``coll``; both at an origin near the data when it is far from the world origin
+    (``bridge.local_origin``)."""
+    verts, faces = tessellation if tessellation is not None else surf.tessellate(resolution)
     origin = bridge.local_origin(verts)  # (0, 0, 0) unless far from the world origin
     smesh = bridge.new_mesh(f"{name} TCB Surface", verts - origin, faces)
     set_texture(smesh, surf, resolution)
@@ -1048,10 +1065,18 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         self._part = ""
         edit = context.mode == "EDIT_MESH"
         if edit:  # the selected faces (or vertices) of the mesh in Edit Mode
+            problem = bridge.edit_problem(context)
+            if problem:
+                raise bridge.SelectionError(problem)
             obj = context.edit_object
             kind, mask = bridge.edit_selection(obj)
             data = bridge.read_part(obj, kind, mask)
-            self._part = bridge.part_text(kind, mask)
+            # all of a mesh, as Object Mode reads it (its faces hold every vertex, no modifier
+            # makes another shape): the whole object's result (it had been a second one; review)
+            whole = (mask.all() and len(data.points) == len(obj.data.vertices)
+                     and (kind == "FACES") == bool(len(obj.data.polygons))
+                     and not any(m.show_viewport for m in obj.modifiers))
+            self._part = "" if whole else bridge.part_text(kind, mask)
         else:
             data = bridge.read_selection(context)
         self._data = data
@@ -1106,7 +1131,11 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 # Fill Holes, which the engine's words name)
                 no_disk = (isinstance(ex, core.TopologyError)
                            and not isinstance(ex, core.HolesError)
-                           and any(w in str(ex) for w in _NO_DISK))
+                           and any(w in str(ex) for w in _NO_DISK)
+                           # (a mesh's own faces: not a metaball's, nor a shape its modifiers
+                           # make, which a part, read without them, would not be; review)
+                           and len(data.sources) == 1 and data.sources[0].type == "MESH"
+                           and data.modifier_note() is None)
                 if isinstance(ex, core.HolesError):  # (in Blender's words)
                     ex = core.parameterize.holes_error(
                         ex.loops, advice="turn on Fill Holes in the fit settings")
@@ -1120,8 +1149,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                     extra.append(
                         "to fit a patch of it, select a disk-like part's faces (one border, "
                         "no handles) in Edit Mode and press Fit Surface" if self._part else
-                        "or fit a patch of it as it is: select the patch's faces in Edit Mode "
-                        "and press Fit Surface (the mesh is not changed)")
+                        "or fit a patch of it as it is, the mesh unchanged: select the "
+                        "patch's faces in Edit Mode and press Fit Surface")
                 if str(ex).startswith("at least 10 points are needed") and data.faces is not None:
                     # (the default Plane, 4 vertices: the bare count; user test)
                     extra.append("a mesh of so few vertices can be subdivided first (Edit Mode "
@@ -1143,12 +1172,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 dict(points=data.points, faces=data.faces, **kwargs))
 
     def _auto_resolution(self) -> bool:
-        """Auto Resolution, unless a script gave a Resolution and not it (the panel gives
-        both)."""
-        props = self.properties
-        if props.is_property_set("resolution") and not props.is_property_set("auto_resolution"):
-            return False
-        return bool(self.auto_resolution)
+        return auto_resolution_of(self)
 
     def finish(self, context, surf):
         if context.mode == "EDIT_MESH":
@@ -1165,8 +1189,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         kept = []
         part = getattr(self, "_part", "")
         previous = previous_result(context, data.sources, kept, part) if self.replace else None
-        replaced = [f"'{kept[0]}' is linked from another file and was kept: this result is a "
-                    "new one"] if kept and previous is None else []
+        replaced = kept[:1] if previous is None else []
         stale = (stale_nets(context, data.sources, part) if self.replace and previous is None
                  else [])
         coll = next((c for n in stale for c in n.users_collection), None)
@@ -1790,6 +1813,10 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
     bl_label = "Export Spline (.npz)"
     filename_ext = ".npz"
     filter_glob: StringProperty(default="*.npz", options={"HIDDEN"})
+    # ('//' is taken relative to the .blend, _file_path: Blender had warned it was not)
+    filepath: StringProperty(name="File Path", description="Filepath used for exporting the "
+                             "file", maxlen=1024, subtype="FILE_PATH",
+                             options={"PATH_SUPPORTS_BLEND_RELATIVE"})  # fmt: skip
 
     @classmethod
     def poll(cls, context):
@@ -1836,8 +1863,8 @@ def _import_sources(context, surf, label: str):
     left out) when they are the data it was fitted to (:func:`source_mismatch`, as Refine
     takes them), else none, with a note saying why and what Refine and the Deviation Map
     then need. ``label``: the file's name, for the notes."""
-    without = ("it has no source object, which Refine and the Deviation Map need (select the "
-               "scan it was fitted to, in the file's coordinates, and import again)")
+    without = ("the result has no source object, which Refine and the Deviation Map need "
+               "(select the scan it was fitted to, in the file's coordinates, and import again)")
     chosen = [o for o in context.selected_objects if not bridge._is_result(o)]
     if not chosen:
         return [], [without]
@@ -1854,9 +1881,20 @@ def _import_sources(context, surf, label: str):
         what = source_mismatch(surf, data)[1]
     if what is None:
         return list(data.sources), [f"linked to its source {names}"]
-    axes = (" (Blender's OBJ importer turns the file's axes by default: import the scan with "
-            "Forward Y and Up Z to keep its coordinates)"
-            if what.startswith("other coordinates") else "")
+    # the file's coordinates turned as Blender's OBJ importer turns them by default (Forward
+    # -Z, Up Y: the file's (x, y, z) at (x, -z, y), by the object's rotation): said only then
+    # (it had been said for any other coordinates: user test)
+    p = data.points
+    turned = np.c_[p[:, 0], p[:, 2], -p[:, 1]]
+    axes = (" (it is the data turned as Blender's OBJ importer turns a file's axes by default: "
+            "clear the scan's rotation, Alt+R, or import it with Forward Y and Up Z)"
+            if what.startswith("other coordinates") and (
+                surf.same_data_set(turned) or surf.fitted_to(turned, data.rounding)) else "")
+    then, now = len(surf.parameterization.uv), len(data.points)
+    if then < now and not axes:  # (a spline of selected faces: its .npz keeps no faces' list)
+        without = ("the result has no source object, which Refine and the Deviation Map need "
+                   "(a spline fitted to a part of a scan, its selected faces, is not linked to "
+                   "the scan)") if cloud == (data.faces is None) else without
     return [], [f"{names} {'is' if len(data.sources) == 1 else 'are'} not the data '{label}' "
                 f"was fitted to ({what}){axes}: not taken as its source; {without}"]
 
@@ -1871,6 +1909,9 @@ class TCB_OT_import_spline(bpy.types.Operator, ImportHelper):
     bl_options = {"REGISTER", "UNDO"}
     filename_ext = ".npz"
     filter_glob: StringProperty(default="*.npz", options={"HIDDEN"})
+    filepath: StringProperty(name="File Path", description="Filepath used for importing the "
+                             "file", maxlen=1024, subtype="FILE_PATH",
+                             options={"SKIP_PRESET", "HIDDEN", "PATH_SUPPORTS_BLEND_RELATIVE"})  # fmt: skip
     resolution: IntProperty(name="Resolution", default=64, soft_min=2, soft_max=512,
                             description="Grid steps of the surface mesh along the domain's "
                             "longer side (with Auto Resolution off)")  # fmt: skip
@@ -1887,31 +1928,51 @@ class TCB_OT_import_spline(bpy.types.Operator, ImportHelper):
 
     @classmethod
     def poll(cls, context):
-        return context.mode == "OBJECT"
+        return _poll_object_mode(cls, context, surface=False)  # (with its words: user test)
 
     def _auto_resolution(self) -> bool:
-        """Auto Resolution, unless a script gave a Resolution and not it (as Fit Surface)."""
-        props = self.properties
-        if props.is_property_set("resolution") and not props.is_property_set("auto_resolution"):
-            return False
-        return bool(self.auto_resolution)
+        return auto_resolution_of(self)
 
     def execute(self, context):
         started = time.perf_counter()
         core = _core()
+        # everything that reads the file is done before an object is made (a damaged file had
+        # left a half-made result and a traceback: user test)
         try:
             check_settings(self)
+            if not self.filepath or self.filepath.endswith(("/", "\\")):
+                raise bridge.SelectionError("No file chosen: choose the .npz file of a spline")
             path = _file_path(self.filepath)
             auto = self._auto_resolution()
             # as a fit's result is stored (compact), tessellated and its resolution chosen
             try:
-                surf = _as_stored(lambda: core.TCBSurface.load(path), self.resolution, auto)()
+                with np.errstate(over="ignore", invalid="ignore"):  # (said below: not finite)
+                    surf = _as_stored(lambda: core.TCBSurface.load(path), self.resolution,
+                                      auto)()
             except core.FileFormatError as ex:
                 if "not a TCB surface file" in str(ex):  # (which files are, in Blender's words)
                     ex.args = (f"{ex}: Import Spline reads the .npz files that Export Spline, "
                                "the command line's --spline and TCBSurface.save write",)
                 raise
             label = os.path.basename(path)
+            resolution = chosen_resolution(surf, self.resolution) if auto else self.resolution
+            with np.errstate(over="ignore", invalid="ignore"):
+                mesh = surf.tessellate(resolution)
+            if not (np.isfinite(mesh[0]).all() and np.isfinite(surf.control_points).all()
+                    and np.abs(mesh[0]).max(initial=0.0) < 1e30):
+                raise core.FileFormatError(f"{path} is damaged: its spline's points are not "
+                                           "finite")
+            opts = surf.options
+            settings = dict(
+                tolerance=float(opts.tolerance), relative=bool(opts.relative),
+                criterion=str(opts.criterion).upper(),
+                max_control_points=min(int(opts.max_control_points), 2**31 - 1),
+                max_iterations=min(int(opts.max_iterations), 2**31 - 1), degree=str(surf.degree),
+                mode=str(surf.mode).upper(), auto_smoothness=opts.smoothness == "auto",
+                smoothness=0.0 if opts.smoothness == "auto" else float(opts.smoothness),
+                resolution=resolution, auto_resolution=auto,
+            )  # fmt: skip
+            edited = int(surf.report.get("edited", 0))
             sources, notes = _import_sources(context, surf, label)
         except _user_errors() as ex:
             self.report({"ERROR"}, str(ex))
@@ -1919,22 +1980,12 @@ class TCB_OT_import_spline(bpy.types.Operator, ImportHelper):
         except OSError as ex:
             self.report({"ERROR"}, f"Could not read {self.filepath}: {ex.strerror or ex}")
             return {"CANCELLED"}
-        resolution = chosen_resolution(surf, self.resolution) if auto else self.resolution
         name = os.path.splitext(label)[0] or "Spline"
         coll = bridge.result_collection(context, f"TCB {name}")
-        surface, net = _new_result(coll, name, surf, resolution)
-        opts = surf.options
-        settings = dict(
-            tolerance=float(opts.tolerance), relative=bool(opts.relative),
-            criterion=str(opts.criterion).upper(), max_control_points=int(opts.max_control_points),
-            max_iterations=int(opts.max_iterations), degree=str(surf.degree),
-            mode=str(surf.mode).upper(), auto_smoothness=opts.smoothness == "auto",
-            smoothness=0.0 if opts.smoothness == "auto" else float(opts.smoothness),
-            resolution=resolution, auto_resolution=auto,
-        )  # fmt: skip
+        surface, net = _new_result(coll, name, surf, resolution, tessellation=mesh)
+        surface[IMPORTED_KEY] = path  # (Fit Surface makes a new result beside it: not replaced)
         set_up_result(context, surface, net, surf, sources, settings, live_net=self.live_net,
                       show_net=self.show_net)
-        edited = int(surf.report.get("edited", 0))
         if edited:
             notes.append(f"{edited} of its control points {'was' if edited == 1 else 'were'} "
                          "edited after the fit (Refine fits the data again and replaces them)")

@@ -119,13 +119,14 @@ def test_import_without_its_scan_warns_and_refine_says_what_it_needs(clean_scene
     out = capfd.readouterr().out
     assert "WARNING" in out or "Warning" in out
     assert "'Other' is not the data 'scan.npz' was fitted to (other coordinates" in out
+    assert "OBJ" not in out  # (moved, not turned as Blender's OBJ importer turns a file)
     surface = bpy.context.view_layer.objects.active
     assert len(surface.tcb.sources) == 0
     assert surface.tcb.auto_resolution and surface.tcb.resolution in (64, 128, 256)
     # nothing selected: no source, said
     capfd.readouterr()
     assert import_spline(bpy, path) == {"FINISHED"}
-    assert "it has no source object, which Refine and the Deviation Map need" in (
+    assert "the result has no source object, which Refine and the Deviation Map need" in (
         capfd.readouterr().out)
     for op in ("refine", "deviation_map"):
         with bpy.context.temp_override(**select(bpy, surface)):
@@ -165,10 +166,26 @@ def test_a_file_that_is_no_spline_is_refused_and_nothing_is_made(clean_scene, tm
     text.write_text("not an archive")
     grid_file = tmp_path / "dem.npz"
     np.savez(grid_file, elevation=np.zeros((4, 4)))
-    before = (len(bpy.data.objects), len(bpy.data.collections), len(bpy.data.meshes))
     which = "is not a TCB surface file.*: Import Spline reads the .npz files that Export Spline"
-    for path, words in ((text, "notes.npz " + which), (grid_file, "dem.npz " + which),
-                        (tmp_path / "missing.npz", "no such file")):
+    # a spline whose control points are finite but overflow the surface, and one with a
+    # report entry of the wrong kind: refused before anything is made (user test: half a
+    # result and a traceback)
+    verts, faces = grid(10, triangles=True)
+    fitted, good = saved_fit(tmp_path, verts, faces, name="good.npz")
+    huge = tmp_path / "huge.npz"
+    fitted.with_control_points(fitted.control_points * 1e300).save(huge)
+    arrays = dict(np.load(good))
+    arrays["report"] = np.array(str(arrays["report"]).replace('"rms": ', '"rms": "x", "_": '))
+    wrong = tmp_path / "wrong.npz"
+    np.savez(wrong, **arrays)
+    before = (len(bpy.data.objects), len(bpy.data.collections), len(bpy.data.meshes))
+    for path, words in ((text, "notes.npz " + which), (grid_file, "dem.npz is a DEM grid"),
+                        (tmp_path / "missing.npz", "no such file"),
+                        (tmp_path, "is a folder: give the name of a .npz file"),
+                        ("", "No file chosen"),
+                        (huge, "huge.npz is damaged: its spline's points are not finite"),
+                        (wrong, "wrong.npz is damaged or incomplete \\(its report's 'rms' is "
+                                "'x'\\)")):
         with pytest.raises(RuntimeError, match=words):
             import_spline(bpy, path)
         assert (len(bpy.data.objects), len(bpy.data.collections),
@@ -222,7 +239,42 @@ def test_the_command_line_s_spline_of_a_scan_file_links_to_blender_s_import_of_i
         surface = bpy.context.view_layer.objects.active
         assert [s.object for s in surface.tcb.sources] == ([scan] if linked else []), (ext, out)
         if not linked:
-            assert "import the scan with Forward Y and Up Z" in out
+            assert ("it is the data turned as Blender's OBJ importer turns a file's axes by "
+                    "default: clear the scan's rotation, Alt+R, or import it with Forward Y and "
+                    "Up Z") in out
             continue
         with bpy.context.temp_override(**select(bpy, surface)):
             assert bpy.ops.tcb.refine(tolerance=1e-3) == {"FINISHED"}
+
+
+def test_fit_surface_keeps_an_imported_result_and_import_wants_object_mode(clean_scene,
+                                                                          tmp_path, capfd):
+    """Fit Surface with Replace Previous Result on an imported spline's source makes a new
+    result beside it (an import may be a long fit made elsewhere; it had been overwritten, and
+    kept the file's names); Import in Edit Mode says to switch (it said "poll() failed")."""
+    bpy = clean_scene
+    verts, faces = grid(14, triangles=True)
+    fitted, path = saved_fit(tmp_path, verts, faces, name="server.npz")
+    scan = add_mesh(bpy, "Scan", verts, faces)
+    assert import_spline(bpy, path, scan) == {"FINISHED"}
+    imported = bpy.context.view_layer.objects.active
+    capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, scan)):
+        assert bpy.ops.tcb.fit_surface(tolerance=5e-3, resolution=16) == {"FINISHED"}
+    assert ("'server TCB Surface' was imported (Import Spline) and was kept: this result is a "
+            "new one") in capfd.readouterr().out
+    fitted_obj = bpy.context.view_layer.objects.active
+    assert fitted_obj != imported and fitted_obj.name == "Scan TCB Surface"
+    assert np.array_equal(spline_of(imported).control_points, fitted.control_points)
+    # Fit again: the Blender fit is replaced, the import still kept
+    with bpy.context.temp_override(**select(bpy, scan)):
+        assert bpy.ops.tcb.fit_surface(tolerance=3e-3, resolution=16) == {"FINISHED"}
+    assert sorted(o.name for o in bpy.data.objects if o.tcb.role == "SURFACE") == [
+        "Scan TCB Surface", "server TCB Surface"]
+    with bpy.context.temp_override(**select(bpy, scan)):
+        bpy.ops.object.mode_set(mode="EDIT")
+        try:
+            with pytest.raises(RuntimeError, match=r"Switch to Object Mode \(Tab\) first"):
+                bpy.ops.tcb.import_spline(filepath=str(path))
+        finally:
+            bpy.ops.object.mode_set(mode="OBJECT")

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from scenes import add_mesh, select, spline_of  # noqa: E402
+from scenes import add_mesh, grid, select, spline_of  # noqa: E402
 
 from test_operators import draw_panels, snapshot  # noqa: E402
 
@@ -33,17 +33,22 @@ def sphere(bpy, name="Ball", segments=32, rings=16):
 
 def select_faces(obj, keep) -> np.ndarray:
     """Select (in the mesh data, Object Mode) the faces whose centre satisfies ``keep``, their
-    edges and vertices, and nothing else; the mask of faces."""
-    mesh = obj.data
-    centres = np.array([p.center for p in mesh.polygons])
-    faces = keep(centres)
-    mesh.polygons.foreach_set("select", faces)
-    verts = np.zeros(len(mesh.vertices), bool)
-    for p in np.flatnonzero(faces):
-        verts[list(mesh.polygons[p].vertices)] = True
-    mesh.vertices.foreach_set("select", verts)
-    edges = np.array([verts[list(e.vertices)].all() for e in mesh.edges])
-    mesh.edges.foreach_set("select", edges)
+    edges and vertices, and nothing else; the mask of faces. (Through bmesh: foreach_set of
+    edge selection on a mesh made without select layers crashed Blender 5.0.)"""
+    import bmesh
+
+    bm = bmesh.new()
+    bm.from_mesh(obj.data)
+    for elem in (*bm.verts, *bm.edges, *bm.faces):
+        elem.select = False
+    faces = np.array([bool(keep(np.array([f.calc_center_median()]))[0]) for f in bm.faces])
+    for f, chosen in zip(bm.faces, faces):
+        if chosen:
+            f.select = True  # (its edges and vertices with it)
+            for elem in (*f.verts, *f.edges):
+                elem.select = True
+    bm.to_mesh(obj.data)
+    bm.free()
     return faces
 
 
@@ -67,7 +72,8 @@ def test_the_selected_faces_of_a_closed_scan_are_fitted_refined_and_mapped(clean
     ball = sphere(bpy)
     with bpy.context.temp_override(**select(bpy, ball)):
         with pytest.raises(RuntimeError, match="the mesh is closed.*or fit a patch of it as it "
-                                               "is: select the patch's faces in Edit Mode"):
+                                               "is, the mesh unchanged: select the patch's "
+                                               "faces in Edit Mode"):
             bpy.ops.tcb.fit_surface(tolerance=3e-3)
     cap = select_faces(ball, lambda c: c[:, 2] > 0.3)
     before = snapshot(ball)
@@ -177,3 +183,98 @@ def test_undo_of_an_edit_mode_fit_leaves_nothing_behind(clean_scene):
     assert bpy.data.objects["Ball"].mode == "EDIT"
     with bpy.context.temp_override(**select(bpy, bpy.data.objects["Ball"])):
         bpy.ops.object.mode_set(mode="OBJECT")
+
+
+def test_edit_mode_of_a_result_or_of_two_meshes_is_refused(clean_scene):
+    """In its net's Edit Mode a user drags control points: Fit had fitted the net as a scan
+    (review); two meshes in Edit Mode: one at a time (only the active one's faces had been
+    fitted, without a word)."""
+    bpy = clean_scene
+    ball = sphere(bpy)
+    select_faces(ball, lambda c: c[:, 2] > 0.3)
+    assert edit_fit(bpy, ball) == {"FINISHED"}
+    net = bpy.context.view_layer.objects.active.tcb.net
+    net.data.vertices.foreach_set("select", np.ones(len(net.data.vertices), bool))
+    with pytest.raises(RuntimeError, match=f"'{net.name}' is a TCB result, not input: in its "
+                                           "Edit Mode drag the net's vertices"):
+        edit_fit(bpy, net)
+    assert any(e[0] == "label" and "is a TCB result" in e[1] for e in draw_panels(bpy, [net]))
+    with bpy.context.temp_override(**select(bpy, net)):
+        bpy.ops.object.mode_set(mode="OBJECT")
+    other = sphere(bpy, "Other")
+    select_faces(other, lambda c: c[:, 2] > 0.3)
+    with bpy.context.temp_override(**select(bpy, ball, other)):
+        bpy.ops.object.mode_set(mode="EDIT")
+        assert len(bpy.context.objects_in_mode) == 2
+        with pytest.raises(RuntimeError, match="2 meshes are in Edit Mode: Fit Surface fits the "
+                                               "selected faces of one mesh at a time"):
+            bpy.ops.tcb.fit_surface(tolerance=3e-3, resolution=16)
+        bpy.ops.object.mode_set(mode="OBJECT")
+    assert len(surfaces(bpy)) == 1
+
+
+def test_a_part_of_a_mesh_with_modifiers_and_all_faces_selected(clean_scene):
+    """A part is read from the mesh's own faces, without its modifiers: Refine of it works,
+    and after an edit says what changed (it had blamed the modifiers: review). All faces of a
+    mesh without modifiers are the whole object: its result is replaced, not doubled."""
+    bpy = clean_scene
+    ball = sphere(bpy)
+    ball.modifiers.new("Subdivision", "SUBSURF")
+    select_faces(ball, lambda c: c[:, 2] > 0.3)
+    assert edit_fit(bpy, ball) == {"FINISHED"}
+    part = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, part)):
+        assert bpy.ops.tcb.refine(tolerance=2e-3) == {"FINISHED"}
+    top = int(np.argmax([v.co.z for v in ball.data.vertices]))
+    ball.data.vertices[top].co.z += 0.05
+    ball.data.update()
+    with bpy.context.temp_override(**select(bpy, part)):
+        with pytest.raises(RuntimeError, match=r"'Ball' changed since 'Ball TCB Surface' was "
+                                               r"fitted \(other coordinates"):
+            bpy.ops.tcb.refine()
+
+    verts, faces = grid(12, f=lambda x, y: 0.2 * x * y)
+    scan = add_mesh(bpy, "Sheet", verts, faces)
+    with bpy.context.temp_override(**select(bpy, scan)):
+        assert bpy.ops.tcb.fit_surface(tolerance=3e-3, resolution=16) == {"FINISHED"}
+    first = bpy.context.view_layer.objects.active.name
+    select_faces(scan, lambda c: np.ones(len(c), bool))
+    assert edit_fit(bpy, scan, tolerance=2e-3) == {"FINISHED"}
+    assert bpy.context.view_layer.objects.active.name == first
+    assert "tcb_source_part" not in bpy.context.view_layer.objects.active
+    assert sum(o.tcb.role == "SURFACE" and o.tcb.sources[0].object == scan
+               for o in bpy.data.objects) == 1
+
+
+def test_each_triangle_read_is_of_its_polygon_after_n_gons_are_cut_again(clean_scene):
+    """read_triangles(polygons=True) on Suzanne after Limited Dissolve (n-gons whose
+    diagonals are cut again, _untangle_diagonals, which reorders the triangles): every
+    triangle's corners are corners of the polygon it is given, so a part's faces are the
+    selected polygons' (review)."""
+    import sys
+
+    bpy = clean_scene
+    bridge = sys.modules["bl_ext.user_default.tcb_surface.tcb_addon.bridge"]
+    bpy.ops.mesh.primitive_monkey_add()
+    monkey = bpy.context.active_object
+    with bpy.context.temp_override(**select(bpy, monkey)):
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.mesh.select_all(action="SELECT")
+        bpy.ops.mesh.dissolve_limited(angle_limit=0.35)
+        bpy.ops.object.mode_set(mode="OBJECT")
+    mesh = monkey.data
+    assert max(len(p.vertices) for p in mesh.polygons) > 4
+    blender = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+    mesh.loop_triangles.foreach_get("vertices", blender)
+    tris, poly = bridge.read_triangles(mesh, monkey.matrix_world, polygons=True)
+    assert not np.array_equal(np.sort(blender.reshape(-1, 3), 1), np.sort(tris, 1))  # cut again
+    assert len(tris) == len(poly)
+    corners = [set(p.vertices) for p in mesh.polygons]
+    assert all(set(t) <= corners[p] for t, p in zip(tris.tolist(), poly.tolist()))
+    # a part: the triangles of its polygons, on their vertices only
+    mask = np.array([p.center.x > 0.1 for p in mesh.polygons])
+    data = bridge.read_part(monkey, "FACES", mask)
+    used = np.unique(tris[mask[poly]])
+    assert len(data.points) == len(used) and len(data.faces) == int(mask[poly].sum())
+    co = np.array([mesh.vertices[i].co for i in used])
+    assert np.allclose(data.points, co, atol=1e-6)

@@ -2,6 +2,7 @@
 meshes, local control, files, cancellation and bad input."""
 
 import io
+import json
 import re
 import sys
 import warnings
@@ -779,6 +780,27 @@ def test_load_refuses_damaged_and_future_files(nefertiti, tmp_path):
     np.savez(future, **arrays)
     with pytest.raises(FileFormatError, match="newer"):
         TCBSurface.load(future)
+    # entries that load but fail at first use (Blender's Import Spline had made half a result
+    # and shown a traceback: user test), a folder, and a DEM grid given for a spline
+    report = json.loads(str(arrays["report"]))
+    options = json.loads(str(arrays["options"]))
+    for name, change, words in (
+            ("report", dict(report, rms="abc"), "report's 'rms' is 'abc'"),
+            ("report", dict(report, edited=1.5), "report's 'edited' is 1.5"),
+            ("options", dict(options, tolerance="x"), "tolerance must be a nonnegative number"),
+            ("triangles_1", None, "its triangles_1 are no indices of its knots")):
+        damaged = dict(arrays, format_version=np.array(FORMAT_VERSION))
+        damaged[name] = (np.array(json.dumps(change)) if change is not None
+                         else damaged[name] + len(damaged["knots"]))
+        path = tmp_path / "damaged.npz"
+        np.savez(path, **damaged)
+        with pytest.raises(FileFormatError, match=re.escape(words)):
+            TCBSurface.load(path)
+    with pytest.raises(FileFormatError, match="is a folder: give the name of a .npz file"):
+        TCBSurface.load(tmp_path)
+    np.savez(tmp_path / "dem.npz", elevation=np.zeros((3, 3)))
+    with pytest.raises(FileFormatError, match=r"is a DEM grid \('elevation'\), not a TCB "):
+        TCBSurface.load(tmp_path / "dem.npz")
 
 
 def test_callback_sees_every_iteration_and_can_cancel():
