@@ -104,6 +104,14 @@ TESSELLATION_SPLITS = 4
 # machine, /tmp/s34/sag_check.py), so 512 is left to Re-tessellate (Blender's warning says so)
 AUTO_RESOLUTIONS = (64, 128, 256)
 AUTO_RESOLUTION_FLOOR = 1e-6  # ... and a mesh within this share of the diagonal is taken
+# auto_resolution measures the edges of every SAG_SAMPLE_STRIDE-th triangle of a candidate it
+# may pass over first (an eighth of the evaluations of its whole sag: as many vertices as
+# midpoints): one of them beyond the target rejects it, the rest unmeasured. On three_peaks,
+# nefertiti and patch-01 (default tolerance and 3e-4) and two clouds, the candidates passed
+# over strayed on 0.07-10% of their edges, and the sample rejected each, but for three_peaks'
+# and nefertiti's 64 at the default (2 and 1 edges: the rest measured too; /tmp/h97_work/
+# analyze.py and count.py of the 97th helper)
+SAG_SAMPLE_STRIDE = 24
 
 
 def sag_target(report) -> float:
@@ -227,6 +235,10 @@ class TCBSurface:
         self._tess_cache: dict = {}  # resolution -> (uv, triangles), most recent last
         self._domain_cache = None  # the convex domain polygon prepared for closest points
         self._sag_cache: dict = {}  # resolution -> tessellation_sag (the surface is immutable)
+        # resolution -> the spline at tessellation_uv's vertices, from auto_resolution's sag of
+        # the one it chose, handed over to the next tessellate of it: one entry at most, 24
+        # bytes per vertex beside the 64 of its tessellation_uv (2.4 MB at 256 on three_peaks)
+        self._sag_values: dict = {}
 
     def __getstate__(self) -> dict:
         """Pickle/copy state: everything but the caches (rebuilt on demand)."""
@@ -234,6 +246,7 @@ class TCBSurface:
         state["_tess_cache"] = {}
         state["_domain_cache"] = None
         state["_sag_cache"] = {}
+        state["_sag_values"] = {}
         return state
 
     def __setstate__(self, state: dict) -> None:
@@ -241,6 +254,7 @@ class TCBSurface:
         self._tess_cache = {}
         self._domain_cache = None
         self._sag_cache = {}
+        self._sag_values = {}
 
     # ---- read-only state ----------------------------------------------------------------
     space = property(lambda self: self._space)
@@ -572,8 +586,18 @@ class TCBSurface:
         comes (``SplineSpace.combine``: no sparse matrix of all of them, tens of entries per
         vertex; about the time of ``self(uv)``, and its values to rounding);
         ``callback({"points_done": k, "points": V})`` hears of each chunk and may return True
-        to stop (CancelledError); before them, the grid's steps (:meth:`tessellation_uv`)."""
+        to stop (CancelledError); before them, the grid's steps (:meth:`tessellation_uv`).
+        Right after :meth:`auto_resolution` chose this resolution, the vertices are those its
+        sag evaluated (the same bits: a point's value does not depend on the points evaluated
+        with it), handed over once, and the callback hears of all of them at once."""
         uv, faces = self.tessellation_uv(resolution, callback)
+        key = int(resolution) if isinstance(resolution, (int, np.integer)) else None
+        kept = self._sag_values.get(key)
+        if kept is not None and len(kept) == len(uv):
+            if callback is not None and callback({"points_done": len(uv), "points": len(uv)}):
+                raise CancelledError("the tessellation was cancelled")
+            self._sag_values.pop(key, None)  # (handed over: not kept twice)
+            return kept, faces.copy()
         return self._points(uv, callback)[0], faces.copy()
 
     def tessellate_with_matrix(self, resolution: int = 64, callback=None
@@ -597,15 +621,37 @@ class TCBSurface:
         points, max 8.8e-4 of the diagonal) strayed 7.9e-3 from the spline (256: 8.1e-4),
         nefertiti's at 1e-3 6.6e-3 against the fit's 6.2e-3 (128: 2.2e-3;
         benchmarks/tessellation_sag.py); a user measured the mesh, not the spline (user
-        test)."""
+        test).
+
+        A candidate before the last is rejected as soon as a sample of its edges (those of every
+        SAG_SAMPLE_STRIDE-th triangle) strays by more than ``target``: the same choice, and the
+        same sag of the one chosen, with an eighth of the evaluations of the whole sag of each
+        candidate passed over (its :meth:`tessellation_sag` is measured whole when asked for).
+        When the finest strays, the sag at half of it is measured too (see below). The spline
+        at the chosen mesh's vertices is kept for the next :meth:`tessellate` of it. Points
+        evaluated on three_peaks fitted to 3e-4 (256, straying): 415 000 against 523 000, and
+        none more for its tessellate (100 000 before); seconds in docs/benchmarks.md."""
         if target is None:
             target = sag_target(self._report)
         candidates = AUTO_RESOLUTIONS if least is None else (
             [int(least)] + [r for r in AUTO_RESOLUTIONS if r > least])
-        for resolution in candidates:
-            sag = self.tessellation_sag(resolution)
+        points = None
+        for k, resolution in enumerate(candidates):
+            last = k == len(candidates) - 1
+            sag, points = self._sag_above(resolution, None if last else target, keep=True,
+                                          points=last)
             if not sag > target:  # (NaN target or sag: the first)
                 break
+        half = resolution // 2
+        if sag > target and half in candidates and half not in self._sag_cache:
+            # the finest strays: the command line and Blender advise a finer resolution from
+            # the sag at half of it (finer_resolution), measured here (Blender: on the fit's
+            # thread, as when every candidate was measured whole), taking the finest's values
+            # where the parameters are the same bits: three_peaks at 3e-4 evaluated 1 803 of
+            # the 100 046 at 128, nefertiti 1 357 of 47 404 (128's vertices and midpoints are
+            # 256's midpoints and vertices); patch-01 and a cloud, whose grids do not nest to
+            # the bit, 55 823 of 56 545 and 59 331 of 63 457
+            self._sag_cache[half] = self._sag(half, known=points)[0]
         return resolution, sag
 
     def tessellation_sag(self, resolution: int = 64) -> float:
@@ -618,28 +664,80 @@ class TCBSurface:
         at 256 where all edges have 1.07e-3, at a spot of a few triangles (review). About two
         evaluations per triangle (see AUTO_RESOLUTIONS for seconds). NaN when no edge has both
         ends on the domain. Kept per resolution (the surface does not change)."""
+        return self._sag_above(resolution)[0]
+
+    def _sag_above(self, resolution, above: float | None = None, keep: bool = False,
+                   points: bool = False) -> tuple[float, tuple | None]:
+        """:meth:`tessellation_sag`, kept per resolution; with ``above``, possibly only a lower
+        bound of it that exceeds ``above`` (not kept), see :meth:`_sag`. ``keep``: the spline
+        at the vertices, when measured, replaces those kept for :meth:`tessellate`. With
+        ``points``, also the parameters evaluated and the values there (None if kept)."""
         key = int(resolution) if isinstance(resolution, (int, np.integer)) else None
         if key is not None and key in self._sag_cache:
-            return self._sag_cache[key]
-        sag = self._sag(resolution)
-        if key is not None:
+            return self._sag_cache[key], None
+        sag, vertex, evaluated = self._sag(resolution, above, points=points)
+        if vertex is not None and key is not None:
             self._sag_cache[key] = sag
-        return sag
+            if keep:  # (one resolution's at most)
+                self._sag_values = {key: vertex}
+        return sag, evaluated
 
-    def _sag(self, resolution) -> float:
-        """:meth:`tessellation_sag`, computed."""
+    def _sag(self, resolution, above: float | None = None, known: tuple | None = None,
+             points: bool = False) -> tuple[float, np.ndarray | None, tuple | None]:
+        """:meth:`tessellation_sag`, computed, the spline at the vertices of
+        :meth:`tessellation_uv` (None if not all measured), and with ``points`` the parameters
+        evaluated and the values there (else None). With ``above``, the edges of every
+        SAG_SAMPLE_STRIDE-th triangle first: if one of them strays by more than ``above``, the
+        largest of their gaps (at most the sag) and None, the other edges not measured.
+        ``known``: parameters and values evaluated already, taken where a parameter is the
+        same bits (:func:`_same_rows`). A point's value is the same bits whichever points it is
+        evaluated with (``SplineSpace.combine`` sums each point's pairs in one order), so the
+        sag of the sample and the rest, or with values known, is the one pass's, bit for
+        bit."""
         uv, tri = self.tessellation_uv(resolution)
         if len(tri) == 0:
-            return float("nan")
-        e = np.sort(np.stack([tri, np.roll(tri, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
-        key = np.unique(e[:, 0].astype(np.int64) * len(uv) + e[:, 1])
-        a, b = key // len(uv), key % len(uv)
-        used = np.unique(tri)
-        values = self._points(np.vstack([uv[used], 0.5 * (uv[a] + uv[b])]))[0]
-        vertex = np.full((len(uv), 3), np.nan)
-        vertex[used] = values[: len(used)]
-        gap = np.linalg.norm(values[len(used):] - 0.5 * (vertex[a] + vertex[b]), axis=1)
-        return float(np.nanmax(gap)) if np.isfinite(gap).any() else float("nan")
+            return float("nan"), None, None
+        n = len(uv)  # (every vertex is on a triangle: tessellation_uv keeps only those)
+
+        def edge_keys(t):  # a * n + b for each edge (a, b), a < b, sorted, once each
+            e = np.sort(np.stack([t, np.roll(t, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+            return np.unique(e[:, 0].astype(np.int64) * n + e[:, 1])
+
+        key = edge_keys(tri)
+        vertex = np.empty((n, 3))
+        todo_vertex = np.ones(n, dtype=bool)
+        todo_edge = np.ones(len(key), dtype=bool)
+        gaps, evaluated = [], []
+
+        def measure(verts, edges):  # the gaps at ``edges`` (indices into key), ``verts`` new
+            a, b = key[edges] // n, key[edges] % n
+            x = np.vstack([uv[verts], 0.5 * (uv[a] + uv[b])])
+            if known is None:
+                values = self._points(x)[0]
+            else:
+                at = _same_rows(known[0], x)
+                values = np.empty((len(x), 3))
+                values[at >= 0] = known[1][at[at >= 0]]
+                values[at < 0] = self._points(x[at < 0])[0]
+            if points:
+                evaluated.append((x, values))
+            vertex[verts] = values[: len(verts)]
+            todo_vertex[verts] = False
+            todo_edge[edges] = False
+            gaps.append(np.linalg.norm(values[len(verts):] - 0.5 * (vertex[a] + vertex[b]),
+                                       axis=1))
+
+        if above is not None and above == above and len(tri) > SAG_SAMPLE_STRIDE:
+            sample = tri[::SAG_SAMPLE_STRIDE]
+            measure(np.unique(sample), np.searchsorted(key, edge_keys(sample)))
+            if np.isfinite(gaps[0]).any() and np.nanmax(gaps[0]) > above:
+                return float(np.nanmax(gaps[0])), None, None
+        measure(np.flatnonzero(todo_vertex), np.flatnonzero(todo_edge))
+        gap = np.concatenate(gaps)
+        sag = float(np.nanmax(gap)) if np.isfinite(gap).any() else float("nan")
+        if not points:
+            return sag, vertex, None
+        return sag, vertex, tuple(np.concatenate(c) for c in zip(*evaluated))
 
     def _points(self, uv, callback=None, matrix: bool = False):
         """``self(uv)`` (m, 3), to rounding, by chunks with ``callback`` (see tessellate), and
@@ -1920,6 +2018,22 @@ def _lattice(deep: np.ndarray, number: np.ndarray, origin, d: float):
         return out
 
     return cells.astype(np.intp), rest.astype(np.intp), in_cells if len(cells) else None
+
+
+def _same_rows(known: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """For each row of ``x`` (m, 2) the index of a row of ``known`` (k, 2) with the same bits,
+    -1 where there is none (float64 parameters: a hash of both words, sorted and looked up,
+    then the bits compared)."""
+    kb = np.ascontiguousarray(known, dtype=np.float64).view(np.int64)
+    xb = np.ascontiguousarray(x, dtype=np.float64).view(np.int64)
+    if not len(kb) or not len(xb):
+        return np.full(len(xb), -1)
+    mix = np.int64(-7046029254386353131)  # (0x9E3779B97F4A7C15: products wrap around)
+    hk, hx = kb[:, 0] * mix + kb[:, 1], xb[:, 0] * mix + xb[:, 1]
+    order = np.argsort(hk)
+    pos = np.minimum(np.searchsorted(hk[order], hx), len(hk) - 1)
+    at = order[pos]
+    return np.where((kb[at] == xb).all(axis=1), at, -1)
 
 
 def _split_edges(uv: np.ndarray, tri: np.ndarray, marked) -> tuple[np.ndarray, np.ndarray,

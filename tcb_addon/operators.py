@@ -428,7 +428,9 @@ def resolution_note(surf) -> str | None:
     target = _core().surface.sag_target(surf.report)
     if not sag > target:
         return None
-    finer = _core().surface.finer_resolution(  # (the sag at half: kept by Auto Resolution)
+    # (the sag at half: kept by Auto Resolution, or measured whole now if it passed over it
+    # on a sample)
+    finer = _core().surface.finer_resolution(
         resolution, sag, target, surf.tessellation_sag(resolution // 2) if resolution >= 4
         else None)
     return (f"the surface mesh (Resolution {resolution}, the finest Auto Resolution takes) "

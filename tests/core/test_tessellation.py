@@ -190,6 +190,82 @@ def test_the_tessellation_sag_falls_with_the_resolution_and_auto_resolution_meet
     assert 0.7 * sags[0] <= probe <= 1.4 * sags[0]
 
 
+def test_auto_resolution_rejects_on_a_sample_and_hands_its_vertices_to_tessellate(nefertiti_fit,
+                                                                                   monkeypatch):
+    """auto_resolution passes over a candidate as soon as the edges of every
+    SAG_SAMPLE_STRIDE-th triangle stray by more than the target, measures the rest only when
+    none does, and keeps the spline at the chosen mesh's vertices for the next tessellate: the
+    same resolution, the same sag (bits), the same mesh as a fresh copy of the surface that
+    measures every candidate's whole sag in one pass and evaluates its mesh anew; a candidate
+    passed over has its whole sag when asked for. When the finest strays, the sag at half of
+    it (the advice's) is measured too, from the finest's values where the parameters are the
+    same (nefertiti: all but a few percent of 128's)."""
+    import core.surface
+    from core.surface import AUTO_RESOLUTIONS
+
+    data = nefertiti_fit.to_bytes()
+
+    def fresh():
+        return type(nefertiti_fit).from_bytes(data)
+
+    ref = fresh()
+    full = {r: ref.tessellation_sag(r) for r in AUTO_RESOLUTIONS}  # (one pass each)
+    assert full[64] > full[128] > full[256] > 0
+    # 64 within; 64 out by a few edges (the sample misses them: the rest measured too); 64 and
+    # 128 out by many (rejected on their samples); all out (the finest, whole)
+    mesh = {}  # resolution -> a fresh copy's tessellate
+    targets = {1.01 * full[64]: {64}, 0.99 * full[64]: {64, 128}, 0.5 * full[128]: {256},
+               0.5 * full[256]: {128, 256}}  # -> the resolutions whose whole sag was measured
+    assert full[256] < 0.5 * full[128]  # (the third: 256 within)
+    for target, whole in targets.items():
+        surf = fresh()
+        evaluated = []
+        points = surf._points
+        surf._points = lambda *a, **k: evaluated.append(len(a[0])) or points(*a, **k)
+        resolution, sag = surf.auto_resolution(target)
+        if 128 in whole and 64 not in whole:  # (128 after 256, from its values)
+            vertices = len(surf.tessellation_uv(128)[0])  # (about 4x as many points: + edges)
+            assert evaluated[-1] < 0.1 * 4 * vertices, evaluated
+            assert sag == full[256] and surf._sag_cache[128] == full[128]
+        assert resolution == next((r for r in AUTO_RESOLUTIONS if not full[r] > target),
+                                  AUTO_RESOLUTIONS[-1])
+        assert sag == full[resolution]  # (bit for bit)
+        assert set(surf._sag_cache) == whole
+        evaluated.clear()
+        verts, faces = surf.tessellate(resolution)
+        assert evaluated == [] and verts.flags.writeable  # (handed over: not evaluated again)
+        if resolution not in mesh:
+            mesh[resolution] = fresh().tessellate(resolution)
+        again, faces2 = mesh[resolution]
+        np.testing.assert_array_equal(verts, again)
+        np.testing.assert_array_equal(faces, faces2)
+        verts2, _ = surf.tessellate(resolution)  # (once: then evaluated as before)
+        assert evaluated == [len(verts)] and verts2 is not verts
+        np.testing.assert_array_equal(verts2, again)
+        for r in AUTO_RESOLUTIONS:  # (passed over on a sample: measured whole when asked)
+            assert surf.tessellation_sag(r) == full[r]
+    # a sample and then the rest give the one pass's sag and vertices, bit for bit; above a
+    # target the sample's largest gap, at most the sag
+    sag, vertex, _ = fresh()._sag(256, above=np.inf)
+    assert sag == full[256]
+    np.testing.assert_array_equal(vertex, mesh[256][0])
+    bound, none, _ = fresh()._sag(128, above=0.0)
+    assert none is None and 0.0 < bound <= full[128]
+    surf = fresh()
+    for stride in (1, 2, 3):  # (samples of all, half and a third of the triangles)
+        monkeypatch.setattr(core.surface, "SAG_SAMPLE_STRIDE", stride)
+        assert surf._sag(64, above=np.inf)[0] == full[64]
+    # the parameters looked up by their bits: found wherever they are, -0.0 is not 0.0
+    known = np.random.default_rng(2).random((1000, 2))
+    known[7] = (0.0, 0.5)
+    # (and a row of the same hash as known[0], u one bit up and v down by the multiplier)
+    bits = known[:1].view(np.int64) + np.array([[1, 7046029254386353131]])
+    x = np.vstack([known[::-3], [[-0.0, 0.5], [0.25, 2.0]], np.nextafter(known[:1], 2.0),
+                   bits.view(np.float64)])
+    np.testing.assert_array_equal(core.surface._same_rows(known, x),
+                                  np.r_[np.arange(999, -1, -3), -1, -1, -1, -1])
+
+
 def test_finer_resolution_follows_the_measured_fall_of_the_sag():
     """core.surface.finer_resolution: doublings until the sag meets the target when it falls
     by the measured ratio per doubling (the sag at half the resolution over the sag), taken
