@@ -87,6 +87,20 @@ def move_net_vertex(bpy, net, j, offset):
     return p
 
 
+def delete_first(mesh, what: str = "faces") -> None:
+    """Delete the first of ``mesh``'s ``what`` ("faces": the face alone; "verts": the vertex
+    and what uses it), through bmesh, as an edit in Edit Mode would."""
+    import bmesh
+
+    bm = bmesh.new()
+    bm.from_mesh(mesh)
+    elems = getattr(bm, what)
+    elems.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[elems[0]], context="FACES_ONLY" if what == "faces" else "VERTS")
+    bm.to_mesh(mesh)
+    bm.free()
+
+
 def fit(bpy, *objs, **props):
     """Fit Surface on exactly ``objs`` (tolerance 2e-3, 400 control points, resolution 24
     unless given)."""

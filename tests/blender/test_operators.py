@@ -16,8 +16,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from scenes import (  # noqa: E402
-    ADDON, add_mesh, core_module, failing_fit, fit, grid, move_net_vertex, positions, select,
-    spline_of,
+    ADDON, add_mesh, core_module, delete_first, failing_fit, fit, grid, move_net_vertex,
+    positions, select, spline_of,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -747,14 +747,7 @@ def test_a_net_with_a_deleted_vertex_is_named_when_its_edits_are_ignored(clean_s
     surface = bpy.context.view_layer.objects.active
     net = surface.tcb.net
     n = surface.tcb.control_points
-    import bmesh
-
-    bm = bmesh.new()
-    bm.from_mesh(net.data)
-    bm.verts.ensure_lookup_table()
-    bmesh.ops.delete(bm, geom=[bm.verts[0]], context="VERTS")
-    bm.to_mesh(net.data)
-    bm.free()
+    delete_first(net.data, "verts")
     with bpy.context.temp_override(**select(bpy, surface)):
         capfd.readouterr()
         assert bpy.ops.tcb.retessellate() == {"FINISHED"}

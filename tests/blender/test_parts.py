@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from scenes import add_mesh, grid, select, spline_of  # noqa: E402
+from scenes import add_mesh, delete_first, grid, select, spline_of  # noqa: E402
 
 from test_operators import draw_panels, snapshot  # noqa: E402
 
@@ -111,14 +111,7 @@ def test_the_selected_faces_of_a_closed_scan_are_fitted_refined_and_mapped(clean
     assert other.name != first and spline_of(other)(np.zeros((1, 2)))[0, 2] < 0
 
     # the mesh edited since: Refine says what changed
-    import bmesh
-
-    bm = bmesh.new()
-    bm.from_mesh(ball.data)
-    bm.faces.ensure_lookup_table()
-    bmesh.ops.delete(bm, geom=[bm.faces[0]], context="FACES_ONLY")
-    bm.to_mesh(ball.data)
-    bm.free()
+    delete_first(ball.data, "faces")
     with bpy.context.temp_override(**select(bpy, other)):
         with pytest.raises(RuntimeError, match=r"'Ball' has \d+ faces now, \d+ when its "
                                                "selected faces were fitted"):
