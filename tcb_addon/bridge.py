@@ -176,9 +176,9 @@ QUAD_TIE_RTOL = 1e-2
 def _quads_by_shape(mesh, tris: np.ndarray, poly: np.ndarray, matrix=None,
                     positions=None) -> np.ndarray:
     """``tris`` (Blender's loop triangles, of the polygons ``poly``) with each quad's two
-    triangles replaced, in their places, by the cut of ``core.geometry.quad_triangles`` in world space: the shorter
-    diagonal, whatever corner the quad starts at (Blender cuts from its first corner unless
-    that is concave, so a 6 x 6 quad grid whose corners were turned had got 142-335 control
+    triangles replaced, in their places, by the cut of ``core.geometry.quad_triangles`` in
+    world space: the shorter diagonal, whatever corner the quad starts at (Blender cuts from
+    its first corner unless that is concave, so a 6 x 6 quad grid whose corners were turned had got 142-335 control
     points: review); of diagonals within QUAD_TIE_RTOL (a square), Blender's, from the first
     corner. World space: Apply Rotation & Scale leaves the cut as it was."""
     n_poly = len(mesh.polygons)

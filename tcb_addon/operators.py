@@ -917,24 +917,24 @@ class _EngineOperator:
 FITTED_KEY = "tcb_fitted_at"
 
 
-def previous_result(context, sources, linked: list | None = None, part: str = ""):
+def previous_result(context, sources, kept: list | None = None, part: str = ""):
     """The surface object of the view layer fitted to exactly the objects ``sources`` (the
     latest fitted when there are several), or None; and to the same ``part`` of them (faces
     selected in Edit Mode, ``bridge.part_text``; "" for all: a patch's result and the whole
     mesh's are two). (One in an excluded collection stays as it is: it cannot be made active;
-    so does one linked from another file, and one made by Import Spline: ``linked`` gets a
+    so does one linked from another file, and one made by Import Spline: ``kept`` gets a
     sentence for each.)"""
     want = sorted(o.as_pointer() for o in sources)
     found = [ob for ob in context.view_layer.objects
              if ob.tcb.role == "SURFACE" and ob.type == "MESH"
              and sorted(s.object.as_pointer() for s in ob.tcb.sources if s.object is not None)
              == want and len(ob.tcb.sources) == len(want) and ob.get(PART_KEY, "") == part]
-    if linked is not None:
-        linked += [f"'{ob.name}' is linked from another file and was kept: this result is a "
-                   "new one" for ob in found if linked_problem(ob, ob.tcb.net)]
-        linked += [f"'{ob.name}' was imported (Import Spline) and was kept: this result is a "
-                   "new one" for ob in found if ob.get(IMPORTED_KEY)
-                   and not linked_problem(ob, ob.tcb.net)]
+    if kept is not None:
+        kept += [f"'{ob.name}' is linked from another file and was kept: this result is a "
+                 "new one" for ob in found if linked_problem(ob, ob.tcb.net)]
+        kept += [f"'{ob.name}' was imported (Import Spline) and was kept: this result is a "
+                 "new one" for ob in found if ob.get(IMPORTED_KEY)
+                 and not linked_problem(ob, ob.tcb.net)]
     found = [ob for ob in found if not linked_problem(ob, ob.tcb.net)
              and not ob.get(IMPORTED_KEY)]
     if not found:
@@ -1892,11 +1892,11 @@ def _import_sources(context, surf, label: str):
             "clear the scan's rotation, Alt+R, or import it with Forward Y and Up Z)"
             if what.startswith("other coordinates") and (
                 surf.same_data_set(turned) or surf.fitted_to(turned, data.rounding)) else "")
-    then, now = len(surf.parameterization.uv), len(data.points)
-    if then < now and not axes:  # (a spline of selected faces: its .npz keeps no faces' list)
+    if len(surf.parameterization.uv) < len(data.points) and cloud == (data.faces is None):
+        # (a spline of selected faces: its .npz keeps no list of them; review)
         without = ("the result has no source object, which Refine and the Deviation Map need "
                    "(a spline fitted to a part of a scan, its selected faces, is not linked to "
-                   "the scan)") if cloud == (data.faces is None) else without
+                   "the scan)")
     return [], [f"{names} {'is' if len(data.sources) == 1 else 'are'} not the data '{label}' "
                 f"was fitted to ({what}){axes}: not taken as its source; {without}"]
 
@@ -1960,8 +1960,7 @@ class TCB_OT_import_spline(bpy.types.Operator, ImportHelper):
             resolution = chosen_resolution(surf, self.resolution) if auto else self.resolution
             with np.errstate(over="ignore", invalid="ignore"):
                 mesh = surf.tessellate(resolution)
-            if not (np.isfinite(mesh[0]).all() and np.isfinite(surf.control_points).all()
-                    and np.abs(mesh[0]).max(initial=0.0) < 1e30):
+            if not (np.isfinite(mesh[0]).all() and np.abs(mesh[0]).max(initial=0.0) < 1e30):
                 raise core.FileFormatError(f"{path} is damaged: its spline's points are not "
                                            "finite")
             opts = surf.options
