@@ -1280,24 +1280,38 @@ class TCBSurface:
     def same_data_set(self, points) -> bool:
         """Whether ``points`` are the values this surface was fitted to in any order, exactly
         (``report["data_set_digest"]``, :func:`data_set_digest`; False for files saved before
-        it). Cheap: a sort and a digest (:meth:`reordered` checks more)."""
+        it), or rounded to 32-bit floats as Blender keeps a file's values
+        (``report["data_set_digest32"]``, :func:`rounded_set_digest`: a spline fitted to a text
+        file's points and a scan imported from it and sorted had been refused; user test).
+        Cheap: a sort and a digest (:meth:`reordered` checks more)."""
         key = self._report.get("data_set_digest")
+        key32 = self._report.get("data_set_digest32")
         points = np.asarray(points, dtype=np.float64)
-        return bool(key is not None and points.ndim == 2 and len(points) == len(self._param.uv)
-                    and data_set_digest(points) == key)
+        if not (points.ndim == 2 and len(points) == len(self._param.uv)):
+            return False
+        return bool(key is not None and data_set_digest(points) == key
+                    or key32 is not None and rounded_set_digest(points) == key32)
 
     def same_faces(self, faces, points=None) -> bool:
         """Whether ``faces`` are the faces this surface was fitted to: the same rows in the
         same order (``report["faces_digest"]``; True for surfaces that keep none: point
         clouds, files saved before it) or, with ``points`` (the data, in the order the faces
         index) and for a surface that keeps ``report["faces_set_digest"]``, the same faces in
-        any order, a triangle's corners also turned (:func:`faces_set_digest`)."""
+        any order, a triangle's corners also turned (:func:`faces_set_digest`; also on the
+        points rounded to 32-bit floats, :func:`rounded_faces_digest`)."""
         stored = self._report.get("faces_digest")
         if stored is None or faces_digest(faces) == stored:
             return True
+        return points is not None and self._same_face_set(faces, points)
+
+    def _same_face_set(self, faces, points) -> bool:
+        """``faces`` on ``points`` are the fit's faces as a set (:func:`faces_set_digest`), or
+        on the points rounded to 32-bit floats (:func:`rounded_faces_digest`)."""
         key = self._report.get("faces_set_digest")
-        return bool(key is not None and points is not None
-                    and faces_set_digest(faces, points) == key)
+        key32 = self._report.get("faces_set_digest32")
+        return bool(key is not None and faces_set_digest(faces, points) == key
+                    or key32 is not None
+                    and rounded_faces_digest(faces, points, checked=True) == key32)
 
     def reordered(self, points, faces=None) -> Parameterization | None:
         """The parameterization of ``points`` (and ``faces``) when they are the data this
@@ -1315,7 +1329,8 @@ class TCBSurface:
         parameters and of the domain polygon, sorted, within :data:`REORDERED_UV_TOL` (else
         None). Parameters that were stored in 32-bit floats (a compact file) are rounded so
         too. Files saved before the set digests take no other order; values both reordered
-        and rounded are not found. Costs a parameterization (1e5 points: a cloud 0.4 s, a
+        and rounded are found when rounded to 32-bit floats (Blender's), by surfaces fitted
+        since the thirty-seventh session. Costs a parameterization (1e5 points: a cloud 0.4 s, a
         grid mesh 3.7 s; docs/benchmarks.md)."""
         return self._reordered(points, faces)[0]
 
@@ -1333,7 +1348,7 @@ class TCBSurface:
             if faces is None:
                 return None, "no faces"
             # (the set digest, even when the faces are the fit's rows: on other points)
-            if faces_set_digest(faces, points) != self._report.get("faces_set_digest", ""):
+            if not self._same_face_set(faces, points):
                 return None, "faces"
             # (spike vertices dissolved by drop_outliers: again, else refused)
             tries = [dict(fill_holes=bool(self._report.get("holes_filled", 0)),
@@ -1405,7 +1420,8 @@ class TCBSurface:
                 old = ("another order, which a surface saved before it kept a digest of its "
                        "data as a set does not take"
                        if self._report.get("data_set_digest") is None
-                       else "values both reordered and rounded")
+                       else "values both reordered and rounded, other than to 32-bit "
+                       "floats")
                 raise InvalidInputError(
                     f"refine() needs the {len(points)} points this surface was fitted to, in "
                     f"the same order; these differ from them (other values, by more than "
@@ -1433,10 +1449,13 @@ class TCBSurface:
         check_callback(callback)
         # the digests of the faces given (kept from now: a file saved before the set digest
         # gets it), else the fit's
-        keys = (self._report.get("faces_digest"), self._report.get("faces_set_digest"))
+        keys = (self._report.get("faces_digest"), self._report.get("faces_set_digest"),
+                self._report.get("faces_set_digest32"))
         if faces is not None and keys[0] is not None:
-            keys = (faces_digest(faces), faces_set_digest(faces, points))
+            keys = (faces_digest(faces), faces_set_digest(faces, points),
+                    rounded_faces_digest(faces, points))
         return _run(points, param, options, callback, faces_key=keys[0], faces_set_key=keys[1],
+                    faces_set_key32=keys[2],
                     start=self.knots[: self._n_interior], rings=self.knots[self._n_interior:],
                     history=self._report.get("history", []), start_degree=self.degree,
                     projection_given=bool(self._report.get("projection_given")))
@@ -1874,6 +1893,86 @@ def faces_set_digest(faces, points) -> str | None:
         lab = lab[np.lexsort(lab.T[::-1])]
     lab = np.ascontiguousarray(lab)
     return hashlib.blake2b(str(lab.shape).encode() + lab.tobytes(), digest_size=16).hexdigest()
+
+
+def _row_hashes(values: np.ndarray) -> np.ndarray:
+    """Two 64-bit hashes (n, 2) uint64 of each row of the float64 ``values`` (n, d): its words
+    (-0.0 as 0.0) mixed in turn by splitmix64's finalizer, from two seeds."""
+    v = np.ascontiguousarray(np.asarray(values, dtype=np.float64) + 0.0)
+    words = v.reshape(len(v), -1).view(np.uint64)
+    out = np.empty((len(v), 2), dtype=np.uint64)
+    for lane, seed in enumerate((0x9E3779B97F4A7C15, 0xD1B54A32D192ED03)):
+        h = np.full(len(v), seed, dtype=np.uint64)
+        for j in range(words.shape[1]):
+            h = _mix64(h ^ words[:, j])
+        out[:, lane] = h
+    return out
+
+
+def _mix64(h: np.ndarray) -> np.ndarray:
+    """splitmix64's finalizer on uint64 values (wrapping products)."""
+    h = (h ^ (h >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    h = (h ^ (h >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return h ^ (h >> np.uint64(31))
+
+
+def _multiset_text(hashes: np.ndarray) -> str:
+    """The sums (mod 2^64) of both lanes of ``hashes`` (n, 2) and n: one text for the same rows
+    in any order."""
+    total = hashes.sum(axis=0, dtype=np.uint64)
+    return f"{len(hashes)}:{int(total[0]):016x}{int(total[1]):016x}"
+
+
+def _rounded(points) -> np.ndarray:
+    """``points`` rounded to 32-bit floats, as float64 (what Blender keeps of them)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.asarray(points, dtype=np.float64).astype(np.float32).astype(np.float64)
+
+
+def rounded_set_digest(points) -> str:
+    """A digest of ``points`` (n, d) rounded to 32-bit floats, as a multiset of rows: the sums
+    of two 64-bit hashes of each row (:func:`_row_hashes`), so that the same values in any
+    order, before or after Blender's rounding of a file's 64-bit values, have the same one;
+    ``report["data_set_digest32"]``. Linear, no sort: 1e6 points in about 0.1 s (a sort
+    digest of them, :func:`data_set_digest`, took 0.9 s)."""
+    return _multiset_text(_row_hashes(_rounded(points)))
+
+
+def _float32_values(points) -> bool:
+    """Whether ``points`` are 32-bit float values (Blender's: their rounded digests are the
+    exact ones)."""
+    p = np.asarray(points, dtype=np.float64)
+    return bool(np.array_equal(_rounded(p), p, equal_nan=True))
+
+
+def rounded_faces_digest(faces, points, checked: bool = False) -> str | None:
+    """A digest of ``faces`` (f, k) on ``points`` rounded to 32-bit floats as a multiset of
+    polygons of vertex positions: each polygon hashed from its corners' row hashes from the
+    corner of least hash on (a reversed winding is another face), the sums over polygons
+    (``report["faces_set_digest32"]``; the rounded twin of :func:`faces_set_digest`; 2e6
+    triangles in 0.5-1 s). None when the faces are no integer (f, k) array of indices into
+    ``points``, and (unless ``checked``: a comparison) when the points are 32-bit values,
+    whose exact digest is the one to keep."""
+    f = _int_faces(faces)
+    n = len(points)
+    if f is None or f.ndim != 2 or (f.size and (f.min() < 0 or f.max() >= n)):
+        return None
+    if not checked and _float32_values(points):
+        return None
+    corner = _row_hashes(_rounded(points))[f]  # (f, k, 2)
+    k = f.shape[1]
+    out = np.zeros((len(f), 2), dtype=np.uint64)
+    if k and len(f):
+        # each polygon from its corner of least hash on: the same for its corners turned
+        start = np.argmin(corner[:, :, 0], axis=1)
+        corner = np.take_along_axis(corner, ((start[:, None] + np.arange(k)) % k)[..., None],
+                                    axis=1)
+        for lane in range(2):
+            h = np.full(len(f), 0x2545F4914F6CDD1D + lane, dtype=np.uint64)
+            for c in range(k):
+                h = _mix64(h ^ corner[:, c, lane])
+            out[:, lane] = h
+    return _multiset_text(out)
 
 
 def data_set_digest(points: np.ndarray) -> str:
@@ -2445,11 +2544,12 @@ TESSELLATION_JITTER = 1e-7
 
 def _run(points, param, options, callback, start=None, rings=None, history=(), checked=False,
          start_degree=None, faces_key=None, spikes=False, faces_set_key=None,
-         projection_given=False):
+         projection_given=False, faces_set_key32=None):
     """Fit ``points`` over ``param``; ``checked``: ``parameterize_points`` has just accepted
     these very points (a cloud), so :func:`normalize` need not check them again.
-    ``faces_key``, ``faces_set_key``: the digests of the given faces (:func:`faces_digest`,
-    :func:`faces_set_digest`) that the report keeps. ``projection_given``: the cloud was
+    ``faces_key``, ``faces_set_key``, ``faces_set_key32``: the digests of the given faces
+    (:func:`faces_digest`, :func:`faces_set_digest`, :func:`rounded_faces_digest`) that the
+    report keeps. ``projection_given``: the cloud was
     projected along a direction the user gave (``report["projection_given"]``)."""
     t0 = time.perf_counter()
     used = np.asarray(param.used, dtype=bool)
@@ -2626,6 +2726,12 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         report["faces_digest"] = faces_key
     if faces_set_key is not None:  # (or the same stored in another order: faces_set_digest)
         report["faces_set_digest"] = faces_set_key
+    # ... or in another order and rounded to 32-bit floats, as Blender keeps a file's values
+    # (not for 32-bit values: the digests above are theirs)
+    if faces_set_key32 is not None:
+        report["faces_set_digest32"] = faces_set_key32
+    if not _float32_values(points):
+        report["data_set_digest32"] = rounded_set_digest(points)
     if param.faces is not None:  # (the map is of the canonical winding: reordered() maps a
         report["canonical_winding"] = True  # file's without it as its faces were given)
     if noise is not None:  # a mesh's noise (local_noise), in the user's units (a cloud's: below)
@@ -3170,6 +3276,7 @@ def fit_surface(
     return _run(points, param, options, callback, checked=faces is None,
                 faces_key=None if faces is None else faces_digest(faces),
                 faces_set_key=None if faces is None else faces_set_digest(faces, points),
+                faces_set_key32=None if faces is None else rounded_faces_digest(faces, points),
                 spikes=faces is None and not drop_outliers,
                 projection_given=faces is None and projection is not None)
 

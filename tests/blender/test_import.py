@@ -227,12 +227,23 @@ def test_the_command_line_s_spline_of_a_scan_file_links_to_blender_s_import_of_i
     assert cli.main(["fit", str(tmp_path / "scan.ply"), "-o", str(tmp_path / "s.obj"),
                           "--spline", str(tmp_path / "scan.npz"), "--tolerance", "3e-3"]) == 0
     spline = tmp_path / "scan.npz"
-    for ext, axes, linked in (("ply", {}, True), ("obj", {}, False),
-                              ("obj", dict(forward_axis="Y", up_axis="Z"), True)):
+    same_axes = dict(forward_axis="Y", up_axis="Z")
+    # (the OBJ's text values are rounded to 32-bit floats by Blender: sorted too, they are the
+    # same data; user test)
+    for ext, axes, linked, shuffle in (("ply", {}, True, False), ("obj", {}, False, False),
+                                       ("obj", same_axes, True, False),
+                                       ("obj", same_axes, True, True)):
         for o in list(bpy.context.scene.objects):
             bpy.data.objects.remove(o)
         getattr(bpy.ops.wm, f"{ext}_import")(filepath=str(tmp_path / f"scan.{ext}"), **axes)
         scan = bpy.context.selected_objects[0]
+        if shuffle:
+            with bpy.context.temp_override(**select(bpy, scan)):
+                bpy.ops.object.mode_set(mode="EDIT")
+                bpy.ops.mesh.select_all(action="SELECT")
+                bpy.ops.mesh.sort_elements(type="RANDOMIZE", elements={"VERT", "FACE"})
+                bpy.ops.object.mode_set(mode="OBJECT")
+            assert not np.array_equal(positions(scan), verts.astype(np.float32))
         capfd.readouterr()
         assert import_spline(bpy, spline, scan) == {"FINISHED"}
         out = capfd.readouterr().out
