@@ -3190,6 +3190,8 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     graph = sp.coo_matrix((np.ones(len(ea)), (ea, eb)), shape=(n, n))
     _, label = connected_components(graph, directed=False)
     n_pieces = len(np.unique(label[used]))
+    # the pieces' sizes in faces, largest first (a stray piece of a selection is easy to miss)
+    sizes = np.sort(np.bincount(label[tris[:, 0]]))[::-1] if n_pieces > 1 else None
     graph = label = None  # (freed: the arrays of the edges and half-edges are most of what
     # a large mesh's map holds besides its factors, 0.9 GB at 1e6 vertices)
     if n_pieces > 1:
@@ -3207,9 +3209,12 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
                 "vertices at equal positions (duplicated there, as by a UV seam split or an "
                 f"export): merged, they are {welded}; merge vertices at equal positions "
                 "(Blender: Mesh > Clean Up > Merge by Distance) and fit again")
+        shown = ", ".join(str(int(k)) for k in sizes[sizes > 0][:5]) + (
+            ", ..." if n_pieces > 5 else "")
         raise TopologyError(
-            f"the mesh has {n_pieces} separate pieces (connected components); one connected "
-            "disk-like patch is needed: keep the largest piece or fit each piece separately"
+            f"the mesh has {n_pieces} separate pieces (connected components) of {shown} faces; "
+            "one connected disk-like patch is needed: keep the largest piece or fit each piece "
+            "separately"
         )
 
     tris = _orient_consistently(tris, edge_id)

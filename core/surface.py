@@ -3014,8 +3014,8 @@ def folds_warning(report: dict) -> str:
         "loose": "on a smooth mesh with steep slopes, a tolerance too loose for them, which "
                  "the surface cuts across (tighten it)",
         "crushed": "narrow fingers or slits along the border, which the parameter map crushes "
-                   "(cut the mesh into simpler pieces and fit each; in Blender select one in "
-                   "Edit Mode, then Mesh > Separate > Selection)",
+                   "(cut the mesh into simpler pieces and fit each; in Blender select one's "
+                   "faces in Edit Mode and press Fit Surface)",
         "noise": "on a noisy mesh (its faces wrinkled at the scale of the tolerance or "
                  "finer), knots that chase the noise (loosen the tolerance or smooth the mesh "
                  "first; in Blender a Smooth or Corrective Smooth modifier)",

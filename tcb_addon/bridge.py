@@ -606,21 +606,32 @@ def edit_selection(obj) -> tuple[str, np.ndarray]:
         "object")
 
 
-def read_part(obj, kind: str, mask: np.ndarray) -> InputData:
+def read_part(obj, kind: str, mask: np.ndarray, digest: str | None = None
+              ) -> tuple[InputData, str]:
     """World-space points (and faces) of the part of mesh ``obj`` that ``mask`` selects
     (:func:`edit_selection`): the selected polygons, triangulated as :func:`read_triangles`
     does, with their vertices only, or (``"VERTICES"``) the selected vertices as a point
-    cloud. Read from the mesh itself, without its modifiers (the selection is of its own
-    faces: a modifier may make others), a note says so when it has any. A
-    :class:`SelectionError` when the mesh no longer has as many polygons or vertices as
-    ``mask``."""
+    cloud; and a digest of the part (its vertices' own coordinates as a set:
+    ``core.surface.rounded_set_digest``). Read from the mesh itself, without its modifiers
+    (the selection is of its own faces: a modifier may make others) and its shape keys (the
+    basis shape), a note says so when it has any (the basis had been fitted without a word:
+    user test). A :class:`SelectionError` when the mesh no longer has as many polygons
+    or vertices as ``mask``, or the part is not the one of ``digest`` (its faces renumbered,
+    Sort Elements, or edited since: the mask had picked other faces, and the Deviation Map
+    had measured them; user test)."""
+    from .. import core  # the extension's own engine
+
     mesh = obj.data
     faces = kind == "FACES"
     what = "faces" if faces else "vertices"
+    again = ": select the part in Edit Mode and use Fit Surface to fit it as it is now"
     n = len(mesh.polygons) if faces else len(mesh.vertices)
     if n != len(mask):
         raise SelectionError(f"'{obj.name}' has {n} {what} now, {len(mask)} when its selected "
-                             f"{what} were fitted")
+                             f"{what} were fitted{again}")
+    modified = any(m.show_viewport for m in getattr(obj, "modifiers", ()))
+    keys = mesh.shape_keys is not None and any(
+        k.value != 0 and not k.mute for k in mesh.shape_keys.key_blocks[1:])
     pts = read_positions(mesh)
     matrix = obj.matrix_world
     tris = None
@@ -633,6 +644,12 @@ def read_part(obj, kind: str, mask: np.ndarray) -> InputData:
         pts, tris = pts[used], where[tris]
     else:
         pts = pts[mask]
+    part = core.surface.rounded_set_digest(pts)
+    if digest is not None and part != digest:
+        raise SelectionError(
+            f"the {what} of '{obj.name}' that were selected for the fit are not as they were: "
+            f"its {what} were renumbered (Sort Elements, or some deleted and others added) or "
+            f"edited since{again}")
     bad = int((~np.isfinite(pts).all(axis=1)).sum())
     if bad:
         raise SelectionError(
@@ -641,30 +658,44 @@ def read_part(obj, kind: str, mask: np.ndarray) -> InputData:
             "and try again")
     notes = [f"the {int(mask.sum())} selected {what} of '{obj.name}'"
              + (", as a point cloud" if not faces else "")]
-    if any(m.show_viewport for m in getattr(obj, "modifiers", ())):
+    if modified or keys:
         # (not UNMODIFIED's words: Refine and the Deviation Map take those for a source hidden
         # since its fit, and a part is always read so; review)
-        notes.append(f"its own {what}, without the modifiers of '{obj.name}'")
+        notes.append(f"its own {what}, without the "
+                     + " and ".join(w for w, on in (("modifiers", modified),
+                                                    ("shape keys", keys)) if on)
+                     + f" of '{obj.name}' (its basis shape)" * keys
+                     + ("" if keys else f" of '{obj.name}'"))
     _rounding_note(obj, pts, notes)
-    return InputData(points=_world_checked(obj, pts, matrix),
+    data = InputData(points=_world_checked(obj, pts, matrix),
                      faces=None if tris is None else _world_faces(tris, matrix).astype(np.int64),
                      sources=[obj], counts={obj.name: len(pts)}, notes=notes)
+    return data, part
 
 
-def part_text(kind: str, mask: np.ndarray) -> str:
-    """``kind`` and ``mask`` as text (a surface keeps it: Refine and the Deviation Map read
-    the same part again, Fit Surface replaces the result of the same part):
-    ``"FACES:<count>:<base64 of the packed bits>"``; 167 000 characters for a million faces
-    (0.4 ms)."""
+def part_text(kind: str, mask: np.ndarray, digest: str) -> str:
+    """``kind``, ``mask`` and the part's ``digest`` (:func:`read_part`) as text (a surface
+    keeps it: Refine and the Deviation Map read the same part again, Fit Surface replaces the
+    result of the same part): ``"FACES:<count>:<digest>:<base64 of the packed bits>"``;
+    167 000 characters for a million faces (0.4 ms)."""
     bits = base64.b64encode(np.packbits(mask.astype(bool)).tobytes()).decode("ascii")
-    return f"{kind}:{len(mask)}:{bits}"
+    return f"{kind}:{len(mask)}:{digest.replace(':', '/')}:{bits}"
 
 
-def part_of_text(text: str) -> tuple[str, np.ndarray]:
-    """The ``(kind, mask)`` of :func:`part_text`."""
-    kind, n, bits = text.split(":", 2)
+def part_of_text(text: str) -> tuple[str, np.ndarray, str]:
+    """The ``(kind, mask, digest)`` of :func:`part_text`."""
+    kind, n, digest, bits = text.split(":", 3)
     packed = np.frombuffer(base64.b64decode(bits), dtype=np.uint8)
-    return kind, np.unpackbits(packed, count=int(n)).astype(bool)
+    return kind, np.unpackbits(packed, count=int(n)).astype(bool), digest.replace("/", ":")
+
+
+def part_identity(text: str) -> str:
+    """What makes two parts (:func:`part_text`) the same: their kind and digest, the faces at
+    the same places whatever their numbers ("" for all of a mesh)."""
+    if not text:
+        return ""
+    kind, _, digest, _ = text.split(":", 3)
+    return f"{kind}:{digest}"
 
 
 def _faces_or_cloud(obj, pts, tris, notes):

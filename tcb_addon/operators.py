@@ -464,7 +464,7 @@ def source_data(context, surface_obj) -> bridge.InputData:
         obj = sources[0]
         if obj.mode == "EDIT":
             raise bridge.SelectionError(bridge.in_edit_mode(obj))
-        return bridge.read_part(obj, *bridge.part_of_text(str(part)))
+        return bridge.read_part(obj, *bridge.part_of_text(str(part)))[0]
     return bridge.read_selection(context, sources)
 
 
@@ -920,15 +920,16 @@ FITTED_KEY = "tcb_fitted_at"
 def previous_result(context, sources, kept: list | None = None, part: str = ""):
     """The surface object of the view layer fitted to exactly the objects ``sources`` (the
     latest fitted when there are several), or None; and to the same ``part`` of them (faces
-    selected in Edit Mode, ``bridge.part_text``; "" for all: a patch's result and the whole
-    mesh's are two). (One in an excluded collection stays as it is: it cannot be made active;
+    selected in Edit Mode, ``bridge.part_text``: the same faces, ``bridge.part_identity``,
+    whatever their numbers; "" for all: a patch's result and the whole mesh's are two). (One in an excluded collection stays as it is: it cannot be made active;
     so does one linked from another file, and one made by Import Spline: ``kept`` gets a
     sentence for each.)"""
     want = sorted(o.as_pointer() for o in sources)
     found = [ob for ob in context.view_layer.objects
              if ob.tcb.role == "SURFACE" and ob.type == "MESH"
              and sorted(s.object.as_pointer() for s in ob.tcb.sources if s.object is not None)
-             == want and len(ob.tcb.sources) == len(want) and ob.get(PART_KEY, "") == part]
+             == want and len(ob.tcb.sources) == len(want)
+             and bridge.part_identity(ob.get(PART_KEY, "")) == bridge.part_identity(part)]
     if kept is not None:
         kept += [f"'{ob.name}' is linked from another file and was kept: this result is a "
                  "new one" for ob in found if linked_problem(ob, ob.tcb.net)]
@@ -956,7 +957,8 @@ def stale_nets(context, sources, part: str = "") -> list:
             and sorted(s.object.as_pointer() for s in ob.tcb.surface.tcb.sources
                        if s.object is not None) == want
             and len(ob.tcb.surface.tcb.sources) == len(want)
-            and ob.tcb.surface.get(PART_KEY, "") == part]
+            and bridge.part_identity(ob.tcb.surface.get(PART_KEY, ""))
+            == bridge.part_identity(part)]
 
 
 def _new_net(coll, name: str, surf, origin):
@@ -1072,13 +1074,13 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 raise bridge.SelectionError(problem)
             obj = context.edit_object
             kind, mask = bridge.edit_selection(obj)
-            data = bridge.read_part(obj, kind, mask)
+            data, digest = bridge.read_part(obj, kind, mask)
             # all of a mesh, as Object Mode reads it (its faces hold every vertex, no modifier
             # makes another shape): the whole object's result (it had been a second one; review)
             whole = (mask.all() and len(data.points) == len(obj.data.vertices)
                      and (kind == "FACES") == bool(len(obj.data.polygons))
                      and not any(m.show_viewport for m in obj.modifiers))
-            self._part = "" if whole else bridge.part_text(kind, mask)
+            self._part = "" if whole else bridge.part_text(kind, mask, digest)
         else:
             data = bridge.read_selection(context)
         self._data = data

@@ -889,10 +889,16 @@ def test_non_manifold_edge_is_reported_with_its_count() -> None:
 
 
 def test_two_components_are_a_topology_error() -> None:
+    """... with the pieces' sizes in faces, largest first (a stray piece of a selection is
+    easy to miss: user test)."""
     pts, faces = grid_mesh(5)
     two = np.concatenate([pts, pts + [3.0, 0, 0]])
     with pytest.raises(TopologyError, match="2 separate pieces"):
         parameterize(two, np.concatenate([faces, faces + len(pts)]))
+    stray = np.concatenate([pts, pts[:3] + [3.0, 0, 0]])
+    with pytest.raises(TopologyError, match=rf"2 separate pieces \(connected components\) of "
+                                            rf"{len(faces)}, 1 faces"):
+        parameterize(stray, np.concatenate([faces, [[len(pts), len(pts) + 1, len(pts) + 2]]]))
 
 
 def test_a_mesh_whose_faces_share_no_vertices_is_told_to_merge_them() -> None:
