@@ -159,7 +159,14 @@ def returned_why(report: dict, criterion: str = "rms") -> str:
     """Why the surface returned is an earlier iteration's fit (adaptive_fit's choice), in
     words for the command line and Blender: they had said "lowest RMS" also of a smaller net
     kept after a coarser start missed the tolerance and of the criterion "max"'s lowest max
-    (review, user test)."""
+    (review, user test). A refine whose surface is worse than the one it started from
+    returns that one (``report["kept_start"]``: :meth:`core.TCBSurface.refine`)."""
+    kept = report.get("kept_start")
+    if kept:
+        what = "max error" if kept.get("criterion") == "max" else "RMS"
+        return (f"the surface refine started from: the refined one, iteration "
+                f"{kept['refined_iteration']}'s, has a higher {what}, {kept['refined']:.4g} "
+                f"against {kept['start']:.4g}")
     if report.get("stop_reason") == STALLED:
         return "lowest estimated error"
     if report.get("stop_reason") == "tolerance reached":  # (a coarser start missed it after)

@@ -1398,7 +1398,16 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             notes.append("the Deviation Points of the previous surface were removed (run "
                          "Deviation Map again)")
         rep = dict(surf.report or {})
-        if (len(surf.control_points) == self._before[1]
+        kept = rep.get("kept_start")
+        if kept:  # (core: refine() returns the surface it started from when it got worse)
+            what = "max error" if kept.get("criterion") == "max" else "RMS"
+            d = float(rep.get("diagonal", 1.0)) or 1.0
+            warnings.append(
+                f"nothing was refined: the refined surface (iteration "
+                f"{kept['refined_iteration']}, {kept['refined_control_points']} control "
+                f"points) has a higher {what} at the data, {kept['refined'] / d:.4g} of the "
+                f"diagonal against {kept['start'] / d:.4g}; the surface is kept as it was")
+        elif (len(surf.control_points) == self._before[1]
                 and str(rep.get("stop_reason", "")).startswith("tolerance reached")):
             what = "max" if is_max(st) else "RMS"
             unit = " of the diagonal" if self._settings["relative"] else ""

@@ -892,6 +892,63 @@ def test_refine_continues_with_a_tighter_tolerance():
     assert len(fine.knots) > len(coarse.knots)
 
 
+def noisy_sphere_cap(seed=0, noise=0.002, segments=32, rings=16):
+    """The faces (triangles) with centroid z > 0.4 of a UV sphere of radius 1 (``segments``
+    x ``rings``, poles, as Blender's), its vertices moved along their normals by Gaussian
+    noise, rounded to 32-bit floats as Blender keeps them: (points, faces)."""
+    th = np.pi * np.arange(1, rings) / rings
+    ph = 2 * np.pi * np.arange(segments) / segments
+    T, H = np.meshgrid(th, ph, indexing="ij")
+    V = np.vstack([[0, 0, 1], np.c_[(np.sin(T) * np.cos(H)).ravel(),
+                                    (np.sin(T) * np.sin(H)).ravel(), np.cos(T).ravel()],
+                   [0, 0, -1]])
+    V = V + V * np.random.default_rng(seed).normal(0, noise, (len(V), 1))
+    V = V.astype(np.float32).astype(np.float64)
+    at = lambda i, j: 1 + (i - 1) * segments + j % segments  # noqa: E731
+    tris = [[0, at(1, j), at(1, j + 1)] for j in range(segments)]
+    for i in range(1, rings - 1):
+        for j in range(segments):
+            a, b, c, d = at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)
+            tris += [[a, b, c], [a, c, d]]
+    tris = np.array(tris)
+    keep = np.zeros(len(tris), bool)
+    keep[:segments] = V[tris[:segments]].mean(axis=1)[:, 2] > 0.4
+    body = tris[segments:].reshape(-1, 2, 3)
+    centre = V[body.reshape(len(body), 6)].mean(axis=1)  # (a quad's 4 corners: a, c twice)
+    keep[segments:] = np.repeat(centre[:, 2] > 0.4, 2)  # (each quad's centroid decides)
+    used, faces = np.unique(tris[keep], return_inverse=True)
+    return V[used], faces.reshape(-1, 3)
+
+
+def test_refine_never_returns_a_surface_worse_than_the_one_it_started_from():
+    """A noisy sphere cap fitted at 3e-3 (49 control points, RMS 1.58e-3 of the diagonal),
+    refined at half its error as Blender's Refine does, from the compact stored spline: the
+    tighter tolerance makes the vertices' noise count (core.surface.mesh_noise_counts), the
+    faces' samples are drawn flat instead of curved, and the refit at the same knots was
+    2.36e-3, the run's choice (lowest estimated error, 65 control points) 1.83e-3, returned
+    as the refined surface (user test). The surface it started from is returned instead, with
+    its errors, and the report says so."""
+    points, faces = noisy_sphere_cap()
+    fit = fit_surface(points, faces, tolerance=3e-3, max_control_points=400)
+    r0 = fit.report
+    stored = TCBSurface.from_bytes(fit.to_bytes(compact=True))
+    refined = stored.refine(points, faces, rounding=1e-6, tolerance=0.5 * r0["rms_rel"],
+                            max_control_points=max(400, 2 * r0["control_points"]),
+                            max_iterations=20)
+    r = refined.report
+    assert r["rms"] <= r0["rms"] * (1 + 1e-6)  # (the stored errors: 32-bit floats)
+    assert r["iterations"] > r0["iterations"]  # ... after a run whose fits were all worse
+    assert all(h["rms"] > r0["rms"] for h in r["history"][r0["iterations"]:])
+    kept = r["kept_start"]
+    assert kept["criterion"] == "rms" and kept["refined"] > kept["start"] == r["rms"]
+    assert np.array_equal(refined.coefficients, stored.coefficients)
+    assert np.array_equal(refined.knots, stored.knots)
+    assert r["control_points"] == r0["control_points"]
+    assert r["returned_iteration"] == r0["returned_iteration"] < r["iterations"]
+    np.testing.assert_allclose(refined.errors, fit.errors, rtol=1e-5, atol=1e-7)
+    assert "the surface refine started from" in refine.returned_why(r)
+
+
 def test_a_sparse_cloud_gets_a_cross_validated_smoothness_unless_one_is_given(monkeypatch):
     """60 random points of Franke's function, about 1 per control point: with smoothness
     1e-4 the surface swings away from the function between the points (seeds 1-5: up to 0.32-
