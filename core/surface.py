@@ -1485,29 +1485,38 @@ class TCBSurface:
                       and options.smoothness == self._options.smoothness)
         if not same_model:
             return refined
+        mine = refined._report
+        crit = options.criterion
+
+        def value(err: np.ndarray, uv: np.ndarray) -> float:
+            if crit == "max":
+                return float(err.max(initial=0.0))
+            rms = float(np.sqrt(np.mean(err**2)))
+            if "rms_area" not in mine:
+                return rms
+            return max(rms, float(np.sqrt(np.dot(area_weights(uv), err**2) / len(err))))
+
+        # the start's errors as its fit kept them (the fit's control points at its data: the
+        # same points, maybe in another order or rounded, by far less than these errors), so
+        # that a refine that beats it evaluates nothing more
+        used = np.asarray(self._param.used, dtype=bool)
+        start = value(np.asarray(self._errors)[used], np.asarray(self._param.uv)[used])
         param = refined.parameterization
         kept = np.flatnonzero(np.asarray(param.used, dtype=bool))
         uv = np.asarray(param.uv)[kept]
-        e = np.empty(len(kept))
+        new = value(np.asarray(refined.errors)[kept], uv)
+        if not new > start:
+            return refined
+        e = np.empty(len(kept))  # (at the points as given, in their order)
         step = 200_000
         for s in range(0, len(kept), step):
             at = self._space.combine(uv[s: s + step], self._fitted_c)[0]
             e[s: s + step] = np.linalg.norm(at - points[kept[s: s + step]], axis=1)
-        mine = refined._report
-        crit = options.criterion
-
-        def value(err: np.ndarray, rms_area) -> float:
-            if crit == "max":
-                return float(err.max(initial=0.0))
-            rms = float(np.sqrt(np.mean(err**2)))
-            return rms if rms_area is None else max(rms, float(rms_area))
-
+        start = value(e, uv)
+        if not new > start:  # (the kept errors' rounding decided it)
+            return refined
         start_area = (float(np.sqrt(np.dot(area_weights(uv), e**2) / len(e)))
                       if "rms_area" in mine else None)
-        start = value(e, start_area)
-        new = value(np.asarray(refined.errors)[kept], mine.get("rms_area"))
-        if not new > start:
-            return refined
         report = copy.deepcopy(self._report)
         report.pop("edited", None)
         for key in ("history", "iterations", "seconds", "stop_reason", "data_digest",
