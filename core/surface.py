@@ -1488,13 +1488,14 @@ class TCBSurface:
         mine = refined._report
         crit = options.criterion
 
+        def area_rms(err: np.ndarray, uv: np.ndarray) -> float:
+            return float(np.sqrt(np.dot(area_weights(uv), err**2) / len(err)))
+
         def value(err: np.ndarray, uv: np.ndarray) -> float:
             if crit == "max":
                 return float(err.max(initial=0.0))
             rms = float(np.sqrt(np.mean(err**2)))
-            if "rms_area" not in mine:
-                return rms
-            return max(rms, float(np.sqrt(np.dot(area_weights(uv), err**2) / len(err))))
+            return rms if "rms_area" not in mine else max(rms, area_rms(err, uv))
 
         # the start's errors as its fit kept them (the fit's control points at its data: the
         # same points, maybe in another order or rounded, by far less than these errors), so
@@ -1515,8 +1516,7 @@ class TCBSurface:
         start = value(e, uv)
         if not new > start:  # (the kept errors' rounding decided it)
             return refined
-        start_area = (float(np.sqrt(np.dot(area_weights(uv), e**2) / len(e)))
-                      if "rms_area" in mine else None)
+        start_area = area_rms(e, uv) if "rms_area" in mine else None
         report = copy.deepcopy(self._report)
         report.pop("edited", None)
         for key in ("history", "iterations", "seconds", "stop_reason", "data_digest",

@@ -661,11 +661,10 @@ def read_part(obj, kind: str, mask: np.ndarray, digest: str | None = None
     if modified or keys:
         # (not UNMODIFIED's words: Refine and the Deviation Map take those for a source hidden
         # since its fit, and a part is always read so; review)
-        notes.append(f"its own {what}, without the "
-                     + " and ".join(w for w, on in (("modifiers", modified),
-                                                    ("shape keys", keys)) if on)
-                     + f" of '{obj.name}' (its basis shape)" * keys
-                     + ("" if keys else f" of '{obj.name}'"))
+        without = " and ".join(w for w, on in (("modifiers", modified), ("shape keys", keys))
+                               if on)
+        notes.append(f"its own {what}, without the {without} of '{obj.name}'"
+                     + (" (its basis shape)" if keys else ""))
     _rounding_note(obj, pts, notes)
     data = InputData(points=_world_checked(obj, pts, matrix),
                      faces=None if tris is None else _world_faces(tris, matrix).astype(np.int64),
