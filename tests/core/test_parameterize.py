@@ -1814,8 +1814,8 @@ def test_a_surface_that_folds_over_its_mesh_is_warned_of() -> None:
                       r"the mesh's area .*: the mesh's noise \(its vertices scatter 0\.8[0-9]% "
                       r"of the diagonal across a smooth surface\), which the knots chase "
                       r"\(loosen the tolerance or smooth the mesh first.*; narrow fingers .*cut "
-                      r"the mesh into simpler pieces and fit each; in Blender select one in "
-                      r"Edit Mode, then Mesh > Separate > Selection\)$") as caught:
+                      r"the mesh into simpler pieces and fit each; in Blender select one's "
+                      r"faces in Edit Mode and press Fit Surface\)$") as caught:
         surf = fit_surface(noisy, faces, tolerance=1e-2)
     # the measured noise is the cause named: no steep slopes (the fit met the tolerance)
     assert not any("steep slopes" in str(w.message) for w in caught)
