@@ -470,6 +470,23 @@ def source_data(context, surface_obj) -> bridge.InputData:
     return bridge.read_selection(context, sources)
 
 
+def source_words(surface_obj) -> str | None:
+    """What the Result panel says of a surface's data when it is not simply its source
+    objects: the part fitted (faces selected in Edit Mode) or the file imported (a patch's
+    result and an import looked like any fit: user test)."""
+    part = surface_obj.get(PART_KEY)
+    names = [s.object.name for s in surface_obj.tcb.sources if s.object is not None]
+    if part and names:
+        kind, mask, _ = bridge.part_of_text(str(part))
+        what = "faces" if kind == "FACES" else "vertices"
+        return f"Fitted to {int(mask.sum())} selected {what} of '{names[0]}'"
+    imported = surface_obj.get(IMPORTED_KEY)
+    if imported:
+        return (f"Imported from {os.path.basename(str(imported))}"
+                + ("" if names else " (no source object)"))
+    return None
+
+
 def source_mismatch(surf, data: bridge.InputData):
     """``(faces, what)``: the faces of ``data`` as the fit of ``surf`` read them, and how
     ``data`` differ from the data ``surf`` was fitted to, in words ("12 points then, 10 now",

@@ -9,8 +9,8 @@ import bpy
 from . import bridge
 from .operators import (NO_DATA_KEY, SPLINE_KEY, converted_problem, folded_over, is_max,
                         live_link_problem, live_moved_problem, net_copy_note,
-                        net_modifier_problem, net_vertex_problem, result_objects, stack_problem,
-                        uneven_density)
+                        net_modifier_problem, net_vertex_problem, result_objects, source_words,
+                        stack_problem, uneven_density)
 from .properties import FIT_KEYS, RESULT_KEYS, draw_fit_settings
 
 
@@ -63,6 +63,9 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
         st = surface.tcb
         col = layout.column(align=True)
         col.label(text=surface.name, icon="SURFACE_NSURFACE")
+        source = source_words(surface)
+        if source:
+            col.label(text=source, icon="INFO")
         grid = col.grid_flow(columns=2, even_columns=True, align=True)
         for label, value in (
             ("Knots", f"{st.knots}"),

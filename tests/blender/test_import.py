@@ -13,7 +13,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from scenes import add_mesh, core_module, grid, move_net_vertex, positions, select, spline_of  # noqa: E402
 
-from test_operators import snapshot  # noqa: E402
+from test_operators import draw_panels, snapshot  # noqa: E402
 
 
 def saved_fit(tmp_path, verts, faces, name="scan.npz", **kwargs):
@@ -123,6 +123,7 @@ def test_import_without_its_scan_warns_and_refine_says_what_it_needs(clean_scene
     surface = bpy.context.view_layer.objects.active
     assert len(surface.tcb.sources) == 0
     assert surface.tcb.auto_resolution and surface.tcb.resolution in (64, 128, 256)
+    assert ("label", "Imported from scan.npz (no source object)") in draw_panels(bpy, [surface])
     # nothing selected: no source, said
     capfd.readouterr()
     assert import_spline(bpy, path) == {"FINISHED"}

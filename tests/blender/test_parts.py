@@ -85,6 +85,8 @@ def test_the_selected_faces_of_a_closed_scan_are_fitted_refined_and_mapped(clean
     surface = bpy.context.view_layer.objects.active
     assert surface.tcb.role == "SURFACE" and [s.object for s in surface.tcb.sources] == [ball]
     assert snapshot(ball) == before
+    assert ("label", f"Fitted to {cap.sum()} selected faces of 'Ball'") in draw_panels(
+        bpy, [surface])  # (the Result panel says it is a patch)
     # the surface is the cap: within the tolerance of the sphere, over the cap only
     surf = spline_of(surface)
     verts, _ = surf.tessellate(32)
