@@ -2,19 +2,25 @@
 shape the fit ends, with the mesh's vertices counted alone against the net (the default where
 the mesh's noise is at least ``core.surface.NOISE_COUNTS`` of the tolerance, with its errors
 taken across the surface and its folds weighed against normals smooth over the noise) or as
-before (``samples``: NOISE_COUNTS set to infinity, which turns all three off), in the same run.
+before (``samples``: NOISE_COUNTS set to infinity, which turns all three off), and with the
+faces of every such mesh sampled flat (``flat``: ``core.surface.FACET_SAG_OVER_NOISE`` set to
+infinity, the default of the thirtieth to thirty-seventh sessions) instead of curved where the
+facets' sag outweighs the noise (``core.surface.facet_sag``), in the same run.
 
     .venv/bin/python benchmarks/noisy_meshes.py [--quick] [--tolerances 1e-3 1e-4]
 
 Cases: grid meshes of ``0.2 sin 4x cos 3y + 0.1 xy`` over the unit square (tests/meshes.py's
 ``noisy_grid``) of 41 x 41 and 81 x 81 vertices, and the bundled ``three_peaks.off`` (1907
 vertices), with Gaussian noise of the given share of the diagonal on every coordinate of every
-vertex (seeded); and clean meshes, where nothing may change (``three_peaks.off`` and a 41 x 41
-grid, noise 0). Columns: the noise given and measured (``report["noise_rel"]``,
-``core.parameterize.local_noise``), both over the diagonal; then per variant the control
-points, the stop reason, the RMS at the vertices over the diagonal, *true*: the RMS distance over
-the diagonal from the mesh without noise of the surface at 20 000 random points of the faces'
-parameters (``core.geometry.point_mesh_distance``), the share of the mesh's area where the
+vertex (seeded); caps of UV spheres of radius 1 (tests/meshes.py's ``noisy_sphere_cap``, 32 x 16
+and 64 x 32 segments: coarse meshes of a curved shape) with noise of the given share of the
+radius along the normals; and clean meshes, where nothing may change (``three_peaks.off`` and a
+41 x 41 grid, noise 0). Columns: the noise given and measured (``report["noise_rel"]``,
+``core.parameterize.local_noise``, over the diagonal); then per variant the control points,
+how the faces were sampled (``report["face_samples"]``), the stop reason, the RMS at the
+vertices over the diagonal, *true*: the RMS distance over the diagonal from the noise-free shape
+(the mesh without noise; the sphere for a cap) of the surface at 20 000 random points of the
+faces' parameters (``core.geometry.point_mesh_distance``), the share of the mesh's area where the
 surface folds over (``report["folded"]``), and seconds.
 """
 
@@ -36,20 +42,24 @@ import core.surface as S  # noqa: E402
 from core import fit_surface  # noqa: E402
 from core.geometry import point_mesh_distance  # noqa: E402
 from core.meshio import read_geometry  # noqa: E402
-from meshes import noisy_grid  # noqa: E402
+from meshes import noisy_grid, noisy_sphere_cap  # noqa: E402
 
 STOPS = {"tolerance reached": "tolerance", "control-point budget reached": "budget",
          "the error stopped falling": "stalled"}
 
 
 def cases(quick: bool) -> list:
-    """(name, noise share, clean vertices, noisy vertices, faces)."""
+    """(name, noise share, clean vertices (None: the unit sphere), noisy vertices, faces)."""
     out = []
     grids = [(41, 0.002), (41, 0.005)] if quick else [
         (41, 0.0), (41, 0.001), (41, 0.002), (41, 0.005), (81, 0.002), (81, 0.005)]
     for n, noise in grids:
         clean, faces = noisy_grid(n, 0.0)
         out.append((f"grid {n} x {n}", noise, clean, noisy_grid(n, noise)[0], faces))
+    caps = [(32, 0.002)] if quick else [(32, 0.002), (32, 0.005), (64, 0.002), (64, 0.005)]
+    for segments, noise in caps:
+        noisy, faces = noisy_sphere_cap(noise=noise, segments=segments, rings=segments // 2)
+        out.append((f"cap {segments} x {segments // 2}", noise, None, noisy, faces))
     if not quick:
         clean, faces = read_geometry(ROOT / "data" / "three_peaks.off")
         diagonal = np.linalg.norm(np.ptp(clean, axis=0))
@@ -61,13 +71,15 @@ def cases(quick: bool) -> list:
 
 
 def off_clean(surf, clean, faces) -> np.ndarray:
-    """Distances from the mesh ``clean`` (``faces``) of ``surf`` at 20 000 seeded random points
-    of the faces in the parameters (the noise along the surface, which moves the vertices'
-    parameters with them, is no error of the fit)."""
+    """Distances from the mesh ``clean`` (``faces``; None: the unit sphere) of ``surf`` at
+    20 000 seeded random points of the faces in the parameters (the noise along the surface,
+    which moves the vertices' parameters with them, is no error of the fit)."""
     uv = np.asarray(surf.parameterization.uv)
     rng = np.random.default_rng(5)
     corners = uv[faces[rng.integers(len(faces), size=20_000)]]
     at = surf((corners * rng.dirichlet([1, 1, 1], 20_000)[:, :, None]).sum(axis=1))
+    if clean is None:
+        return np.abs(np.linalg.norm(at, axis=1) - 1.0)
     return point_mesh_distance(at, clean, faces)
 
 
@@ -77,14 +89,15 @@ def main() -> None:
     ap.add_argument("--tolerances", type=float, nargs="*")
     args = ap.parse_args()
     tolerances = args.tolerances or ([1e-3] if args.quick else [1e-3, 1e-4])
-    print("| mesh | vertices | noise | measured | tolerance | variant | cp | stop | RMS | true "
-          "| folded | s |")
-    print("|---|---:|---:|---:|---:|---|---:|---|---:|---:|---:|---:|")
-    counts = S.NOISE_COUNTS
+    print("| mesh | vertices | noise | measured | tolerance | variant | cp | faces | stop | RMS "
+          "| true | folded | s |")
+    print("|---|---:|---:|---:|---:|---|---:|---|---|---:|---:|---:|---:|")
+    counts, sag = S.NOISE_COUNTS, S.FACET_SAG_OVER_NOISE
     for name, noise, clean, noisy, faces in cases(args.quick):
         for tol in tolerances:
-            for variant in ("samples", "now"):
+            for variant in ("samples", "flat", "now"):
                 S.NOISE_COUNTS = np.inf if variant == "samples" else counts
+                S.FACET_SAG_OVER_NOISE = np.inf if variant == "flat" else sag
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
@@ -92,11 +105,11 @@ def main() -> None:
                         surf = fit_surface(noisy, faces, tolerance=tol)
                         seconds = time.perf_counter() - t0
                 finally:
-                    S.NOISE_COUNTS = counts
+                    S.NOISE_COUNTS, S.FACET_SAG_OVER_NOISE = counts, sag
                 r = surf.report
                 true = float(np.sqrt(np.mean(off_clean(surf, clean, faces) ** 2))) / r["diagonal"]
                 print(f"| {name} | {len(noisy)} | {noise:g} | {r['noise_rel']:.2e} | {tol:g} | "
-                      f"{variant} | {r['control_points']} | "
+                      f"{variant} | {r['control_points']} | {r['face_samples']} | "
                       f"{STOPS.get(r['stop_reason'], r['stop_reason'])} | {r['rms_rel']:.2e} | "
                       f"{true:.2e} | {100 * r['folded']:.2f}% | {seconds:.1f} |", flush=True)
 

@@ -1478,9 +1478,10 @@ class TCBSurface:
         for is another one. A noisy sphere cap (32 x 16 UV sphere, noise 0.002) fitted at
         3e-3 (49 control points, RMS 1.58e-3 of the diagonal) and refined at 1.5e-3 had its
         noise count against the tighter tolerance (``mesh_noise_counts``): the faces' samples
-        drawn flat instead of curved, the refit at the same knots 2.36e-3 and the run's
-        choice (lowest estimated error, 65 control points) 1.83e-3, returned as the refined
-        surface (user test)."""
+        drawn flat instead of curved (as the noisy meshes' were until their facets' sag was
+        weighed: :data:`FACET_SAG_OVER_NOISE`), the refit at the same knots 2.36e-3 and the
+        run's choice (lowest estimated error, 65 control points) 1.83e-3, returned as the
+        refined surface (user test)."""
         same_model = (options.degree == self.degree and options.mode == self.mode
                       and options.smoothness == self._options.smoothness)
         if not same_model:
@@ -2378,6 +2379,36 @@ CREASE_ANGLE = 20.0
 FLAT_ANGLE = 0.1
 
 
+# a noisy mesh's faces are sampled flat (mesh_samples) where the RMS sag of its point-normal
+# triangles from its faces (facet_sag) is under this share of its noise
+# (core.parameterize.local_noise), curved where it is not. The curved samples interpolate the
+# noise between the vertices with the turns of their normals, the flat ones take the facets'
+# sag: measured against the true surface (/tmp/s38/noisy5.py and noisy6.py of the thirty-
+# eighth session; tolerance 1e-3, sag over noise: the curved fit's distance as a share of the
+# flat one's): sphere caps of UV spheres with radial noise 2.95: 0.24 (32 x 16 segments, 140
+# control points instead of 488), 1.18: 0.60, 0.58: 0.93, 0.67: 0.57 (64 x 32), but 0.29: 1.64
+# (64 x 32, noise 0.5%: 722 control points chasing the noise instead of 147); three_peaks.off
+# with noise on every coordinate (against its clean vertices' curved triangles) 2.03: 0.87,
+# 1.04: 0.88, 0.50: 0.96, 0.30: 1.01; wave grids of 15 x 15 to 81 x 81 vertices with noise of
+# 0.1-0.5% of the diagonal, sags of 0.03-0.23 of the noise: 0.98-1.07, one of 0.40: 0.88
+FACET_SAG_OVER_NOISE = 0.5
+FACET_SAG_SAMPLES = 4000  # ... at this many points drawn on the faces by area
+
+
+def facet_sag(points, faces, seed: int = 0, vertex_normals=None, area_table=None) -> float:
+    """The RMS distance between a mesh's point-normal triangles (:func:`curved_points`) and
+    its flat faces at :data:`FACET_SAG_SAMPLES` seeded points drawn on them by area
+    (:func:`_area_samples`): ``sqrt(mean |PN(b) - sum b_i P_i|^2)``; 0 for faces of no area.
+    The sag of a coarse mesh of a curved shape, the turns of a noisy mesh's normals (not in
+    method.md). ``vertex_normals``, ``area_table``: as for :func:`mesh_samples`."""
+    face, bary = _area_samples(points, faces, FACET_SAG_SAMPLES, seed, area_table)
+    if not len(face):
+        return 0.0
+    flat = np.einsum("nk,nkj->nj", bary, points[faces[face]])
+    bent = curved_points(points, faces, face, bary, vertex_normals=vertex_normals) - flat
+    return float(np.sqrt(np.mean(np.einsum("nj,nj->n", bent, bent))))
+
+
 def curved_points(points, faces, face, bary, vertex_normals=None):
     """Points at barycentric coordinates ``bary`` (n, 3) on the faces ``face`` (n,) of the
     mesh ``(points, faces)``, on its curved point-normal triangles (PN triangles, Vlachos,
@@ -2689,13 +2720,17 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         at = norm.apply(points)
         vertex_normals = _vertex_normals(at, np.asarray(param.faces))
         area_table = _area_table(at, np.asarray(param.faces))
+    curved = None
     if param.faces is not None:
         # fit the mesh's surface: vertices plus points sampled on its faces, curved through the
-        # vertices unless the vertices are noisy (their normals turn with the noise)
+        # vertices unless the vertices' noise outweighs the facets' sag (facet_sag)
         # (of the vertices in faces: loose ones had changed the draws, review)
+        curved = not noisy or (facet_sag(at, np.asarray(param.faces), options.seed,
+                                         vertex_normals, area_table)
+                               >= FACET_SAG_OVER_NOISE * noise)
         count = mesh_sample_count(len(kept), options.max_control_points)
         sp_, su_ = mesh_samples(at, np.asarray(param.uv), param.faces, count,
-                                seed=options.seed, curved=not noisy,
+                                seed=options.seed, curved=curved,
                                 vertex_normals=vertex_normals, area_table=area_table)
         fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
     # the vertices' normals, smooth over the noise: the errors across the surface, and the
@@ -2818,6 +2853,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     if noise is not None:  # a mesh's noise (local_noise), in the user's units (a cloud's: below)
         report["noise"] = noise * norm.scale
         report["noise_rel"] = noise / diag_norm
+    if curved is not None:  # a mesh's faces sampled on its curved triangles or flat
+        report["face_samples"] = "curved" if curved else "flat"
     if param.faces is not None and not subsampled and len(best.fit.errors) > len(uv):
         # the errors at the points the fit sampled on the mesh's faces: between the vertices
         # of a coarse mesh the surface can be far from the faces where the errors at the

@@ -52,3 +52,31 @@ def spiky_grid(raise_by=(), nx: int = 40, ny: int = 30):
     i, j = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1))
     a = (j * nx + i).ravel()
     return points, np.c_[a, a + 1, a + nx + 1, a + nx]
+
+
+def noisy_sphere_cap(seed=0, noise=0.002, segments=32, rings=16):
+    """The faces (triangles) with centroid z > 0.4 of a UV sphere of radius 1 (``segments``
+    x ``rings``, poles, as Blender's), its vertices moved along their normals by Gaussian
+    noise, rounded to 32-bit floats as Blender keeps them: (points, faces)."""
+    th = np.pi * np.arange(1, rings) / rings
+    ph = 2 * np.pi * np.arange(segments) / segments
+    T, H = np.meshgrid(th, ph, indexing="ij")
+    V = np.vstack([[0, 0, 1], np.c_[(np.sin(T) * np.cos(H)).ravel(),
+                                    (np.sin(T) * np.sin(H)).ravel(), np.cos(T).ravel()],
+                   [0, 0, -1]])
+    V = V + V * np.random.default_rng(seed).normal(0, noise, (len(V), 1))
+    V = V.astype(np.float32).astype(np.float64)
+    at = lambda i, j: 1 + (i - 1) * segments + j % segments  # noqa: E731
+    tris = [[0, at(1, j), at(1, j + 1)] for j in range(segments)]
+    for i in range(1, rings - 1):
+        for j in range(segments):
+            a, b, c, d = at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)
+            tris += [[a, b, c], [a, c, d]]
+    tris = np.array(tris)
+    keep = np.zeros(len(tris), bool)
+    keep[:segments] = V[tris[:segments]].mean(axis=1)[:, 2] > 0.4
+    body = tris[segments:].reshape(-1, 2, 3)
+    centre = V[body.reshape(len(body), 6)].mean(axis=1)  # (a quad's 4 corners: a, c twice)
+    keep[segments:] = np.repeat(centre[:, 2] > 0.4, 2)  # (each quad's centroid decides)
+    used, faces = np.unique(tris[keep], return_inverse=True)
+    return V[used], faces.reshape(-1, 3)

@@ -35,6 +35,7 @@ from core.refine import UNEVEN_DENSITY, area_weights, automatic_start, next_star
 from core.meshio import read_geometry
 from core.simplex import orient2d
 from knotsets import knot_set
+from meshes import noisy_grid, noisy_sphere_cap
 
 DATA = __import__("pathlib").Path(__file__).resolve().parents[2] / "data"
 
@@ -347,7 +348,6 @@ def test_a_noisy_mesh_counts_its_vertices_and_stops_when_its_error_stops_falling
     the vertices alone count: the error stops falling at about 150 control points, 5.7e-4 off.
     A clean mesh measures no noise and counts the samples (a fit that counted its vertices
     stopped a half cylinder at 1e-4 early, as if stalled)."""
-    from meshes import noisy_grid
 
     noisy, faces = noisy_grid(41, 0.002)
     surf = stalled_without_warnings(noisy, faces)
@@ -374,7 +374,6 @@ def test_a_finely_meshed_noisy_scan_stops_on_its_errors_across_the_surface():
     points, 8.9e-4 off; the summary calls it noise (core.surface.stopped_at_noise). The fold
     check weighs the surface against the same normals, not the noisy faces': no fold (the
     faces' normals had it folded on 0.96%, the noise-free surface's none)."""
-    from meshes import noisy_grid
 
     noisy, faces = noisy_grid(81, 0.005)
     surf = stalled_without_warnings(noisy, faces)
@@ -892,42 +891,16 @@ def test_refine_continues_with_a_tighter_tolerance():
     assert len(fine.knots) > len(coarse.knots)
 
 
-def noisy_sphere_cap(seed=0, noise=0.002, segments=32, rings=16):
-    """The faces (triangles) with centroid z > 0.4 of a UV sphere of radius 1 (``segments``
-    x ``rings``, poles, as Blender's), its vertices moved along their normals by Gaussian
-    noise, rounded to 32-bit floats as Blender keeps them: (points, faces)."""
-    th = np.pi * np.arange(1, rings) / rings
-    ph = 2 * np.pi * np.arange(segments) / segments
-    T, H = np.meshgrid(th, ph, indexing="ij")
-    V = np.vstack([[0, 0, 1], np.c_[(np.sin(T) * np.cos(H)).ravel(),
-                                    (np.sin(T) * np.sin(H)).ravel(), np.cos(T).ravel()],
-                   [0, 0, -1]])
-    V = V + V * np.random.default_rng(seed).normal(0, noise, (len(V), 1))
-    V = V.astype(np.float32).astype(np.float64)
-    at = lambda i, j: 1 + (i - 1) * segments + j % segments  # noqa: E731
-    tris = [[0, at(1, j), at(1, j + 1)] for j in range(segments)]
-    for i in range(1, rings - 1):
-        for j in range(segments):
-            a, b, c, d = at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)
-            tris += [[a, b, c], [a, c, d]]
-    tris = np.array(tris)
-    keep = np.zeros(len(tris), bool)
-    keep[:segments] = V[tris[:segments]].mean(axis=1)[:, 2] > 0.4
-    body = tris[segments:].reshape(-1, 2, 3)
-    centre = V[body.reshape(len(body), 6)].mean(axis=1)  # (a quad's 4 corners: a, c twice)
-    keep[segments:] = np.repeat(centre[:, 2] > 0.4, 2)  # (each quad's centroid decides)
-    used, faces = np.unique(tris[keep], return_inverse=True)
-    return V[used], faces.reshape(-1, 3)
-
-
-def test_refine_never_returns_a_surface_worse_than_the_one_it_started_from():
+def test_refine_never_returns_a_surface_worse_than_the_one_it_started_from(monkeypatch):
     """A noisy sphere cap fitted at 3e-3 (49 control points, RMS 1.58e-3 of the diagonal),
     refined at half its error as Blender's Refine does, from the compact stored spline: the
-    tighter tolerance makes the vertices' noise count (core.surface.mesh_noise_counts), the
-    faces' samples are drawn flat instead of curved, and the refit at the same knots was
-    2.36e-3, the run's choice (lowest estimated error, 65 control points) 1.83e-3, returned
-    as the refined surface (user test). The surface it started from is returned instead, with
-    its errors, and the report says so."""
+    tighter tolerance makes the vertices' noise count (core.surface.mesh_noise_counts), and
+    with a noisy mesh's faces always sampled flat (as through the thirty-seventh session; now
+    this cap's stay curved: the next test) the refit at the same knots was 2.36e-3, the run's
+    choice (lowest estimated error, 65 control points) 1.83e-3, returned as the refined surface
+    (user test). The surface it started from is returned instead, with its errors, and the
+    report says so."""
+    monkeypatch.setattr(core.surface, "FACET_SAG_OVER_NOISE", np.inf)
     points, faces = noisy_sphere_cap()
     fit = fit_surface(points, faces, tolerance=3e-3, max_control_points=400)
     r0 = fit.report
@@ -947,6 +920,42 @@ def test_refine_never_returns_a_surface_worse_than_the_one_it_started_from():
     assert r["returned_iteration"] == r0["returned_iteration"] < r["iterations"]
     np.testing.assert_allclose(refined.errors, fit.errors, rtol=1e-5, atol=1e-7)
     assert "the surface refine started from" in refine.returned_why(r)
+
+
+def test_a_noisy_coarse_mesh_of_a_curved_shape_is_fitted_as_the_shape_not_its_facets(monkeypatch):
+    """The noisy sphere cap (32 x 16 segments, noise 0.002 of the radius) at a tolerance where
+    its noise counts: the facets' sag (core.surface.facet_sag, 3x its noise) outweighs the
+    noise, so its faces are sampled curved as a clean mesh's are. Sampled flat (as through the
+    thirty-seventh session) the fit at 7.9e-4 was 1.69e-3 of the diagonal from the sphere
+    (curved: 3.98e-4), and Refine from the fit at 3e-3 kept its start (every refined surface
+    worse); now it refines to half the RMS and closer to the sphere. A dense noisy grid, whose
+    facets hardly sag, keeps its flat samples."""
+    points, faces = noisy_sphere_cap()
+
+    def off_sphere(surf):  # RMS over the faces' parameters, over the diagonal
+        uv = np.asarray(surf.parameterization.uv)
+        rng = np.random.default_rng(5)
+        corners = uv[faces[rng.integers(len(faces), size=20_000)]]
+        at = surf((corners * rng.dirichlet([1, 1, 1], 20_000)[:, :, None]).sum(axis=1))
+        return np.sqrt(np.mean((np.linalg.norm(at, axis=1) - 1.0) ** 2)) / surf.report["diagonal"]
+
+    start = fit_surface(points, faces, tolerance=3e-3, max_control_points=400)
+    tight = 0.5 * start.report["rms_rel"]
+    now = fit_surface(points, faces, tolerance=tight, max_control_points=400)
+    assert now.report["noise_rel"] >= core.surface.NOISE_COUNTS * tight  # (the noise counts)
+    assert now.report["face_samples"] == "curved"
+    refined = start.refine(points, faces, tolerance=tight, max_control_points=400)
+    assert "kept_start" not in refined.report
+    assert refined.report["rms"] < 0.6 * start.report["rms"]
+    assert off_sphere(refined) < 0.8 * off_sphere(start)
+    with monkeypatch.context() as m:
+        m.setattr(core.surface, "FACET_SAG_OVER_NOISE", np.inf)
+        flat = fit_surface(points, faces, tolerance=tight, max_control_points=400)
+    assert flat.report["face_samples"] == "flat"
+    assert off_sphere(now) < 6e-4 and 3 * off_sphere(now) < off_sphere(flat)
+    grid, grid_faces = noisy_grid(41, 0.002)
+    dense = fit_surface(grid, grid_faces, tolerance=1e-3)
+    assert dense.report["noise_rel"] > 1e-3 and dense.report["face_samples"] == "flat"
 
 
 def test_a_sparse_cloud_gets_a_cross_validated_smoothness_unless_one_is_given(monkeypatch):
