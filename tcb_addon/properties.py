@@ -113,7 +113,15 @@ class FitSettings:
     # the Smoothness was set (typed, by a script, or copied by the panel from a field that was):
     # its value is the user's even when it is the default's (it had been cross-validated on a
     # sparse cloud as the default is, with no way to ask for 0.0001 itself)
-    smoothness_set: BoolProperty(default=False, options={"HIDDEN"})
+    # (drawn as a pin beside the field when it holds at the default's value, so that a value
+    # reset to the default, which sets it too, can be given back to the engine: review)
+    smoothness_set: BoolProperty(
+        name="Smoothness Given",
+        description="Use the Smoothness 0.0001 as it is (it was typed, reset or set by a "
+        "script); off: the default, chosen by cross-validation on a sparse cloud or when the "
+        "error stopped falling above the tolerance",
+        default=False, options={"HIDDEN"},
+    )  # fmt: skip
     auto_smoothness: BoolProperty(
         name="Auto Smoothness",
         description=(
@@ -317,6 +325,9 @@ def draw_fit_settings(layout, owner, short_labels: bool = False) -> None:
             sub = row.row(align=True)
             sub.active = not getattr(owner, f"auto_{key}")
             sub.prop(owner, key)
+            if (key == "smoothness" and owner.smoothness_set and not owner.auto_smoothness
+                    and owner.smoothness == DEFAULT_SMOOTHNESS):
+                row.prop(owner, "smoothness_set", text="", icon="PINNED")
             row.prop(owner, f"auto_{key}", text="", icon="AUTO")
         else:
             col.prop(owner, key)

@@ -214,10 +214,19 @@ def test_a_sparse_cloud_left_at_the_default_smoothness_gets_it_cross_validated(c
     assert surf.report["smoothness"] == pytest.approx(1e-4) and "smoothness_selection" not in surf.report
     assert "sparse data" in sidebar_fit()["smoothness_selection"]["why"]
     settings = bpy.context.scene.tcb_settings
-    settings.smoothness = 1e-4  # (typed in: the same value)
+    pinned = ("prop", "smoothness_set")
+    assert pinned not in draw_panels(bpy, [cloud])
+    settings.smoothness = 1e-4  # (typed in: the same value; Reset to Default sets it too)
     try:
         rep = sidebar_fit()
         assert rep["smoothness"] == pytest.approx(1e-4) and "smoothness_selection" not in rep
+        # a pin beside the field says so, and unpinned the default is the engine's again
+        assert pinned in draw_panels(bpy, [cloud])
+        settings.smoothness_set = False
+        assert pinned not in draw_panels(bpy, [cloud])
+        assert "sparse data" in sidebar_fit()["smoothness_selection"]["why"]
+        settings.smoothness = 2e-4  # (another value: used as given, no pin)
+        assert pinned not in draw_panels(bpy, [cloud])
     finally:
         settings.property_unset("smoothness")
         settings.property_unset("smoothness_set")
