@@ -2,10 +2,11 @@
 shape the fit ends, with the mesh's vertices counted alone against the net (the default where
 the mesh's noise is at least ``core.surface.NOISE_COUNTS`` of the tolerance, with its errors
 taken across the surface and its folds weighed against normals smooth over the noise) or as
-before (``samples``: NOISE_COUNTS set to infinity, which turns all three off), and with the
-faces of every such mesh sampled flat (``flat``: ``core.surface.FACET_SAG_OVER_NOISE`` set to
-infinity, the default of the thirtieth to thirty-seventh sessions) instead of curved where the
-facets' sag outweighs the noise (``core.surface.facet_sag``), in the same run.
+before (``samples``: NOISE_COUNTS set to infinity, which turns all three off), and as through
+the thirty-seventh session (``before``: the faces of every such mesh sampled flat,
+``core.surface.FACET_SAG_OVER_NOISE`` set to infinity, instead of curved where the facets' sag
+outweighs the noise, ``core.surface.facet_sag``; and its net not capped at one control point per
+vertex, ``core.refine.NOISY_NET_PER_VERTEX`` set to infinity), in the same run.
 
     .venv/bin/python benchmarks/noisy_meshes.py [--quick] [--tolerances 1e-3 1e-4]
 
@@ -38,6 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
+import core.refine as R  # noqa: E402
 import core.surface as S  # noqa: E402
 from core import fit_surface  # noqa: E402
 from core.geometry import point_mesh_distance  # noqa: E402
@@ -92,12 +94,13 @@ def main() -> None:
     print("| mesh | vertices | noise | measured | tolerance | variant | cp | faces | stop | RMS "
           "| true | folded | s |")
     print("|---|---:|---:|---:|---:|---|---:|---|---|---:|---:|---:|---:|")
-    counts, sag = S.NOISE_COUNTS, S.FACET_SAG_OVER_NOISE
+    counts, sag, cap = S.NOISE_COUNTS, S.FACET_SAG_OVER_NOISE, R.NOISY_NET_PER_VERTEX
     for name, noise, clean, noisy, faces in cases(args.quick):
         for tol in tolerances:
-            for variant in ("samples", "flat", "now"):
+            for variant in ("samples", "before", "now"):
                 S.NOISE_COUNTS = np.inf if variant == "samples" else counts
-                S.FACET_SAG_OVER_NOISE = np.inf if variant == "flat" else sag
+                S.FACET_SAG_OVER_NOISE = np.inf if variant == "before" else sag
+                R.NOISY_NET_PER_VERTEX = np.inf if variant == "before" else cap
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
@@ -106,6 +109,7 @@ def main() -> None:
                         seconds = time.perf_counter() - t0
                 finally:
                     S.NOISE_COUNTS, S.FACET_SAG_OVER_NOISE = counts, sag
+                    R.NOISY_NET_PER_VERTEX = cap
                 r = surf.report
                 true = float(np.sqrt(np.mean(off_clean(surf, clean, faces) ** 2))) / r["diagonal"]
                 print(f"| {name} | {len(noisy)} | {noise:g} | {r['noise_rel']:.2e} | {tol:g} | "

@@ -19,7 +19,7 @@ import copy
 import inspect
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import ConvexHull, Delaunay, cKDTree
@@ -926,6 +926,17 @@ CROSS_VALIDATE_STALLED = True
 THIN_POINTS_PER_CONTROL = 4
 THIN_MARGIN = 1.25
 STALLED = "the error stopped falling"
+# a noisy mesh's net (adaptive_fit's measured_only) has at most this many control points per
+# vertex: its faces' samples are its vertices interpolated, and a larger net fits their noise.
+# The stall test's estimate of the error at new points caps the net's share of the vertices at
+# 0.9, so past that it could not tell, and fresh starts sized for a tolerance far below the
+# noise jumped past it: a noisy cap of a 32 x 16 UV sphere (193 vertices, noise 0.5% of its
+# radius) at 1e-4 took 1402 control points and ended 1.59e-3 of its diagonal from the sphere
+# (at 1e-3 192 and 1.28e-3); with the cap 97 and 1.08e-3 at both, noisy wave grids of 15 x 15 and
+# 21 x 21 vertices 104 and 154 instead of 649-1820 and 1074-1921, 1.26-1.35x closer to the
+# wave (/tmp/s38/capbudget.py, thirty-eighth session; half a control point per vertex was
+# closer still on 5 of 6, one control point per vertex is the bound that needs no tuning)
+NOISY_NET_PER_VERTEX = 1.0
 # a knot insertion after which the surface swings away from the data between points
 # (swing_places) is taken back near the places that swing, and no knot goes within
 # SWING_FREEZE times the distance to their 3rd nearest knot again (adaptive_fit)
@@ -1180,10 +1191,18 @@ def adaptive_fit(
     and tolerances 1e-3 and 1e-4) two took insertions back (F7 and F10, scattered, 1e-4):
     hold-out RMS 1.31e-3 on 844 control points instead of 1.28e-3 on 1951 (F7) and the same
     (F10).
+    With ``measured_only`` the net also has at most :data:`NOISY_NET_PER_VERTEX` control
+    points per measured point (a vertex of the noisy mesh): reaching that is the error having
+    stopped falling (:data:`STALLED`), not the user's budget.
     Returns the best iteration, the per-iteration reports and why the loop stopped.
     """
     options.validate()
     check_callback(callback)
+    asked = options.max_control_points
+    if measured_only and n_measured is not None:
+        cap = NOISY_NET_PER_VERTEX * n_measured
+        if cap < asked:
+            options = replace(options, max_control_points=max(int(cap), 10))
     rng_seed = options.seed
     tol = options.tolerance * (diagonal if options.relative else 1.0 / unit)
     lo, hi = column_bounds(uv)
@@ -1596,14 +1615,16 @@ def adaptive_fit(
         raise RuntimeError("the refinement loop made no fit")
     if quiet is not None and quiet is not best:  # not returned: no basis kept for it
         quiet.fit.basis = None
-    if best.n_control > options.max_control_points:  # only the first fit was made or kept
+    if reason == "control-point budget reached" and options.max_control_points < asked:
+        reason = STALLED  # (a noisy mesh's net at its vertex count: NOISY_NET_PER_VERTEX)
+    if best.n_control > asked:  # only the first fit was made or kept
         what = ("even the coarsest surface needs" if start_knots is None
                 else "the surface to refine already has" if start_degree in (None, options.degree)
                 else f"the surface to refine has, at degree {options.degree} (it was fitted at "
                      f"degree {start_degree}),")
         raise InvalidInputError(
             f"{what} {best.n_control} control points, more than the maximum of "
-            f"{options.max_control_points}; allow more control points"
+            f"{asked}; allow more control points"
         )
     # sparse data (fewer fitted points than SPARSE_POINTS_PER_CONTROL per control point): only
     # the fairing holds the surface between the points, and the loop's fits come close to

@@ -102,9 +102,10 @@ def test_noisy_meshes_quick():
     """``benchmarks/noisy_meshes.py --quick``: for each noisy grid mesh at a tolerance below its
     noise, the default (the vertices counted) takes under a fifth of the control points of the
     faces' samples counted, and ends at least 1.5x closer to the mesh without noise; its faces,
-    which hardly sag, stay flat (the same fit as with every noisy mesh's faces flat). The noisy
-    cap of a 32 x 16 UV sphere, whose facets sag by more than its noise, is sampled curved and
-    ends at least 2x closer to the sphere than on flat samples, with fewer control points."""
+    which hardly sag, stay flat. The noisy cap of a 32 x 16 UV sphere, whose facets sag by more
+    than its noise, is sampled curved and ends at least 2x closer to the sphere than as through
+    the thirty-seventh session (flat samples), with fewer control points than it has
+    vertices."""
     res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "noisy_meshes.py"),
                           "--quick"], capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert res.returncode == 0, res.stderr[-3000:]
@@ -112,15 +113,16 @@ def test_noisy_meshes_quick():
             if r.startswith("| ")][1:]
     grids = [r for r in rows if r[0].startswith("grid")]
     assert [(r[2], r[5]) for r in grids] == [
-        (noise, variant) for noise in ("0.002", "0.005") for variant in ("samples", "flat", "now")]
-    for samples, flat, now in zip(grids[::3], grids[1::3], grids[2::3]):
+        (noise, variant) for noise in ("0.002", "0.005") for variant in ("samples", "before", "now")]
+    for samples, now in zip(grids[::3], grids[2::3]):
         assert now[8] == "stalled" and 5 * int(now[6]) < int(samples[6]), (samples, now)
         assert 1.5 * float(now[10]) < float(samples[10]), (samples, now)
-        assert now[7] == "flat" and flat[6:11] == now[6:11], (flat, now)
+        assert now[7] == "flat", now
     caps = {r[5]: r for r in rows if r[0].startswith("cap")}
-    flat, now = caps["flat"], caps["now"]
-    assert (flat[7], now[7]) == ("flat", "curved")
-    assert 2 * float(now[10]) < float(flat[10]) and int(now[6]) < int(flat[6]), (flat, now)
+    before, now = caps["before"], caps["now"]
+    assert (before[7], now[7]) == ("flat", "curved")
+    assert 2 * float(now[10]) < float(before[10]), (before, now)
+    assert int(now[6]) < min(int(before[6]), int(now[1])), (before, now)
 
 
 def test_coarse_meshes_quick():

@@ -922,6 +922,37 @@ def test_refine_never_returns_a_surface_worse_than_the_one_it_started_from(monke
     assert "the surface refine started from" in refine.returned_why(r)
 
 
+def off_unit_sphere(surf, faces) -> float:
+    """The RMS distance from the unit sphere of ``surf`` (a fit of a sphere cap's mesh with
+    ``faces``) at 20 000 seeded random points of the faces' parameters, over the diagonal."""
+    uv = np.asarray(surf.parameterization.uv)
+    rng = np.random.default_rng(5)
+    corners = uv[faces[rng.integers(len(faces), size=20_000)]]
+    at = surf((corners * rng.dirichlet([1, 1, 1], 20_000)[:, :, None]).sum(axis=1))
+    return np.sqrt(np.mean((np.linalg.norm(at, axis=1) - 1.0) ** 2)) / surf.report["diagonal"]
+
+
+def test_a_noisy_mesh_has_no_more_control_points_than_vertices(monkeypatch):
+    """The noisy sphere cap (193 vertices, noise 0.5% of the radius) at 1e-4, far below its
+    noise: its faces' samples are its vertices interpolated, and without a cap on the net
+    (refine.NOISY_NET_PER_VERTEX) the run fitted the noise with 1402 control points (fresh
+    starts sized for the tolerance jump past the window the stall test needs), 1.59e-3 of the
+    diagonal from the sphere. Now the error stops falling with at most one control point per
+    vertex (97), closer to the sphere, at both tolerances."""
+    points, faces = noisy_sphere_cap(noise=0.005)
+    nets = {}
+    for tol in (1e-3, 1e-4):
+        surf = fit_surface(points, faces, tolerance=tol)
+        r = surf.report
+        assert r["stop_reason"] == refine.STALLED and r["control_points"] <= len(points)
+        nets[tol] = (r["control_points"], off_unit_sphere(surf, faces))
+    assert nets[1e-3] == nets[1e-4]
+    monkeypatch.setattr(refine, "NOISY_NET_PER_VERTEX", np.inf)
+    chased = fit_surface(points, faces, tolerance=1e-4)
+    assert chased.report["control_points"] > 5 * len(points)
+    assert off_unit_sphere(chased, faces) > 1.3 * nets[1e-4][1]
+
+
 def test_a_noisy_coarse_mesh_of_a_curved_shape_is_fitted_as_the_shape_not_its_facets(monkeypatch):
     """The noisy sphere cap (32 x 16 segments, noise 0.002 of the radius) at a tolerance where
     its noise counts: the facets' sag (core.surface.facet_sag, 3x its noise) outweighs the
@@ -931,14 +962,7 @@ def test_a_noisy_coarse_mesh_of_a_curved_shape_is_fitted_as_the_shape_not_its_fa
     worse); now it refines to half the RMS and closer to the sphere. A dense noisy grid, whose
     facets hardly sag, keeps its flat samples."""
     points, faces = noisy_sphere_cap()
-
-    def off_sphere(surf):  # RMS over the faces' parameters, over the diagonal
-        uv = np.asarray(surf.parameterization.uv)
-        rng = np.random.default_rng(5)
-        corners = uv[faces[rng.integers(len(faces), size=20_000)]]
-        at = surf((corners * rng.dirichlet([1, 1, 1], 20_000)[:, :, None]).sum(axis=1))
-        return np.sqrt(np.mean((np.linalg.norm(at, axis=1) - 1.0) ** 2)) / surf.report["diagonal"]
-
+    off_sphere = lambda surf: off_unit_sphere(surf, faces)  # noqa: E731
     start = fit_surface(points, faces, tolerance=3e-3, max_control_points=400)
     tight = 0.5 * start.report["rms_rel"]
     now = fit_surface(points, faces, tolerance=tight, max_control_points=400)
