@@ -411,6 +411,9 @@ def _fit(args) -> int:
     if stopped_at_noise(r) or near:  # core.parameterize.local_noise
         rows.append(("noise", f"{r['noise']:.4g} ({r['noise_rel']:.2e} of the diagonal; "
                               "a tighter fit would follow it)"))
+    if r.get("net_capped"):  # core.refine.NOISY_NET_PER_VERTEX
+        rows.append(("net capped", f"{r['net_capped']} control points, one per vertex of the "
+                                   "noisy mesh (more would fit its noise)"))
     if "rms_area" in r:  # a cloud: the RMS over its area (uneven density)
         rows.append(("RMS over area", f"{r['rms_area']:.4g} ({r['rms_area_rel']:.2e} of the diagonal)"))
     swings = r.get("swings") or {}

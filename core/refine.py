@@ -926,16 +926,18 @@ CROSS_VALIDATE_STALLED = True
 THIN_POINTS_PER_CONTROL = 4
 THIN_MARGIN = 1.25
 STALLED = "the error stopped falling"
-# a noisy mesh's net (adaptive_fit's measured_only) has at most this many control points per
-# vertex: its faces' samples are its vertices interpolated, and a larger net fits their noise.
-# The stall test's estimate of the error at new points caps the net's share of the vertices at
-# 0.9, so past that it could not tell, and fresh starts sized for a tolerance far below the
-# noise jumped past it: a noisy cap of a 32 x 16 UV sphere (193 vertices, noise 0.5% of its
-# radius) at 1e-4 took 1402 control points and ended 1.59e-3 of its diagonal from the sphere
-# (at 1e-3 192 and 1.28e-3); with the cap 97 and 1.08e-3 at both, noisy wave grids of 15 x 15 and
-# 21 x 21 vertices 104 and 154 instead of 649-1820 and 1074-1921, 1.26-1.35x closer to the
-# wave (/tmp/s38/capbudget.py, thirty-eighth session; half a control point per vertex was
-# closer still on 5 of 6, one control point per vertex is the bound that needs no tuning)
+# a noisy mesh's loop (adaptive_fit's measured_only) has a budget of at most this many control
+# points per vertex: its faces' samples are its vertices interpolated, and a larger net fits
+# their noise. The stall test's estimate of the error at new points caps the net's share of the
+# vertices at 0.9, so past that it cannot tell, and the automatic start and the fresh starts,
+# sized from the user's budget and a tolerance far below the noise, jumped past the windows it
+# needs: a noisy cap of a 32 x 16 UV sphere (193 vertices, noise 0.5% of its radius) at 1e-4
+# took 1402 control points and ended 1.59e-3 of its diagonal from the sphere (at 1e-3 192 and
+# 1.28e-3). With the budget capped (the starts sized from it) the stall test stops it at 97
+# and 1.08e-3 at both, and noisy wave grids of 15 x 15 and 21 x 21 vertices at 104 and 154
+# instead of 649-1820 and 1074-1921, 1.26-1.35x closer to the wave (/tmp/s38/capbudget.py,
+# thirty-eighth session; half a control point per vertex was closer still on 5 of 6, one per
+# vertex is the bound that needs no tuning)
 NOISY_NET_PER_VERTEX = 1.0
 # a knot insertion after which the surface swings away from the data between points
 # (swing_places) is taken back near the places that swing, and no knot goes within
@@ -1191,9 +1193,11 @@ def adaptive_fit(
     and tolerances 1e-3 and 1e-4) two took insertions back (F7 and F10, scattered, 1e-4):
     hold-out RMS 1.31e-3 on 844 control points instead of 1.28e-3 on 1951 (F7) and the same
     (F10).
-    With ``measured_only`` the net also has at most :data:`NOISY_NET_PER_VERTEX` control
-    points per measured point (a vertex of the noisy mesh): reaching that is the error having
-    stopped falling (:data:`STALLED`), not the user's budget.
+    With ``measured_only`` the budget is at most :data:`NOISY_NET_PER_VERTEX` control points
+    per measured point (a vertex of the noisy mesh), which also sizes the automatic start; the
+    net grows no further, and reaching that is the error having stopped falling
+    (:data:`STALLED`, the last report's ``net_capped``), not the user's budget. (A first fit
+    above it, of a tiny mesh or a larger net to refine, is not refused: the run stops there.)
     Returns the best iteration, the per-iteration reports and why the loop stopped.
     """
     options.validate()
@@ -1613,10 +1617,17 @@ def adaptive_fit(
         interior = np.vstack([interior, new])
     if best is None:  # cannot happen: the first fit of a run is always made
         raise RuntimeError("the refinement loop made no fit")
+    if reason == "control-point budget reached" and options.max_control_points < asked:
+        # a noisy mesh's net at its vertex count (NOISY_NET_PER_VERTEX): a stall, which returns
+        # the fit of the lowest estimated error at new points, as the stall test's does; the
+        # last report says so (report["net_capped"])
+        reason = STALLED
+        history[-1]["net_capped"] = int(options.max_control_points)
+        if quiet is not None and quiet is not best:
+            best.fit.basis = None
+            best = quiet
     if quiet is not None and quiet is not best:  # not returned: no basis kept for it
         quiet.fit.basis = None
-    if reason == "control-point budget reached" and options.max_control_points < asked:
-        reason = STALLED  # (a noisy mesh's net at its vertex count: NOISY_NET_PER_VERTEX)
     if best.n_control > asked:  # only the first fit was made or kept
         what = ("even the coarsest surface needs" if start_knots is None
                 else "the surface to refine already has" if start_degree in (None, options.degree)

@@ -720,7 +720,10 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None,
         chosen = bool(rep.get("smoothness_selection"))  # by the engine, or Auto Smoothness
         # the data's noise (core.parameterize.local_noise), when the error stopped at it;
         # else the cause is open
-        if _core().surface.stopped_at_noise(rep):
+        if rep.get("net_capped"):  # (core.refine.NOISY_NET_PER_VERTEX)
+            why = (f"when the net reached one control point per vertex of the noisy mesh "
+                   f"({rep['net_capped']}): more would fit its noise")
+        elif _core().surface.stopped_at_noise(rep):
             why = (f"at the data's noise: {_scatter(surf)}, and more control points would fit "
                    "the noise")
         else:

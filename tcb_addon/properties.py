@@ -118,8 +118,8 @@ class FitSettings:
     smoothness_set: BoolProperty(
         name="Smoothness Given",
         description="Use the Smoothness 0.0001 as it is (it was typed, reset or set by a "
-        "script); off: the default, chosen by cross-validation on a sparse cloud or when the "
-        "error stopped falling above the tolerance",
+        "script); off: the default, chosen by cross-validation on sparse or thin data or when "
+        "the error stopped falling above the tolerance",
         default=False, options={"HIDDEN"},
     )  # fmt: skip
     auto_smoothness: BoolProperty(

@@ -5,6 +5,7 @@ save/reopen, panels."""
 from __future__ import annotations
 
 import hashlib
+import importlib
 import re
 import sys
 import warnings
@@ -359,6 +360,29 @@ def test_a_tolerance_below_the_noise_says_the_data_look_noisy(clean_scene, capfd
     said = re.search(r"the points scatter (\S+) \(\S+% of the diagonal\) across a smooth "
                      r"surface", text)
     assert said and 0.008 < float(said.group(1)) < 0.011, text
+
+
+def test_a_noisy_mesh_whose_net_reached_its_vertex_count_is_told_so(clean_scene, capfd,
+                                                                     monkeypatch):
+    """A noisy mesh's net stops at one control point per vertex (core.refine.
+    NOISY_NET_PER_VERTEX; here a third, with the stall test off, so that the cap stops it):
+    the warning says the error stopped falling there and why, not "raise Max Control
+    Points"."""
+    from meshes import noisy_sphere_cap
+
+    bpy = clean_scene
+    refine = importlib.import_module(ADDON + ".core.refine")
+    monkeypatch.setattr(refine, "NOISY_NET_PER_VERTEX", 0.3)
+    monkeypatch.setattr(refine, "_stalled", lambda *a, **k: False)
+    points, faces = noisy_sphere_cap(noise=0.005)
+    cap = add_mesh(bpy, "Cap", points, faces)
+    capfd.readouterr()
+    assert fit(bpy, cap, tolerance=1e-4) == {"FINISHED"}
+    text = capfd.readouterr().out
+    assert (f"the tolerance was not reached: the error stopped falling when the net reached "
+            f"one control point per vertex of the noisy mesh ({int(0.3 * len(points))}): more "
+            "would fit its noise: set the tolerance above the RMS reached") in text, text
+    assert "Max Control Points" not in text
 
 
 def test_a_clean_cloud_whose_error_stopped_falling_is_not_said_to_be_noisy(clean_scene, capfd):
