@@ -606,8 +606,19 @@ def edit_selection(obj) -> tuple[str, np.ndarray]:
         "object")
 
 
-def read_part(obj, kind: str, mask: np.ndarray, digest: str | None = None
-              ) -> tuple[InputData, str]:
+def reshaped(obj) -> tuple[bool, bool]:
+    """Whether mesh ``obj`` has modifiers shown in the viewport, and shape keys in effect (a
+    key other than the basis with a value, not muted): Object Mode reads it so shaped, a part
+    (:func:`read_part`) from its own vertices."""
+    mesh = obj.data
+    modified = any(m.show_viewport for m in getattr(obj, "modifiers", ()))
+    keys = mesh.shape_keys is not None and any(
+        k.value != 0 and not k.mute for k in mesh.shape_keys.key_blocks[1:])
+    return modified, keys
+
+
+def read_part(obj, kind: str, mask: np.ndarray, digest: str | None = None,
+              whole: bool = False) -> tuple[InputData, str]:
     """World-space points (and faces) of the part of mesh ``obj`` that ``mask`` selects
     (:func:`edit_selection`): the selected polygons, triangulated as :func:`read_triangles`
     does, with their vertices only, or (``"VERTICES"``) the selected vertices as a point
@@ -618,7 +629,9 @@ def read_part(obj, kind: str, mask: np.ndarray, digest: str | None = None
     user test). A :class:`SelectionError` when the mesh no longer has as many polygons
     or vertices as ``mask``, or the part is not the one of ``digest`` (its faces renumbered,
     Sort Elements, or edited since: the mask had picked other faces, and the Deviation Map
-    had measured them; user test)."""
+    had measured them; user test). ``whole``: all of a mesh that no modifier or shape key
+    reshapes (:func:`reshaped`), read with all its vertices as Object Mode reads it (a loose
+    one too, which the engine leaves out and counts), without the part's note."""
     from .. import core  # the extension's own engine
 
     mesh = obj.data
@@ -629,16 +642,14 @@ def read_part(obj, kind: str, mask: np.ndarray, digest: str | None = None
     if n != len(mask):
         raise SelectionError(f"'{obj.name}' has {n} {what} now, {len(mask)} when its selected "
                              f"{what} were fitted{again}")
-    modified = any(m.show_viewport for m in getattr(obj, "modifiers", ()))
-    keys = mesh.shape_keys is not None and any(
-        k.value != 0 and not k.mute for k in mesh.shape_keys.key_blocks[1:])
+    modified, keys = reshaped(obj)
     pts = read_positions(mesh)
     matrix = obj.matrix_world
     tris = None
     if faces:
         tris, poly = read_triangles(mesh, matrix, pts, polygons=True)
         tris = tris[mask[poly]]
-        used = np.unique(tris)
+        used = np.arange(len(pts)) if whole else np.unique(tris)
         where = np.full(len(pts), -1, dtype=np.int64)
         where[used] = np.arange(len(used))
         pts, tris = pts[used], where[tris]
@@ -656,8 +667,8 @@ def read_part(obj, kind: str, mask: np.ndarray, digest: str | None = None
             f"'{obj.name}': {bad} of its {len(pts)} selected vertices "
             f"{'has' if bad == 1 else 'have'} NaN or infinite coordinates: delete or fix them "
             "and try again")
-    notes = [f"the {int(mask.sum())} selected {what} of '{obj.name}'"
-             + (", as a point cloud" if not faces else "")]
+    notes = [] if whole else [f"the {int(mask.sum())} selected {what} of '{obj.name}'"
+                              + (", as a point cloud" if not faces else "")]
     if modified or keys:
         # (not UNMODIFIED's words: Refine and the Deviation Map take those for a source hidden
         # since its fit, and a part is always read so; review)

@@ -1096,12 +1096,13 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 raise bridge.SelectionError(problem)
             obj = context.edit_object
             kind, mask = bridge.edit_selection(obj)
-            data, digest = bridge.read_part(obj, kind, mask)
-            # all of a mesh, as Object Mode reads it (its faces hold every vertex, no modifier
-            # makes another shape): the whole object's result (it had been a second one; review)
-            whole = (mask.all() and len(data.points) == len(obj.data.vertices)
-                     and (kind == "FACES") == bool(len(obj.data.polygons))
-                     and not any(m.show_viewport for m in obj.modifiers))
+            # all of a mesh that no modifier or shape key makes another shape: the whole
+            # object, read as Object Mode reads it (its loose vertices too, which the engine
+            # leaves out and counts), and its result replaced (it had been a second one, also
+            # with a loose vertex; review)
+            whole = (mask.all() and (kind == "FACES") == bool(len(obj.data.polygons))
+                     and not any(bridge.reshaped(obj)))
+            data, digest = bridge.read_part(obj, kind, mask, whole=whole)
             self._part = "" if whole else bridge.part_text(kind, mask, digest)
         else:
             data = bridge.read_selection(context)

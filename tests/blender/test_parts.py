@@ -246,6 +246,21 @@ def test_a_part_of_a_mesh_with_modifiers_and_all_faces_selected(clean_scene):
     assert "tcb_source_part" not in bpy.context.view_layer.objects.active
     assert sum(o.tcb.role == "SURFACE" and o.tcb.sources[0].object == scan
                for o in bpy.data.objects) == 1
+    # ... also with a loose vertex, which the whole object's fit leaves out and counts (it had
+    # made a second result: the faces' vertices were not all of the mesh's)
+    assert bpy.context.mode == "OBJECT"
+    scan.data.vertices.add(1)
+    scan.data.vertices[-1].co = (0.0, 0.0, 2.0)
+    scan.data.update()
+    select_faces(scan, lambda c: np.ones(len(c), bool))
+    assert edit_fit(bpy, scan, tolerance=2e-3) == {"FINISHED"}
+    active = bpy.context.view_layer.objects.active
+    assert active.name == first and "tcb_source_part" not in active
+    assert spline_of(active).report["loose_vertices"] == 1
+    with bpy.context.temp_override(**select(bpy, active)):  # (the object's data, as read now)
+        assert bpy.ops.tcb.refine(tolerance=1e-3) == {"FINISHED"}
+    assert sum(o.tcb.role == "SURFACE" and o.tcb.sources[0].object == scan
+               for o in bpy.data.objects) == 1
 
 
 def test_each_triangle_read_is_of_its_polygon_after_n_gons_are_cut_again(clean_scene):
