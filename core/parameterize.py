@@ -3190,7 +3190,8 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     graph = sp.coo_matrix((np.ones(len(ea)), (ea, eb)), shape=(n, n))
     _, label = connected_components(graph, directed=False)
     n_pieces = len(np.unique(label[used]))
-    # the pieces' sizes in faces, largest first (a stray piece of a selection is easy to miss)
+    # the pieces' sizes in triangles, largest first (a stray piece of a selection is easy to
+    # miss; triangles: a quad is two, and "faces" had summed to twice a selection's; user test)
     sizes = np.sort(np.bincount(label[tris[:, 0]]))[::-1] if n_pieces > 1 else None
     graph = label = None  # (freed: the arrays of the edges and half-edges are most of what
     # a large mesh's map holds besides its factors, 0.9 GB at 1e6 vertices)
@@ -3212,7 +3213,8 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
         shown = ", ".join(str(int(k)) for k in sizes[sizes > 0][:5]) + (
             ", ..." if n_pieces > 5 else "")
         raise TopologyError(
-            f"the mesh has {n_pieces} separate pieces (connected components) of {shown} faces; "
+            f"the mesh has {n_pieces} separate pieces (connected components) of {shown} "
+            "triangles; "
             "one connected disk-like patch is needed: keep the largest piece or fit each piece "
             "separately"
         )

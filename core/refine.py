@@ -155,6 +155,18 @@ def check_callback(callback) -> None:
                 f"-> bool); {getattr(callback, '__name__', callback)!r} cannot") from None
 
 
+def kept_words(kept: dict, scale: float = 1.0, unit: str = "") -> str:
+    """How a refined surface compared with the one refine started from, which was kept
+    (``report["kept_start"]``), its errors over ``scale`` followed by ``unit``: "has a higher
+    RMS, a against b", or "is no better (RMS a)" where the two print alike (a stalled run's
+    refit of the same net: "0.00389 against 0.00389" had been said; user test)."""
+    what = "max error" if kept.get("criterion") == "max" else "RMS"
+    refined, start = (f"{kept[k] / scale:.4g}{unit}" for k in ("refined", "start"))
+    if refined == start:
+        return f"is no better ({what} {start})"
+    return f"has a higher {what}, {refined} against {start}"
+
+
 def returned_why(report: dict, criterion: str = "rms") -> str:
     """Why the surface returned is an earlier iteration's fit (adaptive_fit's choice), in
     words for the command line and Blender: they had said "lowest RMS" also of a smaller net
@@ -163,10 +175,8 @@ def returned_why(report: dict, criterion: str = "rms") -> str:
     returns that one (``report["kept_start"]``: :meth:`core.TCBSurface.refine`)."""
     kept = report.get("kept_start")
     if kept:
-        what = "max error" if kept.get("criterion") == "max" else "RMS"
         return (f"the surface refine started from: the refined one, iteration "
-                f"{kept['refined_iteration']}'s, has a higher {what}, {kept['refined']:.4g} "
-                f"against {kept['start']:.4g}")
+                f"{kept['refined_iteration']}'s, {kept_words(kept)}")
     if report.get("stop_reason") == STALLED:
         return "lowest estimated error"
     if report.get("stop_reason") == "tolerance reached":  # (a coarser start missed it after)

@@ -791,8 +791,17 @@ def _recording(fn, sink: list):
 def _engine_notes(op) -> list:
     """The engine's warnings recorded for ``op`` (:func:`_recording`), less the swing warning
     and the large net's (report_result words them from the report) and refine()'s word on
-    edited control points (Refine says it in Blender's terms)."""
-    return [m for m in getattr(op, "_engine", ()) if not m.startswith("the surface swings away")
+    edited control points (Refine says it in Blender's terms); the smoothness advice in
+    Blender's terms (it had told a user whose Smoothness was pinned at the default to leave it
+    at its default; user test)."""
+    advice = _core().surface.SMOOTHNESS_ADVICE
+    pinned = (getattr(op, "smoothness_set", False)
+              and getattr(op, "smoothness", None) == DEFAULT_SMOOTHNESS)
+    words = ("unpin the Smoothness (the pin beside it)" if pinned else
+             "set the Smoothness back to 0.0001, not pinned,") + (
+        " or turn on Auto Smoothness to have it chosen by cross-validation")
+    return [m.replace(advice, words) for m in getattr(op, "_engine", ())
+            if not m.startswith("the surface swings away")
             and not m.startswith("the net has ") and "edited control point" not in m]
 
 
@@ -1176,6 +1185,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                     extra.append(
                         "to fit a patch of it, select a disk-like part's faces (one border, "
                         "no handles) in Edit Mode and press Fit Surface" if self._part else
+                        "to fit a patch of it, select only a disk-like part of its faces (one "
+                        "border, no handles) and press Fit Surface again" if edit else
                         "or fit a patch of it as it is, the mesh unchanged: select the "
                         "patch's faces in Edit Mode and press Fit Surface")
                 if str(ex).startswith("at least 10 points are needed") and data.faces is not None:
@@ -1421,13 +1432,12 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         rep = dict(surf.report or {})
         kept = rep.get("kept_start")
         if kept:  # (core: refine() returns the surface it started from when it got worse)
-            what = "max error" if kept.get("criterion") == "max" else "RMS"
             d = float(rep.get("diagonal", 1.0)) or 1.0
             warnings.append(
                 f"nothing was refined: the refined surface (iteration "
                 f"{kept['refined_iteration']}, {kept['refined_control_points']} control "
-                f"points) has a higher {what} at the data, {kept['refined'] / d:.4g} of the "
-                f"diagonal against {kept['start'] / d:.4g}; the surface is kept as it was")
+                f"points), at the data, {_core().refine.kept_words(kept, d, ' of the diagonal')}"
+                "; the surface is kept as it was")
         elif (len(surf.control_points) == self._before[1]
                 and str(rep.get("stop_reason", "")).startswith("tolerance reached")):
             what = "max" if is_max(st) else "RMS"

@@ -194,7 +194,9 @@ def test_a_sparse_cloud_left_at_the_default_smoothness_gets_it_cross_validated(c
     assert surface.tcb.smoothness == pytest.approx(surf.report["smoothness"])
     capfd.readouterr()
     assert fit(bpy, cloud, smoothness=1e-3) == {"FINISHED"}
-    assert "only the smoothness 0.001 holds the surface" in capfd.readouterr().out  # the report
+    said = capfd.readouterr().out  # the report
+    assert "only the smoothness 0.001 holds the surface" in said
+    assert "set the Smoothness back to 0.0001, not pinned, or turn on Auto Smoothness" in said
     surface = bpy.context.view_layer.objects.active
     surf = spline_of(surface)
     assert surf.report["smoothness"] == pytest.approx(1e-3) and "smoothness_selection" not in surf.report
@@ -219,8 +221,13 @@ def test_a_sparse_cloud_left_at_the_default_smoothness_gets_it_cross_validated(c
     assert pinned not in draw_panels(bpy, [cloud])
     settings.smoothness = 1e-4  # (typed in: the same value; Reset to Default sets it too)
     try:
+        capfd.readouterr()
         rep = sidebar_fit()
         assert rep["smoothness"] == pytest.approx(1e-4) and "smoothness_selection" not in rep
+        said = capfd.readouterr().out  # (the engine's advice, in Blender's words)
+        assert "only the smoothness 0.0001 holds the surface" in said, said
+        assert ("unpin the Smoothness (the pin beside it) or turn on Auto Smoothness" in said
+                and "leave the smoothness at its default" not in said), said
         # a pin beside the field says so, and unpinned the default is the engine's again
         assert pinned in draw_panels(bpy, [cloud])
         settings.smoothness_set = False

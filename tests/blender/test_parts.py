@@ -75,6 +75,13 @@ def test_the_selected_faces_of_a_closed_scan_are_fitted_refined_and_mapped(clean
                                                "is, the mesh unchanged: select the patch's "
                                                "faces in Edit Mode"):
             bpy.ops.tcb.fit_surface(tolerance=3e-3)
+    # all of it selected in Edit Mode: the advice is to select less (it had named Edit Mode)
+    select_faces(ball, lambda c: np.ones(len(c), bool))
+    with pytest.raises(RuntimeError, match="the mesh is closed.*to fit a patch of it, select "
+                                           "only a disk-like part of its faces"):
+        edit_fit(bpy, ball)
+    with bpy.context.temp_override(**select(bpy, ball)):
+        bpy.ops.object.mode_set(mode="OBJECT")
     cap = select_faces(ball, lambda c: c[:, 2] > 0.3)
     before = snapshot(ball)
     capfd.readouterr()

@@ -897,7 +897,7 @@ def test_two_components_are_a_topology_error() -> None:
         parameterize(two, np.concatenate([faces, faces + len(pts)]))
     stray = np.concatenate([pts, pts[:3] + [3.0, 0, 0]])
     with pytest.raises(TopologyError, match=rf"2 separate pieces \(connected components\) of "
-                                            rf"{len(faces)}, 1 faces"):
+                                            rf"{len(faces)}, 1 triangles"):
         parameterize(stray, np.concatenate([faces, [[len(pts), len(pts) + 1, len(pts) + 2]]]))
 
 

@@ -920,6 +920,11 @@ def test_refine_never_returns_a_surface_worse_than_the_one_it_started_from(monke
     assert r["returned_iteration"] == r0["returned_iteration"] < r["iterations"]
     np.testing.assert_allclose(refined.errors, fit.errors, rtol=1e-5, atol=1e-7)
     assert "the surface refine started from" in refine.returned_why(r)
+    # ... in words that do not contradict themselves where the two errors print alike (a
+    # stalled run's refit of the same net: "a higher RMS, 0.00389 against 0.00389"; user test)
+    alike = dict(kept, refined=kept["start"] * (1 + 1e-6))
+    assert refine.kept_words(alike) == f"is no better (RMS {kept['start']:.4g})"
+    assert refine.kept_words(dict(kept, refined=2 * kept["start"])).startswith("has a higher RMS")
 
 
 def off_unit_sphere(surf, faces) -> float:
