@@ -2394,7 +2394,7 @@ SMOOTHNESS_ADVICE = ("leave the smoothness at its default or make it 'auto' to h
 # sag over the noise as the fit measures them, /tmp/s38/ratios.py, then the curved fit's
 # distance as a share of the flat one's): sphere caps of UV spheres with noise along the
 # normals 0.42: 0.61-0.72 (64 x 32 segments, noise 0.3% of the radius), 0.27: 0.73, 0.16:
-# 0.96, 0.51: 0.98 (32 x 16, 1%), and 2.53 and 1.01: 0.22 and 0.50 (32 x 16, the benchmark);
+# 0.96, 0.51: 0.98 (32 x 16, 1%), and 2.53 and 1.01 (32 x 16: benchmarks/noisy_meshes.py);
 # wave grids with noise on every coordinate 0.39: 0.85-0.89 (21 x 21), 0.23: 0.91-1.05, 0.21:
 # 1.10 (15 x 15), 0.15: 0.82, 0.14: 1.12-1.17 (41 x 41), 0.10: 1.06 (81 x 81); three_peaks.off
 # (against its clean vertices' curved triangles) 0.33: 1.01, 0.22: 1.05. Without the cap the
