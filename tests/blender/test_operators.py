@@ -2074,6 +2074,10 @@ def test_panels_draw_for_any_selection(clean_scene):
     assert sum(e[0] == "label" and e[1].endswith("(max)") for e in log) == 1
     assert ("label", "no data nearby") not in log
     assert ("label", "Holes Spanned") not in log  # (only where there were holes)
+    # the engine's seconds, named so (the summary gives the operator's, which are more)
+    labels = [e[1] for e in log if e[0] == "label"]
+    seconds = float(labels[labels.index("Engine Seconds") + 1])
+    assert seconds == pytest.approx(spline_of(surface).report["seconds"], abs=0.006)
 
 
 # --- live control net -----------------------------------------------------------------------------
