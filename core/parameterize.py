@@ -2250,11 +2250,127 @@ RECTANGLE_SMOOTH = 25.0
 RECTANGLE_CURL = 2.0  # the longest ratio of a side's length to the distance of its ends
 CORNER_GAP = 2  # turns at most this many edges apart are one group (boundary_corners)
 CORNER_SPAN = 0.03  # a corner's group spans at most this share of the loop's length
+CORNER_MIN_COARSE = 24  # a ragged loop is read at coarser scales of at least this many vertices
 
 
-def boundary_corners(b: np.ndarray) -> np.ndarray | None:
+def _ears(tris: np.ndarray, loop: np.ndarray) -> np.ndarray:
+    """The positions in the boundary ``loop`` of the vertices ``k`` of the triangles of
+    ``tris`` whose three vertices are the loop's ``k - 1``, ``k``, ``k + 1`` (sorted): on a
+    side of the rectangle such a triangle is flat, so ``k`` has to be a corner."""
+    B = len(loop)
+    pos = np.full(int(tris.max()) + 1, -1)
+    pos[loop] = np.arange(B)
+    s = pos[tris]
+    s = s[(s >= 0).all(axis=1)]
+    mid = []
+    for j in range(3):
+        m, a, c = s[:, j], s[:, (j + 1) % 3], s[:, (j + 2) % 3]
+        around = {1, B - 1}  # (the two others one step either side of m)
+        hit = np.isin((a - m) % B, list(around)) & np.isin((c - m) % B, list(around)) & (a != c)
+        mid.append(m[hit])
+    return np.unique(np.concatenate(mid)) if B > 3 else np.zeros(0, dtype=np.int64)
+
+
+def boundary_corners(b: np.ndarray, ears: np.ndarray | None = None) -> np.ndarray | None:
     """The four corners of a boundary loop ``b`` (its points in order, (B, 3)) that is a
-    quadrilateral's (sorted positions in the loop), or None.
+    quadrilateral's (sorted positions in the loop), or None: :func:`_turn_corners` of the loop,
+    else of the loop read at a coarser scale where it is ragged (not in method.md).
+
+    A loop with four or more vertices that turn by RECTANGLE_SMOOTH degrees or more and no
+    four corners by :func:`_turn_corners` (noise on a scan's border, a staircase of grid cells)
+    is read again by :func:`_chord_corners` at the scale of ``h`` of its edges, ``h`` = 2, 3,
+    4, 6, 8, 11, ... while the loop has CORNER_MIN_COARSE times ``h`` vertices or more: noise
+    that turns each edge by tens of degrees turns chords ``h`` edges long by about ``1 / h`` of
+    that, and a corner still turns by its angle. A noisy grid mesh of 200 x 200 vertices (noise
+    0.1% of its diagonal on every coordinate: its border's vertices turn by up to 130 degrees)
+    went to the circle, the square's corners squeezed: its max error 1.5e-2 of the diagonal,
+    at the corners, and the true surface's corners 1.45e-2 from the fit (user test; on the
+    rectangle 6.1e-3 and 2.3e-3; /tmp/s39/f9c.py of the thirty-ninth session). The corners of
+    noisy grids of 41 x 41 to 317 x 317 vertices with noise up to 0.5% of the diagonal come
+    out within 3 vertices of the true ones (/tmp/s39/turns.py); noisy circles and ellipses of
+    400 to 4000 vertices (noise up to the spacing) and the staircase borders of
+    benchmarks/mesh_maps.py have none; a 21 x 21 grid without one boundary triangle (a notch
+    that hid its corner) has its four. ``ears`` (:func:`_ears`) are kept as corners where one
+    is near."""
+    corners = _turn_corners(b)
+    B = len(b) if corners is None else 0
+    if B and np.count_nonzero(_turns(b)[0] >= RECTANGLE_SMOOTH) >= 4:
+        h = 2
+        while B // h >= CORNER_MIN_COARSE:
+            corners = _chord_corners(b, h, ears)
+            if corners is not None:
+                return corners
+            h = h + 1 if h < 4 else int(round(h * 1.4142))
+    return corners
+
+
+def _chord_corners(b: np.ndarray, h: int, ears: np.ndarray | None) -> np.ndarray | None:
+    """The four corners of a loop ``b`` (B, 3) read at the scale of ``h`` of its edges
+    (:func:`boundary_corners`), or None: the vertices whose chords to the vertices ``h``
+    before and after turn most within ``h`` vertices either way, by more than CORNER_TURN,
+    exactly four, every other such peak under RECTANGLE_SMOOTH, and no side of the loop
+    averaged over ``2 h + 1`` vertices curled (RECTANGLE_CURL). A corner moves to the nearest
+    of the ``ears`` (:func:`_ears`) within ``h / 2`` of it."""
+    turn = _turns(b, h)[0]
+    peak = (turn >= RECTANGLE_SMOOTH) & (turn == ndimage.maximum_filter1d(turn, 2 * h + 1, mode="wrap"))
+    peak &= turn > np.roll(turn, 1)  # (the first of a plateau)
+    at = np.flatnonzero(peak)
+    corners = at[turn[at] > CORNER_TURN]
+    if len(corners) != 4 or len(corners) != len(at):
+        return None
+    if ears is not None and len(ears):
+        for k, c in enumerate(corners):
+            near = ears[np.abs((ears - c + len(b) // 2) % len(b) - len(b) // 2) <= h // 2]
+            if len(near):
+                corners[k] = near[np.argmin(np.abs((near - c + len(b) // 2) % len(b) - len(b) // 2))]
+    corners = np.unique(corners)
+    smooth = sum(np.roll(b, s, axis=0) for s in range(-h, h + 1)) / (2 * h + 1)
+    return corners if len(corners) == 4 and _sides_straight(smooth, corners) else None
+
+
+def _turns(b: np.ndarray, h: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """How much each vertex of a loop ``b`` (B, 3) turns, in degrees, and the same signed by
+    the loop's normal (:func:`_turn_corners`): from its chord to the vertex ``h`` before to
+    its chord to the vertex ``h`` after (its edges for ``h`` = 1)."""
+    d_out = np.roll(b, -h, axis=0) - b
+    d_in = b - np.roll(b, h, axis=0)
+    cos = np.einsum("ij,ij->i", d_in, d_out) / np.maximum(
+        np.linalg.norm(d_in, axis=1) * np.linalg.norm(d_out, axis=1), 1e-300)
+    turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    normal = np.cross(b, np.roll(b, -1, axis=0)).sum(axis=0)  # (Newell: twice the area vector)
+    normal /= max(float(np.linalg.norm(normal)), 1e-300)
+    # the turn within the loop's plane (the edges projected on it), signed by the normal; a
+    # vertex turns by the smaller of that and its 3D turn: a bend out of the plane (a crease
+    # crossing the boundary, a terrain's ups and downs along a DEM mesh's straight sides)
+    # counts little or nothing, and a sheet curled beyond a half cylinder, whose projected
+    # arcs double back, keeps its small 3D turns there
+    p_in = d_in - np.outer(d_in @ normal, normal)
+    p_out = d_out - np.outer(d_out @ normal, normal)
+    across = np.einsum("ij,j->i", np.cross(p_in, p_out), normal)
+    flat = np.degrees(np.arctan2(across, np.einsum("ij,ij->i", p_in, p_out)))
+    # a bend with no part across the normal counts 0: where a wall leans over the floor its
+    # edge's projection points back (a turn of 180 in the plane; review: a channel with
+    # leaning walls lost its corners)
+    small = 1e-9 * np.linalg.norm(d_in, axis=1) * np.linalg.norm(d_out, axis=1)
+    turn = np.where(np.abs(across) > small, np.minimum(turn, np.abs(flat)), 0.0)
+    signed = turn * np.sign(flat)
+    return turn, signed
+
+
+def _sides_straight(b: np.ndarray, corners: np.ndarray) -> bool:
+    """Whether no side of the loop ``b`` between its sorted ``corners`` is more than
+    RECTANGLE_CURL times as long along the loop as the straight distance between its ends."""
+    seg = np.linalg.norm(np.roll(b, -1, axis=0) - b, axis=1)
+    run = np.concatenate([[0.0], np.cumsum(seg)])  # (the loop's length from vertex 0)
+    side = np.diff(np.append(run[corners], run[-1]))  # from each corner to the next
+    side[3] += run[corners[0]]  # (the last side goes on past vertex 0 to the first corner)
+    chord = b[np.roll(corners, -1)] - b[corners]
+    return not np.any(side > RECTANGLE_CURL * np.linalg.norm(chord, axis=1))
+
+
+def _turn_corners(b: np.ndarray) -> np.ndarray | None:
+    """The four corners of a loop ``b`` (B, 3) read from the turns of its vertices
+    (:func:`boundary_corners`), or None.
 
     Each vertex turns by the angle between its incoming and outgoing edge, or by the angle
     between their projections on the loop's plane (normal: Newell's) where that is smaller,
@@ -2278,29 +2394,8 @@ def boundary_corners(b: np.ndarray) -> np.ndarray | None:
     B = len(b)
     if B < 4:
         return None
-    d_out = np.roll(b, -1, axis=0) - b
-    d_in = b - np.roll(b, 1, axis=0)
-    cos = np.einsum("ij,ij->i", d_in, d_out) / np.maximum(
-        np.linalg.norm(d_in, axis=1) * np.linalg.norm(d_out, axis=1), 1e-300)
-    turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    normal = np.cross(b, np.roll(b, -1, axis=0)).sum(axis=0)  # (Newell: twice the area vector)
-    normal /= max(float(np.linalg.norm(normal)), 1e-300)
-    # the turn within the loop's plane (the edges projected on it), signed by the normal; a
-    # vertex turns by the smaller of that and its 3D turn: a bend out of the plane (a crease
-    # crossing the boundary, a terrain's ups and downs along a DEM mesh's straight sides)
-    # counts little or nothing, and a sheet curled beyond a half cylinder, whose projected
-    # arcs double back, keeps its small 3D turns there
-    p_in = d_in - np.outer(d_in @ normal, normal)
-    p_out = d_out - np.outer(d_out @ normal, normal)
-    across = np.einsum("ij,j->i", np.cross(p_in, p_out), normal)
-    flat = np.degrees(np.arctan2(across, np.einsum("ij,ij->i", p_in, p_out)))
-    # a bend with no part across the normal counts 0: where a wall leans over the floor its
-    # edge's projection points back (a turn of 180 in the plane; review: a channel with
-    # leaning walls lost its corners)
-    small = 1e-9 * np.linalg.norm(d_in, axis=1) * np.linalg.norm(d_out, axis=1)
-    turn = np.where(np.abs(across) > small, np.minimum(turn, np.abs(flat)), 0.0)
-    signed = turn * np.sign(flat)
-    seg = np.linalg.norm(d_out, axis=1)
+    turn, signed = _turns(b)
+    seg = np.linalg.norm(np.roll(b, -1, axis=0) - b, axis=1)
     sig = np.flatnonzero(turn >= RECTANGLE_SMOOTH)
     if len(sig) < 4:
         return None
@@ -2327,13 +2422,7 @@ def boundary_corners(b: np.ndarray) -> np.ndarray | None:
         run = np.abs(ct[s0 + 1 : s0 + n0 + 1] - ct[s0])
         at.append((s0 + int(np.argmax(run >= 0.5 * abs(t0)))) % B)
     corners = np.sort(np.array(at))
-    run = cs[: B + 1]  # (the loop's length from vertex 0)
-    side = np.diff(np.append(run[corners], run[-1]))  # from each corner to the next
-    side[3] += run[corners[0]]  # (the last side goes on past vertex 0 to the first corner)
-    chord = b[np.roll(corners, -1)] - b[corners]
-    if np.any(side > RECTANGLE_CURL * np.linalg.norm(chord, axis=1)):
-        return None
-    return corners
+    return corners if _sides_straight(b, corners) else None
 
 
 # a mesh's own boundary shape (not in method.md, whose section 4 puts the boundary on a circle
@@ -3307,7 +3396,10 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
             "distance (Blender: Mesh > Clean Up > Merge by Distance) and try again"
         )
     uv = np.full((n, 2), np.nan)
-    corners = boundary_corners(p[loop]) if RECTANGLE_CORNERS else None
+    ears = _ears(tris, loop)
+    corners = boundary_corners(p[loop], ears) if RECTANGLE_CORNERS else None
+    if corners is not None and not np.isin(ears, corners).all():
+        corners = None  # (a triangle of three vertices on one side would be flat: the circle)
     if corners is None:
         t = np.concatenate([[0.0], np.cumsum(seg[:-1])]) / seg.sum()
         uv[loop] = np.column_stack([np.cos(2.0 * np.pi * t), np.sin(2.0 * np.pi * t)])
