@@ -159,3 +159,18 @@ def test_tessellation_sag_quick():
     assert sags[0] > 4 * sags[-1]
     within = [r for r, s in zip((64, 128, 256), sags) if s <= worst]
     assert auto == (within[0] if within else 256)
+
+
+def test_noisy_borders_quick():
+    """``benchmarks/noisy_borders.py --quick``: a noisy 100 x 100 grid mesh (noise 0.2% of its
+    diagonal) went to the circle as through the thirty-eighth session, and now to the
+    rectangle, where the noise-free grid's farthest vertex (a corner on the circle) comes at
+    least 2x closer to the surface (measured 2.38e-2 and 7.05e-3 of the diagonal)."""
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "noisy_borders.py"),
+                          "--quick"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = {r[4]: r for r in ([c.strip() for c in line.split("|")[1:-1]]
+                              for line in res.stdout.splitlines() if line.startswith("| grid"))}
+    before, now = rows["before"], rows["now"]
+    assert (before[5], now[5]) == ("circle", "rectangle"), (before, now)
+    assert 2 * float(now[10]) < float(before[10]), (before, now)
