@@ -606,15 +606,19 @@ def test_a_surface_that_swings_off_the_data_is_a_warning(clean_scene, capfd, mon
 
 
 def test_a_surface_that_folds_over_its_mesh_is_a_warning_and_a_panel_row(clean_scene, capfd,
-                                                                         tmp_path):
+                                                                         tmp_path, monkeypatch):
     """A noisy scan-like grid mesh (noise of 1% of its diagonal) fitted to 1e-2: the surface
     folds over between the vertices (core.surface.mesh_folds). The summary is a WARNING that
     says so, and the panel keeps the share after the report is gone (user test: nothing
     showed it once the report had scrolled away), also in the saved .blend opened again; a
-    clean mesh has neither."""
+    clean mesh has neither. (The mesh on the circle, as until the thirty-ninth session:
+    mapped from its vertices smoothed it no longer folds.)"""
     from meshes import noisy_grid
 
     bpy = clean_scene
+    pz = core_module().parameterize
+    monkeypatch.setattr(pz, "MAP_DENOISE", False)
+    monkeypatch.setattr(pz, "boundary_corners", lambda b, ears=None: pz._turn_corners(b))
     verts, faces = noisy_grid()
     scan = add_mesh(bpy, "Scan", verts, faces)
     capfd.readouterr()
