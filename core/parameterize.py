@@ -3233,7 +3233,9 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     one :func:`_dissection_order` for both    4.3 s, 0.52 GB  34 s, 2.4 GB
     ========================================  ==============  ===============
 
-    The uv the same to 5e-14 there and on data/*.off."""
+    The uv the same to 5e-14 there and on data/*.off. A noisy mesh left on the circle makes
+    the two again of its vertices smoothed (:func:`_denoised_own_map`, the first two freed
+    before: 0.7-0.8 s more on a noisy L-shaped mesh of 250 x 250 vertices; review)."""
     p = _as_points(points, what="vertices")
     n = len(p)
     tris = _as_triangles(faces, n, p)
@@ -3469,6 +3471,7 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
             uv = flat
     if flat is not uv and corners is None and len(ii) and FLAT_BOUNDARY and MAP_DENOISE:
         # a noisy mesh left on the circle: its own shape again, of its vertices smoothed
+        w = lu = known = None  # (their factor freed first)
         uv = _denoised_own_map(p, tris, loop, ii, ea, eb, used, order, uv)
 
     # fold-over check: det(a, b, c) > 0 for every uv triangle
@@ -3537,9 +3540,12 @@ def _denoised(p, ea, eb, loop, used) -> np.ndarray:
 def _denoised_own_map(p, tris, loop, interior, ea, eb, used, order, uv) -> np.ndarray:
     """A noisy mesh's map with its own boundary shape made of its vertices smoothed
     (:func:`_denoised`; the flattened map, else the projected one: :func:`_flattened_map`,
-    :func:`_projected_map`) where that flips no triangle and distorts them less than ``uv``
-    (its map on the circle; FLAT_GAIN, both measured on the smoothed vertices), else ``uv``
-    (not in method.md). ``order``: the interior's ordering for the sparse factor.
+    :func:`_projected_map`) where that flips no triangle and distorts them less than the
+    circle does (FLAT_GAIN and FLAT_MIN_GAIN, both maps of the smoothed vertices: the circle's
+    interior solved again with their weights, and the distortion measured on them; against
+    the circle of the noisy vertices' weights, whose rough interior distorts far more, a
+    noisy cap had taken its own shape with no gain; review), else ``uv`` (its map on the
+    circle; not in method.md). ``order``: the interior's ordering for the sparse factor.
 
     Noise turns a border's vertices by tens of degrees, and the mesh's angle sums, by which
     the flattened border turns, are noise too: a noisy sheet whose border is L-shaped, ragged
@@ -3567,8 +3573,10 @@ def _denoised_own_map(p, tris, loop, interior, ea, eb, used, order, uv) -> np.nd
         own = _projected_map(q, tris, loop, interior, w, lu, frames)
     if own is None or not (orient2d(own[tris[:, 0]], own[tris[:, 1]], own[tris[:, 2]]) > 0).all():
         return uv
+    circle = uv.copy()
+    circle[interior] = lu.solve(np.asfortranarray(w[:, loop] @ uv[loop]))
     gain = _map_energy(q, tris, own, frames) - 1.0
-    return own if gain < FLAT_GAIN * (_map_energy(q, tris, uv, frames) - 1.0) - FLAT_MIN_GAIN else uv
+    return own if gain < FLAT_GAIN * (_map_energy(q, tris, circle, frames) - 1.0) - FLAT_MIN_GAIN else uv
 
 
 def _vertex_stretch(p, uv, ea, eb, used) -> np.ndarray:
