@@ -16,8 +16,9 @@ function over [0, 3] x [0, 0.3], a grid without noise (nothing may change), the 
 64 x 32 UV sphere (tests/meshes.py's ``noisy_sphere_cap``: a round border, the circle either
 way), and parts of the noisy 100 x 100 grid: the faces outside its upper right quarter (an L),
 below its diagonal (a triangle) and inside a wavy ragged border (benchmarks/mesh_maps.py's
-``ragged``). Columns: the map the fit took (``circle``; ``rectangle``; ``own``: the border's own shape
-flattened or projected, ``core.parameterize.FLAT_BOUNDARY``), the control points, the largest
+``ragged``), and a 150 x 100 grid with bitten sides (``bitten``). Columns: the map the fit took
+(``circle``; ``rectangle``; ``own``: the border's own shape flattened or projected,
+``core.parameterize.FLAT_BOUNDARY``), the control points, the largest
 error at the vertices over the diagonal, *surface to true*: the RMS and largest distance from the
 noise-free shape (the grid without noise; the sphere) of the surface at 20 000 random points of
 the faces' parameters (benchmarks/noisy_meshes.py's ``off_clean``), *true to surface*: the

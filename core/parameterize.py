@@ -2276,29 +2276,30 @@ def boundary_corners(b: np.ndarray, ears: np.ndarray | None = None) -> np.ndarra
     quadrilateral's (sorted positions in the loop), or None: :func:`_turn_corners` of the loop,
     else of the loop read at a coarser scale where it is ragged (not in method.md).
 
-    A loop with four or more vertices that turn by RECTANGLE_SMOOTH degrees or more and no
-    four corners by :func:`_turn_corners` (noise on a scan's border) is read again by :func:`_chord_corners` at the scale of ``h`` of its edges, ``h`` = 2, 3,
-    4, 6, 8, 11, ... while the loop has CORNER_MIN_COARSE times ``h`` vertices or more: noise
-    that turns each edge by tens of degrees turns chords ``h`` edges long by about ``1 / h`` of
-    that, and a corner still turns by its angle. A noisy grid mesh of 200 x 200 vertices (noise
-    0.1% of its diagonal on every coordinate: its border's vertices turn by up to 130 degrees)
-    went to the circle, the square's corners squeezed: its max error 1.5e-2 of the diagonal,
-    at the corners, and the true surface's corners 1.45e-2 from the fit (user test; on the
-    rectangle 6.1e-3 and 2.3e-3; /tmp/s39/f9c.py of the thirty-ninth session). The corners of
-    noisy grids of 41 x 41 to 317 x 317 vertices with noise up to 0.5% of the diagonal come
-    out within 3 vertices of the true ones (seed 0, /tmp/s39/turns.py; a review found up to 8
-    on other seeds at 317 x 317 with 0.5%, 2 at 0.2%, and all 120 noisy grids and strips of
-    50 x 50 to 300 x 30 vertices with noise 0.03-0.2% on rectangles); noisy circles and
-    ellipses of 400 to 4000 vertices (noise up to the spacing), noisy sphere caps and the
-    staircase borders of benchmarks/mesh_maps.py have none; a 21 x 21 grid without one
-    boundary triangle (a notch that hid its corner) has its four. ``ears`` (:func:`_ears`) are
-    kept as corners where one is near; a staircase's steps are ears, and the corners read at a
-    coarser scale miss them (the rectangle is then refused). Short of the truth: strips
-    narrower than about 2 h + 1 vertices, whose two corners at an end are one peak (300 x 6
-    with noise 0.1%; :func:`_denoised_own_map` gives it its own shape), and one spurious peak of RECTANGLE_SMOOTH degrees or more at
-    every scale (a 60 x 60 grid with noise 0.5%, two of eight seeds); a noisy stadium of 400
-    vertices had four corners on a quarter of its seeds (review; with about the circle's max
-    error and 1.1-1.3x its control points)."""
+    A loop with four or more vertices that turn by RECTANGLE_SMOOTH degrees or more and no four
+    corners by :func:`_turn_corners` (noise on a scan's border) is read again by
+    :func:`_chord_corners` at the scale of ``h`` of its edges, ``h`` = 2, 3, 4, 6, 8, 11, ...
+    while the loop has CORNER_MIN_COARSE times ``h`` vertices or more: noise that turns each
+    edge by tens of degrees turns chords ``h`` edges long by about ``1 / h`` of that, and a
+    corner still turns by its angle. A noisy grid mesh of 200 x 200 vertices (noise 0.1% of its
+    diagonal on every coordinate: its border's vertices turn by up to 130 degrees) went to the
+    circle, the square's corners squeezed: its max error 1.5e-2 of the diagonal, at the
+    corners, and the true surface's corners 1.45e-2 from the fit (user test; on the rectangle
+    6.1e-3 and 2.3e-3; /tmp/s39/f9c.py of the thirty-ninth session). The corners of noisy grids
+    of 41 x 41 to 317 x 317 vertices with noise up to 0.5% of the diagonal come out within 3
+    vertices of the true ones (seed 0, /tmp/s39/turns.py; a review found up to 8 on other seeds
+    at 317 x 317 with 0.5%, 2 at 0.2%, and all 120 noisy grids and strips of 50 x 50 to 300 x
+    30 vertices with noise 0.03-0.2% on rectangles); noisy circles and ellipses of 400 to 4000
+    vertices (noise up to the spacing), noisy sphere caps and the staircase borders of
+    benchmarks/mesh_maps.py have none; a 21 x 21 grid without one boundary triangle (a notch
+    that hid its corner) has its four. ``ears`` (:func:`_ears`) are kept as corners where one
+    is near; a staircase's steps are ears, and the corners read at a coarser scale miss them
+    (the rectangle is then refused). Short of the truth: strips narrower than about 2 h + 1
+    vertices, whose two corners at an end are one peak (300 x 6 with noise 0.1%;
+    :func:`_denoised_own_map` gives it its own shape), and one spurious peak of
+    RECTANGLE_SMOOTH degrees or more at every scale (a 60 x 60 grid with noise 0.5%, two of
+    eight seeds); a noisy stadium of 400 vertices had four corners on a quarter of its seeds
+    (review; with about the circle's max error and 1.1-1.3x its control points)."""
     corners = _turn_corners(b)
     B = len(b) if corners is None else 0
     if B and np.count_nonzero(_turns(b)[0] >= RECTANGLE_SMOOTH) >= 4:
@@ -2319,7 +2320,8 @@ def _chord_corners(b: np.ndarray, h: int, ears: np.ndarray | None) -> np.ndarray
     averaged over ``2 h + 1`` vertices curled (RECTANGLE_CURL). A corner moves to the nearest
     of the ``ears`` (:func:`_ears`) within ``h / 2`` of it."""
     turn = _turns(b, h)[0]
-    peak = (turn >= RECTANGLE_SMOOTH) & (turn == ndimage.maximum_filter1d(turn, 2 * h + 1, mode="wrap"))
+    peak = (turn >= RECTANGLE_SMOOTH) & (
+        turn == ndimage.maximum_filter1d(turn, 2 * h + 1, mode="wrap"))
     peak &= turn > np.roll(turn, 1)  # (the first of a plateau)
     at = np.flatnonzero(peak)
     corners = at[turn[at] > CORNER_TURN]
@@ -2329,7 +2331,8 @@ def _chord_corners(b: np.ndarray, h: int, ears: np.ndarray | None) -> np.ndarray
         for k, c in enumerate(corners):
             near = ears[np.abs((ears - c + len(b) // 2) % len(b) - len(b) // 2) <= h // 2]
             if len(near):
-                corners[k] = near[np.argmin(np.abs((near - c + len(b) // 2) % len(b) - len(b) // 2))]
+                off = np.abs((near - c + len(b) // 2) % len(b) - len(b) // 2)
+                corners[k] = near[np.argmin(off)]
     corners = np.unique(corners)
     smooth = sum(np.roll(b, s, axis=0) for s in range(-h, h + 1)) / (2 * h + 1)
     return corners if len(corners) == 4 and _sides_straight(smooth, corners) else None
@@ -3576,7 +3579,8 @@ def _denoised_own_map(p, tris, loop, interior, ea, eb, used, order, uv) -> np.nd
     circle = uv.copy()
     circle[interior] = lu.solve(np.asfortranarray(w[:, loop] @ uv[loop]))
     gain = _map_energy(q, tris, own, frames) - 1.0
-    return own if gain < FLAT_GAIN * (_map_energy(q, tris, circle, frames) - 1.0) - FLAT_MIN_GAIN else uv
+    fixed = _map_energy(q, tris, circle, frames) - 1.0
+    return own if gain < FLAT_GAIN * fixed - FLAT_MIN_GAIN else uv
 
 
 def _vertex_stretch(p, uv, ea, eb, used) -> np.ndarray:

@@ -1433,11 +1433,25 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         kept = rep.get("kept_start")
         if kept:  # (core: refine() returns the surface it started from when it got worse)
             d = float(rep.get("diagonal", 1.0)) or 1.0
-            warnings.append(
-                f"nothing was refined: the refined surface (iteration "
-                f"{kept['refined_iteration']}, {kept['refined_control_points']} control "
-                f"points), at the data, {_core().refine.kept_words(kept, d, ' of the diagonal')}"
-                "; the surface is kept as it was")
+            if kept["refined_control_points"] == self._before[1]:
+                # the run's best was the same net refitted: the error stopped falling at once
+                # ("the refined surface (iteration 2, 105 control points)" had read as a new
+                # net of the same size; user test)
+                what = "max error" if kept.get("criterion") == "max" else "RMS"
+                again, start = (f"{kept[k] / d:.4g}" for k in ("refined", "start"))
+                than = (f"the same {what}, {start}" if again == start
+                        else f"{what} {again} against {start}")
+                warnings.append(
+                    "nothing was refined: no larger net lowered the error, and the same "
+                    f"{kept['refined_control_points']} control points fitted again (iteration "
+                    f"{kept['refined_iteration']}) have {than} of the diagonal; the surface is "
+                    "kept as it was")
+            else:
+                words = _core().refine.kept_words(kept, d, " of the diagonal")
+                warnings.append(
+                    f"nothing was refined: the refined surface (iteration "
+                    f"{kept['refined_iteration']}, {kept['refined_control_points']} control "
+                    f"points), at the data, {words}; the surface is kept as it was")
         elif (len(surf.control_points) == self._before[1]
                 and str(rep.get("stop_reason", "")).startswith("tolerance reached")):
             what = "max" if is_max(st) else "RMS"

@@ -738,6 +738,35 @@ def test_refine_after_a_loose_fit_grows_the_net_and_says_when_nothing_was_refine
     assert "Warning: TCB:" in out and "nothing was refined" in out and "set a smaller" in out
 
 
+def test_refine_that_only_refitted_the_same_net_says_so(clean_scene, capfd):
+    """A noisy scan (noise 0.3% of its diagonal) fitted at 5e-3: Refine's default (half the
+    error) stops at once, the error no longer falling, and the best surface of the run is the
+    same net fitted again, a hair worse at the data: the surface is kept. The warning had
+    called that "the refined surface (iteration 2, 106 control points)", a new net of the
+    same size to the reader (user test); it says that no larger net lowered the error, and
+    the summary that the error stopped falling at the data's noise."""
+    from meshes import noisy_grid
+
+    bpy = clean_scene
+    scan = add_mesh(bpy, "Scan", *noisy_grid(41, 0.003))
+    assert fit(bpy, scan, tolerance=5e-3, max_control_points=300) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    st = surface.tcb
+    n0, before = st.control_points, surface["tcb_spline"]
+    with bpy.context.temp_override(**select(bpy, surface)):
+        capfd.readouterr()
+        assert bpy.ops.tcb.refine() == {"FINISHED"}
+        out = capfd.readouterr().out
+    kept = spline_of(surface).report["kept_start"]
+    assert kept["refined_control_points"] == n0 == st.control_points, out
+    d = spline_of(surface).report["diagonal"]
+    assert (f"nothing was refined: no larger net lowered the error, and the same {n0} control "
+            f"points fitted again (iteration {kept['refined_iteration']}) have RMS "
+            f"{kept['refined'] / d:.4g} against {kept['start'] / d:.4g} of the diagonal; the "
+            "surface is kept as it was" in out), out
+    assert "at the data's noise" in out and "the refined surface (iteration" not in out, out
+
+
 def test_refine_of_a_fit_at_rounding_says_so_and_keeps_the_net(clean_scene, capfd):
     """A flat grid fits to rounding (RMS 9e-17 of the diagonal): Refine's default, half the
     current error, had chased the rounding to the budget (1627 control points, RMS 5.8e-10
