@@ -3503,14 +3503,14 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
 # its vertices smoothed (_denoised_own_map)
 MAP_DENOISE = True
 MAP_NOISE_SPACING = 0.1
-MAP_SMOOTH_STEPS = 10  # Taubin passes (a shrinking and an inflating step each)
+MAP_SMOOTH_STEPS = (10, 30, 90)  # Taubin passes (a shrinking and an inflating step each), in turn
 MAP_SMOOTH_LAMBDA, MAP_SMOOTH_MU = 0.5, -0.53
 
 
-def _denoised(p, ea, eb, loop, used) -> np.ndarray:
+def _denoised(p, ea, eb, loop, used, steps: int) -> np.ndarray:
     """The vertices ``p`` of a mesh (edges ``ea``-``eb``, boundary ``loop``) smoothed, or
     ``p`` itself unless its noise (:func:`local_noise` of the ``used`` vertices) is at least
-    MAP_NOISE_SPACING of its median edge length (not in method.md): MAP_SMOOTH_STEPS passes of
+    MAP_NOISE_SPACING of its median edge length (not in method.md): ``steps`` passes of
     Taubin's ``lambda | mu`` smoothing (Taubin 1995: ``q += lambda (L q - q)``, then ``q += mu
     (L q - q)``, ``L q`` the mean of each vertex's neighbours), which damps the noise at the
     scale of the edges and keeps the shape at larger ones without shrinking it. Interior
@@ -3533,7 +3533,7 @@ def _denoised(p, ea, eb, loop, used) -> np.ndarray:
     mean = sp.diags(1.0 / np.maximum(degree, 1.0)) @ a
     alone = degree == 0
     q = p.copy()
-    for _ in range(MAP_SMOOTH_STEPS):
+    for _ in range(steps):
         for step in (MAP_SMOOTH_LAMBDA, MAP_SMOOTH_MU):
             q += step * (mean @ q - q)
             q[alone] = p[alone]
@@ -3548,19 +3548,33 @@ def _denoised_own_map(p, tris, loop, interior, ea, eb, used, order, uv) -> np.nd
     interior solved again with their weights, and the distortion measured on them; against
     the circle of the noisy vertices' weights, whose rough interior distorts far more, a
     noisy cap had taken its own shape with no gain; review), else ``uv`` (its map on the
-    circle; not in method.md). ``order``: the interior's ordering for the sparse factor.
+    circle; not in method.md). ``order``: the interior's ordering for the sparse factor. The
+    vertices are smoothed by MAP_SMOOTH_STEPS passes in turn while the own shape is refused: an
+    L-shaped mesh of 250 x 250 vertices with noise 0.2% of its diagonal (0.7 of its spacing)
+    needs 30 (review).
 
     Noise turns a border's vertices by tens of degrees, and the mesh's angle sums, by which
     the flattened border turns, are noise too: a noisy sheet whose border is L-shaped, ragged
     or a triangle went to the circle (its flattened border overlapped itself, or mean-value
     weights inside its dents flipped triangles), which squeezed its corners, the largest
     errors there (user test: 9-17 times the noise)."""
-    q = _denoised(p, ea, eb, loop, used)
-    if q is p:
-        return uv
-    n = len(p)
+    for steps in MAP_SMOOTH_STEPS:  # (more passes while its own shape is refused)
+        q = _denoised(p, ea, eb, loop, used, steps)
+        if q is p:
+            return uv
+        own = _own_map_of(q, tris, loop, interior, order, uv)
+        if own is not None:
+            return own[0] if own[1] else uv
+    return uv
+
+
+def _own_map_of(q, tris, loop, interior, order, uv) -> tuple[np.ndarray, bool] | None:
+    """:func:`_denoised_own_map`'s map of the smoothed vertices ``q``: None when it is refused
+    (not closed, not simple, pinched, flipping a triangle, or a failed factor), else the map
+    and whether it distorts the triangles less than the circle ``uv``'s boundary with the
+    interior of ``q``'s weights (FLAT_GAIN, FLAT_MIN_GAIN)."""
     terms = _corner_terms(q, tris)
-    w = _mean_value_weights(q, tris, n, terms)[interior]
+    w = _mean_value_weights(q, tris, len(q), terms)[interior]
     theta = _angle_sums(q, tris, terms)
     system = _cotan_system(q, tris, loop, interior, terms)
     known = (theta, _cotan_carried(q, tris, loop, interior, 2.0 * np.pi - theta[interior],
@@ -3569,18 +3583,18 @@ def _denoised_own_map(p, tris, loop, interior, ea, eb, used, order, uv) -> np.nd
     try:
         lu = _OrderedLU(sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w[:, interior], order)
     except RuntimeError:
-        return uv
+        return None
     own = _flattened_map(q, tris, loop, interior, w, lu, known)
     frames = _energy_frames(q, tris)
     if own is None and PROJECTED_BOUNDARY:
         own = _projected_map(q, tris, loop, interior, w, lu, frames)
     if own is None or not (orient2d(own[tris[:, 0]], own[tris[:, 1]], own[tris[:, 2]]) > 0).all():
-        return uv
+        return None
     circle = uv.copy()
     circle[interior] = lu.solve(np.asfortranarray(w[:, loop] @ uv[loop]))
     gain = _map_energy(q, tris, own, frames) - 1.0
     fixed = _map_energy(q, tris, circle, frames) - 1.0
-    return own if gain < FLAT_GAIN * fixed - FLAT_MIN_GAIN else uv
+    return own, bool(gain < FLAT_GAIN * fixed - FLAT_MIN_GAIN)
 
 
 def _vertex_stretch(p, uv, ea, eb, used) -> np.ndarray:
