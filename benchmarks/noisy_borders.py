@@ -30,8 +30,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -42,9 +40,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import core.parameterize as pz  # noqa: E402
-from core import fit_surface  # noqa: E402
 from meshes import noisy_grid, noisy_sphere_cap, wavy  # noqa: E402
-from noisy_meshes import off_clean  # noqa: E402
+from noisy_meshes import off_clean, timed_fit  # noqa: E402
 
 
 def strip(nx: int, ny: int, noise: float, length: float = 3.0, width: float = 0.3):
@@ -155,11 +152,7 @@ def main() -> None:
                 pz.boundary_corners = lambda b, ears=None: pz._turn_corners(b)
                 pz.MAP_DENOISE = False
             try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    t0 = time.perf_counter()
-                    surf = fit_surface(noisy, faces, tolerance=tol)
-                    seconds = time.perf_counter() - t0
+                surf, seconds = timed_fit(noisy, faces, tol)
             finally:
                 pz.boundary_corners, pz.MAP_DENOISE = shipped, True
             r = surf.report

@@ -85,6 +85,15 @@ def off_clean(surf, clean, faces) -> np.ndarray:
     return point_mesh_distance(at, clean, faces)
 
 
+def timed_fit(points, faces, tolerance: float):
+    """``fit_surface`` of a mesh at ``tolerance``, its warnings silenced: (surface, seconds)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        t0 = time.perf_counter()
+        surf = fit_surface(points, faces, tolerance=tolerance)
+        return surf, time.perf_counter() - t0
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="two noisy grids at 1e-3")
@@ -102,11 +111,7 @@ def main() -> None:
                 S.FACET_SAG_OVER_NOISE = np.inf if variant == "before" else sag
                 R.NOISY_NET_PER_VERTEX = np.inf if variant == "before" else cap
                 try:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore")
-                        t0 = time.perf_counter()
-                        surf = fit_surface(noisy, faces, tolerance=tol)
-                        seconds = time.perf_counter() - t0
+                    surf, seconds = timed_fit(noisy, faces, tol)
                 finally:
                     S.NOISE_COUNTS, S.FACET_SAG_OVER_NOISE = counts, sag
                     R.NOISY_NET_PER_VERTEX = cap
