@@ -3503,7 +3503,8 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
 # its vertices smoothed (_denoised_own_map)
 MAP_DENOISE = True
 MAP_NOISE_SPACING = 0.1
-MAP_SMOOTH_STEPS = (10, 30, 90)  # Taubin passes (a shrinking and an inflating step each), in turn
+# Taubin passes (a shrinking and an inflating step each), tried in turn
+MAP_SMOOTH_STEPS = (10, 30, 90)
 MAP_SMOOTH_LAMBDA, MAP_SMOOTH_MU = 0.5, -0.53
 
 

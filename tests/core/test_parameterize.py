@@ -1925,7 +1925,7 @@ def test_a_surface_that_folds_over_its_mesh_is_warned_of() -> None:
     noisy faces themselves 12.7%: their own wrinkles; against both the faces' and the
     vertices' normals 1.6%); and a RuntimeWarning says so and what to do. The noise-free grid
     reports 0 and no warning. (The case is that mesh on the circle, where it went until the
-    thirty-ninth session: its border's noise hid its corners and folded its flattened map.
+    thirty-ninth session: its border's noise hid its corners and spoiled its flattened map.
     Mapped from its vertices smoothed, core.parameterize._denoised_own_map, its fit has 139
     control points instead of 592, folds nowhere, and the noise-free vertices are 1.6x closer
     to it, RMS.)"""
