@@ -752,7 +752,7 @@ def test_refine_that_only_refitted_the_same_net_says_so(clean_scene, capfd):
     assert fit(bpy, scan, tolerance=5e-3, max_control_points=300) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
     st = surface.tcb
-    n0, before = st.control_points, surface["tcb_spline"]
+    n0 = st.control_points
     with bpy.context.temp_override(**select(bpy, surface)):
         capfd.readouterr()
         assert bpy.ops.tcb.refine() == {"FINISHED"}
