@@ -142,6 +142,7 @@ def fit_control_points(
     basis: list | None = None,
     sparse: bool | None = None,
     normals: np.ndarray | None = None,
+    pins: tuple | None = None,
 ) -> FitResult:
     """Fit the control points of ``space`` to ``points`` (N, 3) at parameters ``uv`` (N, 2).
 
@@ -174,6 +175,13 @@ def fit_control_points(
         Unit normals at the first M points: ``FitResult.across`` gets the errors' components
         along them, ``|(S(x_j) - p_j) . n_j|`` (a noisy mesh's stall test:
         :func:`core.refine.adaptive_fit`).
+    pins : (uv (M, 2), targets (M, 3), weight), optional
+        Points the surface is drawn to besides the data (a neighbouring surface's border,
+        :func:`core.surface.join_pins`): the term ``rho sum_m |S(y_m) - t_m|^2`` is added to
+        the data term, ``rho = weight * mean(w)``, so each pin counts as ``weight`` data points
+        of the mean weight (method.md section 5's objective with extra data; not in
+        method.md). The fairing is scaled by the data's trace alone, and the pins neither
+        count in ``errors`` nor score an ``"auto"`` smoothness (refused with pins).
 
     Raises
     ------
@@ -192,6 +200,8 @@ def fit_control_points(
     if weights.shape != (N,) or not np.all(np.isfinite(weights)) or (weights < 0).any():
         raise InvalidInputError("weights must be N finite nonnegative numbers, one per point")
     smoothness = check_smoothness(smoothness)
+    if pins is not None and smoothness == "auto":
+        raise ValueError("pins= needs a smoothness value, not 'auto'")
 
     unit = bool((weights == 1.0).all())
     # the fairing's Gram matrices depend on the space only: made on a thread of their own
@@ -233,6 +243,17 @@ def fit_control_points(
     data_trace = AtA.diagonal().sum()
     if not data_trace > 0:
         raise SingularSystemError("no data point lies in the support of any basis function")
+    pin_grad = None
+    if pins is not None:  # (after the trace: the pins do not scale the fairing)
+        pin_uv, pin_targets, pin_weight = pins
+        Ap = space.evaluate(np.asarray(pin_uv, dtype=np.float64))
+        rho = float(pin_weight) * float(weights.sum()) / max(N, 1)
+        PtP = (rho * (Ap.T @ Ap)).tocsr()
+        PtT = rho * (Ap.T @ np.asarray(pin_targets, dtype=np.float64))
+        AtA, AtP = AtA + PtP, AtP + PtT
+
+        def pin_grad(c, cols=slice(None)):  # the pins' part of the gradient at c
+            return PtP[cols][:, cols] @ c - PtT[cols]
     has_data = AtA.diagonal() > 0
     G1, G2 = grams()
     G = (FIRST_ORDER_SHARE * data_trace / max(G1.diagonal().sum(), 1e-300)) * G1
@@ -262,7 +283,8 @@ def fit_control_points(
         C, solver = _solve((AtA + smoothness * G).tocsc(), AtP + smoothness * GL, ridge=True)
         if keep:
             C = _refine(C, solver, chunks, weights, points,
-                        lambda c: smoothness * (G @ c - GL))
+                        lambda c: smoothness * (G @ c - GL)
+                        + (0.0 if pin_grad is None else pin_grad(c)))
     else:
         # no fairing: pure least squares for the functions that see data, then the functions
         # without data minimize the fairing energy of S - (reference) with the others held
@@ -271,7 +293,8 @@ def fit_control_points(
         C = np.zeros((n, 3))
         C[d], solver = _solve(AtA[d][:, d].tocsc(), AtP[d], ridge=True)
         if keep:
-            C[d] = _refine(C[d], solver, [A[:, d] for A in chunks], weights, points, None)
+            C[d] = _refine(C[d], solver, [A[:, d] for A in chunks], weights, points,
+                           None if pin_grad is None else lambda c: pin_grad(c, d))
         if len(u):
             C[u], _ = _solve(G[u][:, u].tocsc(), GL[u] - G[u][:, d] @ C[d], ridge=True)
     t_solve = time.perf_counter() - t2

@@ -37,6 +37,7 @@ from .errors import CancelledError, FileFormatError, InvalidInputError, TCBError
 from .fit import (AUTO_SMOOTHNESS, DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL,
                   SPARSE_SMOOTHNESS, DefaultSmoothness, fit_control_points)
 from .geometry import column_bounds, coordinate_order, float32_rounding
+from .join import join_fit, seams
 from .parallel import background
 from .parameterize import (
     Parameterization, _as_points, _check_finite, _edge_pairs, _local_planes, box_normalization,
@@ -1374,7 +1375,7 @@ class TCBSurface:
                 return _rounded_like(new, old), ""
         return None, "map"
 
-    def refine(self, points, faces=None, callback=None, rounding: float = 0.0,
+    def refine(self, points, faces=None, callback=None, rounding: float = 0.0, join=None,
                **changes) -> "TCBSurface":
         """Continue the adaptive loop from this surface on the same data.
 
@@ -1389,6 +1390,8 @@ class TCBSurface:
         ``changes`` override settings (the fields of :class:`RefineOptions`), e.g.
         ``tolerance=``, ``max_control_points=``, ``max_iterations=`` (default: 5 more
         iterations); an unknown name is an :class:`InvalidInputError`.
+        ``join``: as :func:`fit_surface`'s, the neighbours the refined surface is joined to
+        (a surface fitted with ``join=`` is refined without it unless given again).
         The surface returned is never worse at the data, by the criterion, than this one: if
         the run's is, this one is returned (the fit's control points, its errors at the
         points) with the run's history and stop reason, and ``report["kept_start"]`` (the
@@ -1464,7 +1467,10 @@ class TCBSurface:
                        start=self.knots[: self._n_interior],
                        rings=self.knots[self._n_interior:],
                        history=self._report.get("history", []), start_degree=self.degree,
-                       projection_given=bool(self._report.get("projection_given")))
+                       projection_given=bool(self._report.get("projection_given")),
+                       seam_list=seams(param, join))
+        if join is not None:  # (the surface asked for is joined; the start may not be)
+            return refined
         return self._start_unless_beaten(refined, points, options)
 
     def _start_unless_beaten(self, refined: "TCBSurface", points: np.ndarray,
@@ -2666,13 +2672,15 @@ TESSELLATION_JITTER = 1e-7
 
 def _run(points, param, options, callback, start=None, rings=None, history=(), checked=False,
          start_degree=None, faces_key=None, spikes=False, faces_set_key=None,
-         projection_given=False, faces_set_key32=None):
+         projection_given=False, faces_set_key32=None, seam_list=()):
     """Fit ``points`` over ``param``; ``checked``: ``parameterize_points`` has just accepted
     these very points (a cloud), so :func:`normalize` need not check them again.
     ``faces_key``, ``faces_set_key``, ``faces_set_key32``: the digests of the given faces
     (:func:`faces_digest`, :func:`faces_set_digest`, :func:`rounded_faces_digest`) that the
     report keeps. ``projection_given``: the cloud was
-    projected along a direction the user gave (``report["projection_given"]``)."""
+    projected along a direction the user gave (``report["projection_given"]``).
+    ``seam_list``: the neighbours to join (:func:`core.join.seams`): the best fit is joined
+    to them (:func:`core.join.join_fit`)."""
     t0 = time.perf_counter()
     used = np.asarray(param.used, dtype=bool)
     # the used points, in an order of their coordinates alone (coordinate_order): the fit's
@@ -2794,6 +2802,11 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         checks = early() if best is looped else None
     else:
         swings = checks = None
+    joined = None
+    if seam_list:
+        best, joined = join_fit(best, seam_list, np.asarray(param.uv), fit_uv, fit_q, norm,
+                                options, domain)
+        checks = None  # (made again, of the joined fit)
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)
     errors = np.full(len(points), np.nan)
@@ -2865,6 +2878,10 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         report["noise_rel"] = noise / diag_norm
     if curved is not None:  # a mesh's faces sampled on its curved triangles or flat
         report["face_samples"] = "curved" if curved else "flat"
+    if joined is not None:  # (the gaps in the user's units, and over the diagonal)
+        report["join"] = joined | {
+            k + "_rel": joined[k] / diagonal for k in ("gap_max", "gap_rms", "gap_max_unjoined",
+                                                       "gap_rms_unjoined")}
     if hist and hist[-1].get("net_capped"):  # a noisy mesh's net stopped at its vertex count
         report["net_capped"] = int(hist[-1]["net_capped"])  # (core.refine.NOISY_NET_PER_VERTEX)
     if param.faces is not None and not subsampled and len(best.fit.errors) > len(uv):
@@ -3252,6 +3269,7 @@ def fit_surface(
     drop_outliers: bool = False,
     projection=None,
     fill_holes: bool = False,
+    join=None,
 ) -> TCBSurface:
     """Fit a TCB-spline surface to a point cloud or a disk-like mesh (method.md sections 4-6).
 
@@ -3351,6 +3369,17 @@ def fit_surface(
         ``core.parameterize.cloud_holes``), where the surface is held by the fairing;
         ``report["holes_filled"]`` counts those reaching farther from the points than the
         reach of a cloud's tessellation (``core.parameterize.gaps_beyond``).
+    join : (TCBSurface, shared) or a list of them, optional
+        Meshes only: the surfaces of neighbouring patches of the same mesh to join along the
+        border this mesh shares with each (``core.join``): ``shared`` is ``(k, 2)`` vertex
+        pairs ``(i, j)``, vertex ``i`` of these ``points`` the same as vertex ``j`` of the data
+        that surface was fitted to (``core.join.shared_vertices(points, other_points)`` finds
+        them by their coordinates). The run is the same; its surface's control points are then
+        fitted again with the neighbours' surfaces along the shared border edges as pins
+        (the neighbours are not changed), so the patches meet there to a small share of their
+        errors (``report["join"]``: the gaps before and after, in the data's units and over
+        the diagonal). Two patches of a UV sphere fitted at 1e-3: gaps up to 2.7e-3 of the
+        diagonal left, 3e-5 joined (``benchmarks/join.py``).
 
     Counts (``degree``, ``max_control_points``, ...) are whole numbers (``2.0`` is 2), flags
     (``relative``, ``feature_sensitive``) Python or numpy bools; anything else is refused.
@@ -3403,6 +3432,7 @@ def fit_surface(
     if coarse is not None:
         warnings.warn(coarse, RuntimeWarning, stacklevel=2)
     return _run(points, param, options, callback, checked=faces is None,
+                seam_list=seams(param, join),
                 faces_key=None if faces is None else faces_digest(faces),
                 faces_set_key=None if faces is None else faces_set_digest(faces, points),
                 faces_set_key32=None if faces is None else rounded_faces_digest(faces, points),

@@ -80,3 +80,22 @@ def noisy_sphere_cap(seed=0, noise=0.002, segments=32, rings=16):
     keep[segments:] = np.repeat(centre[:, 2] > 0.4, 2)  # (each quad's centroid decides)
     used, faces = np.unique(tris[keep], return_inverse=True)
     return V[used], faces.reshape(-1, 3)
+
+
+def split_mesh(points, faces, mask) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The two patches of a mesh, the faces ``mask`` selects and the others, each with its
+    own vertices only: ``[(points, faces), (points, faces)]`` (they share the vertices of the
+    border between them, at identical coordinates)."""
+    out = []
+    for pick in (mask, ~mask):
+        used, f = np.unique(np.asarray(faces)[pick], return_inverse=True)
+        out.append((np.asarray(points)[used], f.reshape(-1, 3)))
+    return out
+
+
+def wavy_halves(n: int = 40) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`noisy_grid` without noise, cut into two patches along the wavy line
+    ``x = 0.5 + 0.1 sin 9y`` (faces by their centroids): Edit Mode's two selections."""
+    pts, faces = noisy_grid(n, noise=0.0)
+    c = pts[faces].mean(axis=1)
+    return split_mesh(pts, faces, c[:, 0] < 0.5 + 0.1 * np.sin(9 * c[:, 1]))

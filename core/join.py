@@ -1,0 +1,301 @@
+"""Joining a mesh's surface to the surfaces of its neighbouring patches (not in method.md).
+
+A mesh cut into patches (faces selected in Edit Mode, a scan split into parts) is fitted one
+patch at a time, and each fit meets its own data within its tolerance, not its neighbour's
+surface: two patches of a UV sphere fitted at 1e-3 left gaps up to 2.7e-3 of the diagonal
+along their shared border. A patch fitted with ``join=`` is drawn to its neighbours' surfaces
+along the border they share:
+
+- the shared border is the mesh edges that are border edges of both patches (each used by
+  one of the patch's triangles), between vertices given as the same (``shared`` pairs, or
+  :func:`shared_vertices` by their coordinates);
+- a parameterization is linear on each triangle, so the point at fraction ``t`` along a shared
+  edge is at ``(1 - t) uv_i + t uv_j`` in either patch's parameters; the neighbour's surface
+  there is the target (:func:`join_pins`: the edge's vertices and :data:`EDGE_PINS` inside
+  it);
+- the patch's control points are fitted again on the knots its own run chose, with the pins
+  added to the data term (``core.fit.fit_control_points``'s ``pins``, each worth
+  :data:`PIN_WEIGHT` data points), so the neighbour is left as it is; where the pins are
+  missed by more than :data:`GAP_SHARE` of the tolerance, knots are inserted in the
+  ``Gamma_0`` triangles that hold them (method.md section 6's insertion, ranked by the pins'
+  errors), up to :data:`JOIN_ROUNDS` times and within the control-point budget
+  (:func:`join_fit`): a patch's knots follow its own data, and its border is often coarser
+  than its neighbour's.
+
+The gap that is left (:func:`seam_gaps`, at :data:`GAP_SAMPLES` points per shared edge) is
+what the patch's spline space cannot follow of its neighbour between the pins.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .errors import BorderError, InvalidInputError, SingularSystemError
+from .fit import fit_control_points
+from .refine import _feature_cost, insertion_points, make_space
+
+# pins inside each shared edge, as fractions along it (its two vertices are pinned too)
+EDGE_PINS = (0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875)
+# what one pin weighs, in data points of the mean weight: the surfaces meet to a small share of
+# the data's errors (benchmarks/join.py) while the fairing and the data elsewhere are as before
+PIN_WEIGHT = 1000.0
+# the pins are to be met to this share of the tolerance; knots are inserted where they are not,
+# in at most JOIN_ROUNDS rounds
+GAP_SHARE = 0.3
+JOIN_ROUNDS = 10
+# ... of the Gamma_0 triangles holding pins missed by more, the worst this share
+INSERT_SHARE = 0.25
+# points per shared edge at which the gap between the surfaces is measured (ends included)
+GAP_SAMPLES = 17
+GAP_SEGMENTS = 32
+
+
+def border_edges(faces: np.ndarray) -> np.ndarray:
+    """``(e, 2)`` sorted vertex pairs of the edges of triangles ``faces`` used by one
+    triangle only: the mesh's border (outer loop and holes)."""
+    f = np.asarray(faces, dtype=np.int64)
+    e = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    u, count = np.unique(e, axis=0, return_counts=True)
+    return u[count == 1]
+
+
+def shared_vertices(points, other_points) -> np.ndarray:
+    """``(k, 2)`` int64 pairs ``(i, j)`` with ``points[i] == other_points[j]`` (identical
+    coordinates: the vertices two patches cut from one mesh share). A coordinate repeated
+    within either array pairs its first row only."""
+    a = np.ascontiguousarray(np.asarray(points, dtype=np.float64))
+    b = np.ascontiguousarray(np.asarray(other_points, dtype=np.float64))
+    if a.ndim != 2 or b.ndim != 2 or a.shape[1] != 3 or b.shape[1] != 3:
+        raise InvalidInputError("shared_vertices() needs two (N, 3) arrays of points")
+    rows = np.dtype((np.void, 24))
+    ka, ia = np.unique(a.view(rows).ravel(), return_index=True)
+    kb, ib = np.unique(b.view(rows).ravel(), return_index=True)
+    _, sa, sb = np.intersect1d(ka, kb, assume_unique=True, return_indices=True)
+    return np.column_stack([ia[sa], ib[sb]]).astype(np.int64)
+
+
+class Seam:
+    """The border a patch shares with one neighbouring surface: ``own`` and ``other``
+    ``(e, 2)`` vertex pairs of the shared edges (the same edges, in each patch's vertex
+    numbers), ``vertices`` ``(k, 2)`` the shared border vertices, and the neighbour
+    ``surface``."""
+
+    def __init__(self, surface, own_edges, other_edges, vertices):
+        self.surface = surface
+        self.own = own_edges
+        self.other = other_edges
+        self.vertices = vertices
+
+    def along(self, own_uv: np.ndarray, fractions) -> tuple[np.ndarray, np.ndarray]:
+        """Parameters ``(own, other)`` of the points at ``fractions`` along every shared
+        edge: ``(1 - t) uv_i + t uv_j`` in each patch's parameters."""
+        t = np.asarray(fractions, dtype=np.float64)[None, :, None]
+        other_uv = np.asarray(self.surface.parameterization.uv)
+
+        def at(uv, edges):
+            return ((1 - t) * uv[edges[:, 0]][:, None] + t * uv[edges[:, 1]][:, None]).reshape(-1, 2)
+
+        return at(own_uv, self.own), at(other_uv, self.other)
+
+
+def seams(param, join) -> list[Seam]:
+    """The :class:`Seam` of each ``(surface, shared)`` of ``join`` (one pair, or a list of
+    them) with the mesh of parameterization ``param``; ``shared`` ``(k, 2)`` pairs ``(i, j)``:
+    vertex ``i`` of this mesh is vertex ``j`` of the data ``surface`` was fitted to (such as
+    :func:`shared_vertices` finds). A clear :class:`InvalidInputError` for anything else:
+    this data not a mesh, a neighbour fitted to a point cloud, pairs out of range, or none of
+    them on both borders."""
+    if join is None:
+        return []
+    if isinstance(join, tuple) and len(join) == 2 and hasattr(join[0], "parameterization"):
+        join = [join]
+    if param.faces is None:
+        raise InvalidInputError("join= joins a mesh's surface to its neighbours' along their "
+                                "shared border: give the mesh's faces (a point cloud has no "
+                                "border to share)")
+    out = []
+    own_border = border_edges(param.faces)
+    for k, item in enumerate(join):
+        if not (isinstance(item, (tuple, list)) and len(item) == 2
+                and hasattr(item[0], "parameterization")):
+            raise InvalidInputError(
+                f"join[{k}] must be a pair (surface, shared): a TCBSurface and the (k, 2) "
+                "vertex pairs (this mesh's, its data's) the two meshes share "
+                "(core.join.shared_vertices finds them by their coordinates)")
+        surface, shared = item
+        other = surface.parameterization
+        if other.faces is None:
+            raise InvalidInputError(f"join[{k}]: that surface was fitted to a point cloud; only "
+                                    "surfaces of meshes have a border to join to")
+        try:
+            pairs = np.asarray(shared)
+            ok = pairs.ndim == 2 and pairs.shape[1] == 2 and np.issubdtype(pairs.dtype,
+                                                                           np.integer)
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise InvalidInputError(f"join[{k}]: shared must be a (k, 2) array of whole "
+                                    "numbers, vertex pairs (this mesh's, the surface's data's)")
+        pairs = pairs.astype(np.int64)
+        n_own, n_other = len(param.uv), len(other.uv)
+        if len(pairs) and (pairs.min() < 0 or pairs[:, 0].max() >= n_own
+                           or pairs[:, 1].max() >= n_other):
+            raise InvalidInputError(
+                f"join[{k}]: shared pairs out of range: this mesh has {n_own} vertices, the "
+                f"surface's data {n_other}")
+        other_border = border_edges(other.faces)
+        # this mesh's border edges whose two ends are shared, as the other mesh's pairs
+        to_other = np.full(n_own, -1, dtype=np.int64)
+        to_other[pairs[:, 0]] = pairs[:, 1]
+        ends = to_other[own_border]
+        both = (ends >= 0).all(axis=1)
+        mine, theirs = own_border[both], ends[both]
+        # ... that are the other's border edges too
+        key = np.int64(n_other)
+        their_keys = np.sort(theirs, axis=1) @ np.array([key, 1])
+        border_keys = other_border @ np.array([key, 1])
+        on = np.isin(their_keys, border_keys)
+        mine, theirs = mine[on], theirs[on]
+        if not len(mine):
+            raise InvalidInputError(
+                f"join[{k}]: the two meshes share no border edge (an edge on the border of "
+                f"both, between vertices given as shared; {len(pairs)} pairs given): the "
+                "surface to join must be of a neighbouring patch of the same mesh")
+        verts = np.unique(np.column_stack([mine.ravel(), theirs.ravel()]), axis=0)
+        out.append(Seam(surface, mine, theirs, verts))
+    return out
+
+
+def _nearest_on(q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """For polylines ``q`` ``(e, 1, k + 1, 3)`` and points ``p`` ``(e, t, 1, 3)``: the
+    nearest point of each point's polyline, ``(e, t, 3)``."""
+    a, d = q[:, :, :-1], q[:, :, 1:] - q[:, :, :-1]  # pieces a + x d, x in [0, 1]
+    x = np.clip(np.einsum("etkc,etkc->etk", p - a, d)
+                / np.maximum(np.einsum("etkc,etkc->etk", d, d), 1e-300), 0.0, 1.0)
+    near = a + x[..., None] * d
+    k = np.linalg.norm(near - p, axis=-1).argmin(axis=2)
+    return np.take_along_axis(near, k[..., None, None], axis=2)[:, :, 0]
+
+
+def _borders(seam, own_uv, evaluate, fractions):
+    """The surface ``evaluate`` at ``fractions`` along the seam's edges ``(e, t, 3)``, and
+    the nearest points of the neighbour's surface along the same edges (a polyline of
+    :data:`GAP_SEGMENTS` pieces) ``(e, t, 3)``, with the own parameters ``(e * t, 2)``."""
+    mine, _ = seam.along(own_uv, fractions)
+    _, theirs = seam.along(own_uv, np.linspace(0.0, 1.0, GAP_SEGMENTS + 1))
+    e, t = len(seam.own), len(fractions)
+    p = evaluate(mine).reshape(e, t, 3)
+    q = seam.surface(theirs).reshape(e, 1, GAP_SEGMENTS + 1, 3)
+    return p, _nearest_on(q, p[:, :, None]), mine
+
+
+def join_pins(seam_list, own_uv: np.ndarray, evaluate) -> tuple[np.ndarray, np.ndarray]:
+    """Pins of the seams (``core.fit.fit_control_points``'s ``pins``, in the data's units):
+    ``(uv, targets)``: each shared border vertex, to the neighbour's surface at that vertex,
+    and the points :data:`EDGE_PINS` along each shared edge, to the point of the neighbour's
+    surface along that edge nearest to the surface ``evaluate(uv) -> (m, 3)`` there (so the
+    border is drawn to the neighbour's and may slide along it: the two surfaces' speeds along
+    an edge differ, and pinning equal fractions had made the border wiggle between them)."""
+    uvs, targets = [], []
+    for seam in seam_list:
+        other_uv = np.asarray(seam.surface.parameterization.uv)
+        uvs.append(own_uv[seam.vertices[:, 0]])
+        targets.append(seam.surface(other_uv[seam.vertices[:, 1]]))
+        if EDGE_PINS:
+            _, near, mine = _borders(seam, own_uv, evaluate, EDGE_PINS)
+            uvs.append(mine)
+            targets.append(near.reshape(-1, 3))
+    return np.vstack(uvs), np.vstack(targets)
+
+
+def seam_gaps(seam_list, own_uv: np.ndarray, evaluate) -> np.ndarray:
+    """Distances from the surface ``evaluate(uv) -> (m, 3)`` (the data's units) along the
+    shared edges, at :data:`GAP_SAMPLES` points per edge (ends included), to each neighbour's
+    surface along the same edge (a polyline of :data:`GAP_SEGMENTS` pieces of it, the
+    distance to the nearest piece): the geometric gap between the two borders, whatever their
+    speeds along the edge."""
+    t = np.linspace(0.0, 1.0, GAP_SAMPLES)
+    gaps = []
+    for seam in seam_list:
+        p, near, _ = _borders(seam, own_uv, evaluate, t)
+        gaps.append(np.linalg.norm(p - near, axis=-1).ravel())
+    return np.concatenate(gaps) if gaps else np.zeros(0)
+
+
+def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain):
+    """``best`` (a ``core.refine.IterationState`` of the normalized data ``fit_uv``,
+    ``fit_q``; ``norm`` their normalization) joined to the neighbours of ``seam_list``: its
+    control points fitted again, same points and smoothness, with the pins of
+    :func:`join_pins` (each worth :data:`PIN_WEIGHT` points), whose targets along the edges
+    are taken again from each fit (a border sliding along its neighbour's); while a pin is
+    missed by more than :data:`GAP_SHARE` of the tolerance (``options``), a knot is inserted
+    in each ``Gamma_0`` triangle holding such pins (``core.refine.insertion_points`` ranked by
+    the pins' misses, at least two per triangle) and the space made again, as long as the
+    control points that meet ``domain`` stay within the budget; at most :data:`JOIN_ROUNDS`
+    fits after the first. Returns the joined state and what ``report["join"]`` says: the
+    neighbours, shared vertices and edges, knots added, and the gaps (:func:`seam_gaps`, the
+    data's units) before and after."""
+    def surface_of(state):
+        return lambda x: norm.undo(state.space.evaluate(x) @ state.fit.control_points)
+
+    before = seam_gaps(seam_list, own_uv, surface_of(best))
+    smoothness = float(best.fit.smoothness)
+    goal = GAP_SHARE * options.tolerance * (2.0 if options.relative else 1.0 / norm.scale)
+    cost = None
+    state, kept, worse = best, None, 0
+    for round_ in range(JOIN_ROUNDS + 1):
+        pin_uv, targets = join_pins(seam_list, own_uv, surface_of(state))
+        targets = norm.apply(targets)
+        space, knots, n_int, active = state.space, state.knots, state.n_interior, state.active
+        if round_:
+            miss = np.linalg.norm(state.space.evaluate(pin_uv) @ state.fit.control_points
+                                  - targets, axis=1)
+            if goal <= 0 or miss.max() <= goal:
+                break
+            bad = np.where(miss > goal, miss, 0.0)
+            new = insertion_points(knots, space.configurations.triangles[0], pin_uv, bad,
+                                   max(1, int(INSERT_SHARE * np.count_nonzero(bad))),
+                                   min_points=2)
+            if len(new):
+                n_int = n_int + len(new)
+                knots = np.vstack([knots[: state.n_interior], new, knots[state.n_interior:]])
+                if cost is None and options.feature_sensitive and options.mode == "tcb":
+                    cost = _feature_cost(fit_uv, fit_q, n_int, options.seed)
+                space = make_space(knots, options.degree, options.mode, cost, n_int)
+                active = np.flatnonzero(space.meets(domain))
+                if len(active) > options.max_control_points:  # (the pins' targets only)
+                    space, knots, n_int = state.space, state.knots, state.n_interior
+                    active = state.active
+        try:
+            fit = fit_control_points(space, fit_uv, fit_q, smoothness=smoothness,
+                                     pins=(pin_uv, targets, PIN_WEIGHT))
+        except (BorderError, SingularSystemError):
+            if state is best:
+                raise
+            break
+        if not np.isfinite(fit.control_points).all():  # (never a NaN surface)
+            if state is best:
+                raise SingularSystemError("joining the surface to its neighbours gave "
+                                          "non-finite control points; fit without join=")
+            break
+        state = dataclasses.replace(state, knots=knots, n_interior=n_int, space=space,
+                                    fit=fit, active=active)
+        gaps = seam_gaps(seam_list, own_uv, surface_of(state))
+        if kept is None or gaps.max() < kept[1].max():
+            kept, worse = (state, gaps), 0
+        else:
+            worse += 1
+            if worse >= 2:
+                break
+    state, after = kept
+    return state, {
+        "surfaces": len(seam_list),
+        "shared_vertices": int(sum(len(m.vertices) for m in seam_list)),
+        "shared_edges": int(sum(len(m.own) for m in seam_list)),
+        "knots_added": int(state.n_interior - best.n_interior),
+        "gap_max": float(after.max()), "gap_rms": float(np.sqrt(np.mean(after ** 2))),
+        "gap_max_unjoined": float(before.max()),
+        "gap_rms_unjoined": float(np.sqrt(np.mean(before ** 2))),
+    }

@@ -1,0 +1,121 @@
+"""Joining a patch's surface to its neighbours' along their shared border (core.join;
+fit_surface(join=...)), and the pins of core.fit.fit_control_points."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from core import InvalidInputError, fit_surface
+from core.fit import fit_control_points
+from core.geometry import point_mesh_distance
+from core.join import border_edges, shared_vertices
+from core.refine import border_rings
+from core.spline_space import build_space
+from meshes import noisy_grid, wavy_halves
+
+
+def test_pins_draw_the_fit_to_their_targets_and_are_not_counted_as_data():
+    rng = np.random.default_rng(0)
+    interior = rng.uniform(0.05, 0.95, (30, 2))
+    knots = np.vstack([interior, border_rings(np.zeros(2), np.ones(2), 0.2, rings=2, seed=0)])
+    space = build_space(knots, 2)
+    uv = rng.uniform(0, 1, (2000, 2))
+    flat = np.column_stack([uv, np.zeros(len(uv))])  # the plane z = 0
+    plain = fit_control_points(space, uv, flat, smoothness=1e-4)
+    at = np.array([[0.5, 0.5]])
+    target = np.array([[0.5, 0.5, 0.1]])
+    # a pin of weight 0 changes nothing (the fairing is scaled by the data alone)
+    none = fit_control_points(space, uv, flat, smoothness=1e-4, pins=(at, target, 0.0))
+    assert np.allclose(none.control_points, plain.control_points, atol=1e-12)
+    heights = []
+    for weight in (10.0, 1e3, 1e5):
+        fit = fit_control_points(space, uv, flat, smoothness=1e-4, pins=(at, target, weight))
+        assert fit.errors.shape == (len(uv),)  # the pin is not among the errors
+        heights.append(float((space.evaluate(at) @ fit.control_points)[0, 2]))
+    assert 0 < heights[0] < heights[1] < heights[2] <= 0.1 + 1e-9
+    assert heights[2] > 0.09  # worth 1e5 points: the surface goes (almost) through it
+    with pytest.raises(ValueError, match="auto"):
+        fit_control_points(space, uv, flat, smoothness="auto", pins=(at, target, 1.0))
+
+
+def test_shared_vertices_pairs_identical_coordinates():
+    (pa, fa), (pb, fb) = wavy_halves(20)
+    pairs = shared_vertices(pb, pa)
+    assert len(pairs) > 10
+    assert np.array_equal(pb[pairs[:, 0]], pa[pairs[:, 1]])
+    # every shared vertex is on both patches' borders, and every border vertex of one patch
+    # inside the square is shared
+    on_b = np.unique(border_edges(fb))
+    assert np.isin(pairs[:, 0], on_b).all() and np.isin(pairs[:, 1], np.unique(border_edges(fa))).all()
+    inner = on_b[(pb[on_b, 0] > 0) & (pb[on_b, 0] < 1) & (pb[on_b, 1] > 0) & (pb[on_b, 1] < 1)]
+    assert np.isin(inner, pairs[:, 0]).all()
+    assert len(shared_vertices(pb, pa + 1.0)) == 0
+
+
+def _seam_mesh_gap(a, b, diagonal):
+    """Largest distance from the border vertices of b's tessellation along the seam (inside
+    the square, away from its sides) to a's tessellation, over the diagonal: the gap as the
+    meshes show it, measured without core.join."""
+    va, fa = a.tessellate(256)
+    vb, fb = b.tessellate(256)
+    edge = np.unique(border_edges(fb))
+    p = vb[edge]
+    near = ((np.abs(p[:, 0] - (0.5 + 0.1 * np.sin(9 * p[:, 1]))) < 0.01)
+            & (p[:, 1] > 0.05) & (p[:, 1] < 0.95))
+    assert near.sum() > 50
+    return float(point_mesh_distance(p[near], va, fa).max()) / diagonal
+
+
+def test_a_joined_patch_meets_its_neighbour_along_their_shared_border():
+    (pa, fa), (pb, fb) = wavy_halves(40)
+    a = fit_surface(pa, fa, tolerance=1e-3)
+    a_control = a.control_points.copy()
+    pairs = shared_vertices(pb, pa)
+    free = fit_surface(pb, fb, tolerance=1e-3)
+    joined = fit_surface(pb, fb, tolerance=1e-3, join=(a, pairs))
+    j = joined.report["join"]
+    assert j["surfaces"] == 1 and j["shared_vertices"] == len(pairs)
+    assert j["shared_edges"] == len(pairs) - 1  # one open seam across the square
+    # the borders meet to a share of the tolerance (about twice it apart without joining)
+    assert j["gap_max_unjoined_rel"] > 1.5e-3
+    assert j["gap_max_rel"] < 0.25 * j["gap_max_unjoined_rel"]
+    assert j["gap_max_rel"] < 5e-4
+    diagonal = joined.report["diagonal"]
+    assert j["gap_max"] == pytest.approx(j["gap_max_rel"] * diagonal)
+    # ... and so do the meshes, measured on the tessellations
+    before, after = _seam_mesh_gap(a, free, diagonal), _seam_mesh_gap(a, joined, diagonal)
+    assert after < 0.25 * before and after < 5e-4
+    # the patch still fits its own data; the neighbour is not changed
+    assert joined.report["rms_rel"] < 1.5e-3
+    assert np.isfinite(joined.control_points).all()
+    assert np.array_equal(a.control_points, a_control)
+    assert "join" not in free.report
+    # refine() joins again when asked
+    again = joined.refine(pb, fb, join=(a, pairs), max_iterations=2)
+    assert again.report["join"]["gap_max_rel"] < 5e-4
+
+
+def test_join_refuses_what_it_cannot_join():
+    (pa, fa), (pb, fb) = wavy_halves(20)
+    a = fit_surface(pa, fa, tolerance=1e-2)
+    pairs = shared_vertices(pb, pa)
+    with pytest.raises(InvalidInputError, match="point cloud has no border"):
+        fit_surface(pb, join=(a, pairs))
+    cloud = fit_surface(pa, tolerance=1e-2)
+    with pytest.raises(InvalidInputError, match="fitted to a point cloud"):
+        fit_surface(pb, fb, join=(cloud, pairs))
+    with pytest.raises(InvalidInputError, match="out of range"):
+        fit_surface(pb, fb, join=(a, pairs + len(pa)))
+    with pytest.raises(InvalidInputError, match=r"\(k, 2\) array of whole numbers"):
+        fit_surface(pb, fb, join=(a, pairs.astype(float)))
+    with pytest.raises(InvalidInputError, match="must be a pair"):
+        fit_surface(pb, fb, join=[a])
+    # vertices that are not on both borders (B's own interior ones paired with A's)
+    whole, faces = noisy_grid(20, noise=0.0)
+    inside = np.setdiff1d(np.arange(len(pb)), np.unique(border_edges(fb)))[:20]
+    with pytest.raises(InvalidInputError, match="share no border edge"):
+        fit_surface(pb, fb, join=(a, np.column_stack([inside, np.arange(20)])))
+    # a mesh that is not a neighbour: no border edge in common
+    with pytest.raises(InvalidInputError, match="share no border edge"):
+        fit_surface(whole, faces, join=(a, shared_vertices(whole, pa)[:1]))
