@@ -96,6 +96,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="point clouds: project along this direction (a height field over the "
                    "plane across it) instead of choosing it; still checked for folds. Its sign "
                    "does not matter (a leading minus needs the form --projection=-1,0,0)")
+    f.add_argument("--join", nargs=2, action="append", metavar=("MESH", "SPLINE"),
+                   help="join the surface to a neighbouring patch's along the border the two "
+                        "meshes share (vertices at identical coordinates): MESH is that "
+                        "patch's mesh file, SPLINE the .npz its fit wrote with --spline; "
+                        "repeat for more neighbours (core.join)")
     f.add_argument("--quiet", action="store_true", help="no progress output")
     return p
 
@@ -336,6 +341,7 @@ def _fit(args) -> int:
     if not args.quiet:
         kind = f"mesh with {len(faces)} faces" if faces is not None else "point cloud"
         print(f"read {args.input}: {len(points)} points, {kind}", file=sys.stderr)
+    join = _neighbours(args, points, faces)
     try:
         surf = fit_surface(
             points, faces, degree=args.degree, mode=args.mode, tolerance=args.tolerance,
@@ -343,7 +349,7 @@ def _fit(args) -> int:
             max_iterations=args.max_iterations, smoothness=args.smoothness,
             criterion=args.criterion, callback=_progress(args.quiet),
             drop_outliers=args.drop_outliers, projection=args.projection,
-            fill_holes=args.fill_holes,
+            fill_holes=args.fill_holes, join=join,
         )
     except HolesError as exc:
         raise holes_error(exc.loops, advice="pass --fill-holes") from None
@@ -428,6 +434,14 @@ def _fit(args) -> int:
                     + (f": the mesh within {sag:.3g} of the spline" if sag is not None
                        and np.isfinite(sag) else "") + ")"),
     ]
+    if "join" in r:
+        j = r["join"]
+        rows.append(("joined", f"{j['surfaces']} neighbour{'s' if j['surfaces'] > 1 else ''} "
+                               f"along {j['shared_edges']} shared border edges: the borders "
+                               f"{j['gap_max']:.4g} apart at most ({j['gap_max_rel']:.2e} of "
+                               f"the diagonal; {j['gap_max_unjoined_rel']:.2e} unjoined)"
+                               + (f", {j['knots_added']} knots added along them"
+                                  if j["knots_added"] else "")))
     if args.net:
         rows.append(("control net", args.net))
     if args.spline:
@@ -490,6 +504,37 @@ def _fit(args) -> int:
 # a cloud whose bounding-box diagonal is over this many times its height range along its
 # projection is told that a relative tolerance is of the diagonal, not of the heights
 FLAT_HEIGHT_FIELD = 10.0
+
+
+def _neighbours(args, points: np.ndarray, faces) -> list | None:
+    """``fit_surface``'s ``join`` from ``--join MESH SPLINE`` (each neighbour's mesh and the
+    spline fitted to it), or None; a one-line error for a point cloud, a file that is not a
+    mesh, a spline not fitted to that mesh, or a mesh sharing no vertex with the input."""
+    from .join import shared_vertices
+    from .surface import TCBSurface
+
+    if not args.join:
+        return None
+    if faces is None:
+        raise TCBError(f"--join joins a mesh's surface to its neighbours' along their shared "
+                       f"border; {args.input} is a point cloud")
+    join = []
+    for mesh, spline in args.join:
+        other, other_faces = read_geometry(mesh)
+        if other_faces is None:
+            raise TCBError(f"--join {mesh} {spline}: {mesh} is a point cloud; give the "
+                           "neighbouring patch's mesh")
+        surf = TCBSurface.load(spline)
+        if not surf.fitted_to(other):
+            raise TCBError(f"--join {mesh} {spline}: {spline} was not fitted to {mesh} (fit "
+                           f"{mesh} with --spline {spline}, then join to it)")
+        pairs = shared_vertices(points, other)
+        if not len(pairs):
+            raise TCBError(f"--join {mesh} {spline}: {mesh} has no vertex at the coordinates "
+                           f"of one of {args.input}'s: not a neighbouring patch of the same "
+                           "mesh")
+        join.append((surf, pairs))
+    return join
 
 
 def _flat_height_field(surf, points: np.ndarray):

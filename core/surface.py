@@ -2804,8 +2804,9 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         swings = checks = None
     joined = None
     if seam_list:
-        best, joined = join_fit(best, seam_list, np.asarray(param.uv), fit_uv, fit_q, norm,
-                                options, domain)
+        best, joined = join_fit(
+            best, seam_list, np.asarray(param.uv), fit_uv, fit_q, norm, options, domain,
+            folds=None if param.faces is None else lambda state: data_checks(state, None)[2])
         checks = None  # (made again, of the joined fit)
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)

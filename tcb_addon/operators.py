@@ -11,6 +11,7 @@ Errors become ``self.report({'ERROR'}, message)`` and ``{'CANCELLED'}`` with not
 from __future__ import annotations
 
 import base64
+import hashlib
 import os
 import threading
 import time
@@ -974,6 +975,62 @@ def previous_result(context, sources, kept: list | None = None, part: str = ""):
     return max(found, key=lambda ob: (float(ob.get(FITTED_KEY, 0.0)), ob.name))
 
 
+def neighbour_joins(context, obj, part: str, data) -> tuple[list, list, list]:
+    """The neighbours to join a fit of faces ``part`` (``bridge.part_text``) of mesh ``obj``,
+    read as ``data``, to (Join Neighbours; ``core.join``): ``(join, names, notes)``, ``join``
+    as ``fit_surface`` takes it (each neighbouring result's spline, with its net's edits, and
+    the vertex pairs the two parts share: identical world coordinates), the neighbours'
+    names, and a sentence for each result of another part of ``obj`` sharing a border with
+    this one that is not joined (its part renumbered or edited, or the mesh moved, since its
+    fit). Neighbours: the other results of faces of ``obj`` in the view layer, not
+    overlapping these, with a border edge in common."""
+    core = _core()
+    kind, mask, _ = bridge.part_of_text(part)
+    if kind != "FACES" or data.faces is None:
+        return [], [], []
+    join, names, notes = [], [], []
+    mine = bridge.part_identity(part)
+    for ob in context.view_layer.objects:
+        text = str(ob.get(PART_KEY, "")) if ob.type == "MESH" else ""
+        if (ob.tcb.role != "SURFACE" or not text or bridge.part_identity(text) == mine
+                or [s.object for s in ob.tcb.sources] != [obj] or live.deleted(ob)):
+            continue
+        other_kind, other_mask, digest = bridge.part_of_text(text)
+        if other_kind != "FACES" or len(other_mask) != len(mask) or (other_mask & mask).any():
+            continue  # (vertices, another mesh's numbers, or overlapping faces)
+        try:
+            other = bridge.read_part(obj, other_kind, other_mask, digest)[0]
+        except bridge.SelectionError:
+            continue  # (its faces renumbered or edited: not a patch of this mesh any more)
+        pairs = core.join.shared_vertices(data.points, other.points)
+        if not len(core.join.shared_border_edges(data.faces, other.faces, pairs)[0]):
+            continue  # (no border in common: apart, or touching at a corner)
+        try:
+            surf = stored_surface(ob, use_net=True)
+        except bridge.SelectionError:
+            surf = None
+        if surf is None or surf.parameterization.faces is None or not surf.fitted_to(
+                other.points, other.rounding):
+            notes.append(f"not joined to '{ob.name}': its faces moved or changed since its "
+                         "fit (fit them again, then these)")
+            continue
+        join.append((surf, pairs))
+        names.append(ob.name)
+    return join, names, notes
+
+
+def join_words(surf, names: list) -> list:
+    """The summary's sentence on a joined fit (``report["join"]``), or none."""
+    j = (surf.report or {}).get("join")
+    if not j or not names:
+        return []
+    who = ", ".join(f"'{n}'" for n in names)
+    added = (f"; {j['knots_added']} knots added along it" if j.get("knots_added") else "")
+    return [f"joined to {who} along {j['shared_edges']} shared border edges: the borders "
+            f"{j['gap_max']:.4g} apart at most ({j['gap_max_rel']:.2g} of the diagonal; "
+            f"{j['gap_max_unjoined_rel']:.2g} unjoined{added})"]
+
+
 def stale_nets(context, sources, part: str = "") -> list:
     """The control nets in the view layer whose surface was deleted (X: the net's pointer
     keeps it in the file, in no collection) and was fitted to exactly the objects
@@ -1139,7 +1196,17 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 huge, held, "points" if data.faces is None else "vertices in faces")
             raise bridge.SelectionError(f"'{data.name}': {words}; delete or fix them (in Edit "
                                         "Mode) and fit again")
-        self._key = (data.digest(), tuple(sorted(kwargs.items())))
+        self._joined, joined_notes = [], []
+        if self._part and self.join_neighbours:
+            join, self._joined, joined_notes = neighbour_joins(context, obj, self._part, data)
+            if join:
+                kwargs["join"] = join
+        self._ignored += joined_notes
+        # (a joined fit is of its neighbours' splines too)
+        self._key = (data.digest(), tuple(sorted((k, v) for k, v in kwargs.items()
+                                                 if k != "join")),
+                     tuple((n, hashlib.sha256(s.control_points.tobytes()).hexdigest())
+                           for n, (s, _) in zip(self._joined, kwargs.get("join", ()))))
         cached = _cache_get(self._key)
         self._reused = cached is not None
         if cached is not None:
@@ -1291,7 +1358,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         read = [f"fitted after the modifiers ({mods}): {len(data.points)} "
                 f"{'vertices' if data.faces is not None else 'points'}"] if mods else []
         report_result(self, surf,
-                      read + list(data.notes) + self._ignored + reused + replaced + spanned,
+                      read + list(data.notes) + self._ignored + reused + replaced + spanned
+                      + join_words(surf, getattr(self, "_joined", [])),
                       _engine_notes(self), seconds=seconds, auto=auto)
         return {"FINISHED"}
 
@@ -1404,10 +1472,20 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         self._warnings = [f"{edited} edited control point{' was' if edited == 1 else 's were'} "
                           "replaced (Refine fits the data again; Ctrl+Z brings the edits back)"
                           ] if edited else []
+        # a joined patch is joined again, to its neighbours as they are now (refined on its
+        # own, its border would part from theirs again)
+        join, self._joined = None, []
+        part = str(surface.get(PART_KEY, ""))
+        if part and (stored.report or {}).get("join"):
+            found, self._joined, notes = neighbour_joins(context, data.sources[0], part, data)
+            self._notes = list(self._notes) + notes + (
+                [] if found else ["no longer joined: no neighbouring patch's surface shares "
+                                  "its border now"])
+            join = found or None
         self._engine = []
         return ("run", _as_stored(_recording(surf.refine, self._engine), st.resolution,
                                   st.auto_resolution),
-                dict(points=data.points, faces=faces, rounding=data.rounding,
+                dict(points=data.points, faces=faces, rounding=data.rounding, join=join,
                      **self._settings))
 
     def finish(self, context, surf):
@@ -1463,7 +1541,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                 warnings.append(f"nothing was refined: the surface already meets the "
                                 f"tolerance {self._settings['tolerance']:.4g}{unit} ({what} "
                                 f"{self._before[0]:.4g}{unit}); set a smaller Tolerance")
-        report_result(self, surf, notes, warnings, auto=st.auto_resolution,
+        report_result(self, surf, notes + join_words(surf, getattr(self, "_joined", [])),
+                      warnings, auto=st.auto_resolution,
                       seconds=time.perf_counter() - self._started)
         return {"FINISHED"}
 

@@ -219,9 +219,21 @@ class ResultSettings:
         ),
         default=True,
     )  # fmt: skip
+    # patches of one mesh fitted one at a time had left gaps of 2-3 times the tolerance
+    # between their surfaces (core.join)
+    join_neighbours: BoolProperty(
+        name="Join Neighbours",
+        description=(
+            "Edit Mode: join the surface of the selected faces to the surfaces already fitted "
+            "to the mesh's neighbouring patches, along the border they share (the patches "
+            "then meet to a share of the tolerance; knots are added along that border where "
+            "needed; the neighbours are not changed). Off: fit the faces on their own"
+        ),
+        default=True,
+    )  # fmt: skip
 
 
-RESULT_KEYS = ("show_net", "live_net", "replace")
+RESULT_KEYS = ("show_net", "live_net", "replace", "join_neighbours")
 
 
 class TCB_PG_settings(FitSettings, ResultSettings, bpy.types.PropertyGroup):

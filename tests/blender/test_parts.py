@@ -5,6 +5,7 @@ result, on another part makes a new one; undo takes it back to the selection in 
 
 from __future__ import annotations
 
+import importlib
 import sys
 from pathlib import Path
 
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from scenes import add_mesh, delete_first, grid, select, spline_of  # noqa: E402
+from scenes import ADDON, add_mesh, delete_first, grid, select, spline_of  # noqa: E402
 
 from test_operators import draw_panels, snapshot  # noqa: E402
 
@@ -348,3 +349,57 @@ def test_a_part_of_a_mesh_with_shape_keys_is_its_basis_and_says_so(clean_scene, 
         capfd.readouterr().out)
     verts, _ = spline_of(bpy.context.view_layer.objects.active).tessellate(16)
     assert np.abs(np.linalg.norm(verts, axis=1) - 1.0).max() < 0.03
+
+
+def test_a_patch_fitted_beside_another_joins_its_surface_along_their_border(clean_scene, capfd):
+    """Join Neighbours: the second patch of a closed scan fitted in two meets the first's
+    surface along their shared border (3x closer than fitted on its own:
+    core.join); the first is not changed; Refine joins it again; off, it is fitted alone."""
+    bpy = clean_scene
+    ball = sphere(bpy)
+    select_faces(ball, lambda c: c[:, 2] > 0.3)
+    assert edit_fit(bpy, ball) == {"FINISHED"}
+    cap = bpy.context.view_layer.objects.active
+    cap_spline = cap["tcb_spline"]
+    with bpy.context.temp_override(**select(bpy, ball)):
+        bpy.ops.object.mode_set(mode="OBJECT")
+    select_faces(ball, lambda c: c[:, 2] <= 0.3)
+    capfd.readouterr()
+    assert edit_fit(bpy, ball) == {"FINISHED"}
+    out = capfd.readouterr().out
+    rest = bpy.context.view_layer.objects.active
+    assert rest != cap and len(surfaces(bpy)) == 2
+    joined = spline_of(rest).report["join"]
+    assert joined["surfaces"] == 1 and joined["shared_edges"] == 32  # the ring of the cut
+    assert joined["gap_max_rel"] < 0.4 * joined["gap_max_unjoined_rel"]
+    assert f"joined to '{cap.name}' along 32 shared border edges" in out
+    assert cap["tcb_spline"] == cap_spline  # the neighbour is as it was
+    # the two surface meshes meet: the rest's border vertices to the cap's mesh
+    point_mesh_distance = importlib.import_module(ADDON + ".core.geometry").point_mesh_distance
+
+    def world_mesh(obj):
+        me = obj.data
+        me.calc_loop_triangles()
+        co = np.array([obj.matrix_world @ v.co for v in me.vertices])
+        return co, np.array([list(t.vertices) for t in me.loop_triangles])
+
+    def gap(obj):  # the largest distance of obj's border vertices from the cap's mesh
+        co, tris = world_mesh(obj)
+        edges = np.sort(tris[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        edges, count = np.unique(edges, axis=0, return_counts=True)
+        border = np.unique(edges[count == 1])
+        return float(point_mesh_distance(co[border], *world_mesh(cap)).max())
+
+    gap_joined = gap(rest)
+    # Refine joins it again (a surface refined on its own would part from the cap)
+    capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, rest)):
+        assert bpy.ops.tcb.refine(tolerance=2e-3, max_control_points=800) == {"FINISHED"}
+    assert f"joined to '{cap.name}'" in capfd.readouterr().out
+    assert spline_of(rest).report["join"]["gap_max_rel"] < 0.4 * joined["gap_max_unjoined_rel"]
+    # off: the same faces fitted alone (the result replaced), farther from the cap
+    select_faces(ball, lambda c: c[:, 2] <= 0.3)
+    assert edit_fit(bpy, ball, join_neighbours=False) == {"FINISHED"}
+    assert bpy.context.view_layer.objects.active == rest
+    assert "join" not in spline_of(rest).report
+    assert gap(rest) > 3 * gap_joined  # (measured 0.0198 against 0.0032)

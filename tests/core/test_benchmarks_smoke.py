@@ -179,3 +179,20 @@ def test_noisy_borders_quick():
         before, now = rows[mesh, "before"], rows[mesh, "now"]
         assert (before[5], now[5]) == ("circle", now_map), (before, now)
         assert gain * float(now[10]) < float(before[10]), (before, now)
+
+
+def test_join_quick():
+    """``benchmarks/join.py --quick``: the rest of a UV sphere (64 x 32, 32 x 16) fitted on its
+    own and joined to its cap's surface: the borders and the meshes at least 3x closer
+    (measured 8.5x and 4.6x; the meshes 11x and 4.3x), no fold."""
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "join.py"), "--quick"],
+                         capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = [[c.strip() for c in line.split("|")[1:-1]] for line in res.stdout.splitlines()
+            if line.startswith("| sphere")]
+    assert len(rows) == 2
+    for row in rows:
+        for column in (2, 4):  # the borders' largest gap, the meshes'
+            alone, joined = (float(x) for x in row[column].split("->"))
+            assert 3 * joined < alone, row
+        assert float(row[8]) == 0.0, row

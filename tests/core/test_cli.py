@@ -676,3 +676,41 @@ def test_ctrl_c_during_a_fit_is_one_line(tmp_path):
     rest = proc.stderr.read()
     assert proc.wait(timeout=60) == 130, rest
     assert "Traceback" not in rest and rest.strip().endswith("error: cancelled (Ctrl-C)"), rest
+
+
+def test_join_fits_a_patch_to_its_neighbour_s_spline(tmp_path, capsys):
+    """--join MESH SPLINE: the second patch of a mesh cut in two joins the first's surface."""
+    from core import cli
+    from meshes import wavy_halves
+
+    (pa, fa), (pb, fb) = wavy_halves(30)
+    a_mesh, b_mesh = tmp_path / "a.obj", tmp_path / "b.obj"
+    write_mesh(a_mesh, pa, fa)
+    write_mesh(b_mesh, pb, fb)
+    a_spline, b_spline = tmp_path / "a.npz", tmp_path / "b.npz"
+    assert cli.main(["fit", str(a_mesh), "-o", str(tmp_path / "a_s.obj"), "--spline",
+                     str(a_spline), "--quiet"]) == 0
+    capsys.readouterr()
+    assert cli.main(["fit", str(b_mesh), "-o", str(tmp_path / "b_s.obj"), "--spline",
+                     str(b_spline), "--join", str(a_mesh), str(a_spline), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    joined = TCBSurface.load(b_spline).report["join"]
+    assert joined["gap_max_rel"] < 0.25 * joined["gap_max_unjoined_rel"]
+    row = next(line for line in out.splitlines() if line.startswith("joined"))
+    assert "1 neighbour along" in row and f"{joined['gap_max_rel']:.2e} of the diagonal" in row
+    # what it cannot join, in one line and a non-zero exit
+    for args, words in (
+            ([str(b_mesh), str(a_spline)], "was not fitted to"),  # the wrong mesh
+            ([str(tmp_path / "b_s.obj"), str(a_spline)], "was not fitted to"),
+    ):
+        r = run("fit", b_mesh, "-o", tmp_path / "x.obj", "--join", *args)
+        assert r.returncode != 0 and words in r.stderr and "Traceback" not in r.stderr
+    far = tmp_path / "far.obj"
+    write_mesh(far, pa + 5.0, fa)
+    assert cli.main(["fit", str(far), "-o", str(tmp_path / "f.obj"), "--spline",
+                     str(tmp_path / "f.npz"), "--quiet"]) == 0
+    r = run("fit", b_mesh, "-o", tmp_path / "x.obj", "--join", far, tmp_path / "f.npz")
+    assert r.returncode != 0 and "no vertex at the coordinates" in r.stderr
+    np.save(tmp_path / "cloud.npy", pb)
+    r = run("fit", tmp_path / "cloud.npy", "-o", tmp_path / "x.obj", "--join", a_mesh, a_spline)
+    assert r.returncode != 0 and "is a point cloud" in r.stderr
