@@ -64,17 +64,25 @@ def border_edges(faces: np.ndarray) -> np.ndarray:
 
 def shared_vertices(points, other_points) -> np.ndarray:
     """``(k, 2)`` int64 pairs ``(i, j)`` with ``points[i] == other_points[j]`` (identical
-    coordinates: the vertices two patches cut from one mesh share). A coordinate repeated
-    within either array pairs its first row only."""
-    a = np.ascontiguousarray(np.asarray(points, dtype=np.float64))
-    b = np.ascontiguousarray(np.asarray(other_points, dtype=np.float64))
+    coordinates, -0.0 equal to 0.0: the vertices two patches cut from one mesh share), every
+    such pair (a coordinate repeated in either array, an unwelded or loose vertex, pairs each
+    of its rows), sorted."""
+    a = np.asarray(points, dtype=np.float64)
+    b = np.asarray(other_points, dtype=np.float64)
     if a.ndim != 2 or b.ndim != 2 or a.shape[1] != 3 or b.shape[1] != 3:
         raise InvalidInputError("shared_vertices() needs two (N, 3) arrays of points")
     rows = np.dtype((np.void, 24))
-    ka, ia = np.unique(a.view(rows).ravel(), return_index=True)
-    kb, ib = np.unique(b.view(rows).ravel(), return_index=True)
-    _, sa, sb = np.intersect1d(ka, kb, assume_unique=True, return_indices=True)
-    return np.column_stack([ia[sa], ib[sb]]).astype(np.int64)
+    ka = np.ascontiguousarray(a + 0.0).view(rows).ravel()  # (+ 0.0: -0.0 becomes 0.0)
+    kb = np.ascontiguousarray(b + 0.0).view(rows).ravel()
+    keys, code = np.unique(np.concatenate([ka, kb]), return_inverse=True)
+    ca, cb = code[: len(ka)], code[len(ka):]
+    ob = np.argsort(cb, kind="stable")
+    lo = np.searchsorted(cb[ob], ca, side="left")
+    hi = np.searchsorted(cb[ob], ca, side="right")
+    count = hi - lo
+    i = np.repeat(np.arange(len(ka)), count)
+    j = ob[np.repeat(lo - np.cumsum(count) + count, count) + np.arange(count.sum())]
+    return np.column_stack([i, j]).astype(np.int64)
 
 
 def shared_border_edges(faces, other_faces, pairs) -> tuple[np.ndarray, np.ndarray]:
@@ -86,14 +94,38 @@ def shared_border_edges(faces, other_faces, pairs) -> tuple[np.ndarray, np.ndarr
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
     n_own = int(max(own_border.max(initial=-1), pairs[:, 0].max(initial=-1))) + 1
     n_other = int(max(other_border.max(initial=-1), pairs[:, 1].max(initial=-1))) + 1
-    to_other = np.full(n_own, -1, dtype=np.int64)
-    to_other[pairs[:, 0]] = pairs[:, 1]
-    ends = to_other[own_border]  # this mesh's border edges whose two ends are shared ...
-    both = (ends >= 0).all(axis=1)
-    mine, theirs = own_border[both], ends[both]
+    # this mesh's border edges whose two ends are shared, with every pair of the other's
+    # vertices their ends are paired with (a repeated coordinate pairs several) ...
+    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+    start = np.searchsorted(pairs[:, 0], np.arange(n_own + 1))
+    count = np.diff(start)
+    na, nb = count[own_border[:, 0]], count[own_border[:, 1]]
+    e = np.repeat(np.arange(len(own_border)), na * nb)
+    k = np.arange(len(e)) - np.repeat(np.cumsum(na * nb) - na * nb, na * nb)
+    mine = own_border[e]
+    theirs = np.column_stack([pairs[start[mine[:, 0]] + k // nb[e], 1],
+                              pairs[start[mine[:, 1]] + k % nb[e], 1]])
     key = np.array([n_other, 1], dtype=np.int64)  # ... that are the other's border edges too
     on = np.isin(np.sort(theirs, axis=1) @ key, other_border @ key)
     return mine[on], theirs[on]
+
+
+def shared_faces(faces, other_faces, pairs) -> int:
+    """How many triangles of ``faces`` are triangles of ``other_faces`` too, their vertices
+    paired by ``pairs`` (the first pair of each vertex): overlapping patches, or a patch and
+    itself."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    f = np.asarray(faces, dtype=np.int64)
+    g = np.asarray(other_faces, dtype=np.int64)
+    if not len(pairs) or not len(f) or not len(g):
+        return 0
+    to_other = np.full(max(int(f.max()), int(pairs[:, 0].max())) + 1, -1, dtype=np.int64)
+    to_other[pairs[::-1, 0]] = pairs[::-1, 1]  # (the first pair of each vertex last: kept)
+    mapped = to_other[f]
+    whole = (mapped >= 0).all(axis=1)
+    n = max(int(g.max()), int(mapped.max(initial=0))) + 1
+    key = np.array([n * n, n, 1], dtype=np.int64)
+    return int(np.isin(np.sort(mapped[whole], axis=1) @ key, np.sort(g, axis=1) @ key).sum())
 
 
 class Seam:
@@ -164,6 +196,12 @@ def seams(param, join) -> list[Seam]:
             raise InvalidInputError(
                 f"join[{k}]: shared pairs out of range: this mesh has {n_own} vertices, the "
                 f"surface's data {n_other}")
+        overlap = shared_faces(param.faces, other.faces, pairs)
+        if overlap:
+            raise InvalidInputError(
+                f"join[{k}]: the two meshes have {overlap} triangles in common (the same "
+                "patch, or overlapping ones): join to the surface of a neighbouring patch, "
+                "which shares a border with this one and no faces")
         mine, theirs = shared_border_edges(param.faces, other.faces, pairs)
         if not len(mine):
             raise InvalidInputError(
@@ -231,7 +269,8 @@ def seam_gaps(seam_list, own_uv: np.ndarray, evaluate) -> np.ndarray:
     return np.concatenate(gaps) if gaps else np.zeros(0)
 
 
-def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, folds=None):
+def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, folds=None,
+             n_measured=None):
     """``best`` (a ``core.refine.IterationState`` of the normalized data ``fit_uv``,
     ``fit_q``; ``norm`` their normalization) joined to the neighbours of ``seam_list``: its
     control points fitted again, same points and smoothness, with the pins of
@@ -240,14 +279,18 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
     missed by more than :data:`GAP_SHARE` of the tolerance (``options``), a knot is inserted
     in each ``Gamma_0`` triangle holding such pins (``core.refine.insertion_points`` ranked by
     the pins' misses, at least two per triangle) and the space made again, as long as the
-    control points that meet ``domain`` stay within the budget; at most :data:`JOIN_ROUNDS`
-    fits after the first. Of the fits, the one with the smallest largest gap is returned,
-    unless ``folds`` (``folds(state) -> share of the mesh's area where the surface folds
-    over``, ``core.surface.mesh_folds``) says it folds more than ``best``: then the next
-    smallest that does not (knots inserted at a coarse mesh's seam had folded its surface
-    over 0.3% of its area: a UV sphere of 32 x 16 cut at z = 0.3). Returns the joined state
-    and what ``report["join"]`` says: the neighbours, shared vertices and edges, knots added,
-    and the gaps (:func:`seam_gaps`, the data's units) before and after."""
+    control points that meet ``domain`` stay within the budget (fewer, worst first, when all
+    would not fit); at most :data:`JOIN_ROUNDS` fits after the first. Of the fits that fold
+    over the mesh no more than ``best`` (``folds(state) -> share of the mesh's area``,
+    ``core.surface.mesh_folds``: knots inserted at a coarse mesh's seam had folded its surface
+    over 0.3% of its area, a UV sphere of 32 x 16 cut at z = 0.3), the one with the smallest
+    largest gap among those whose error at the first ``n_measured`` points (the criterion's)
+    is within the tolerance, or ``best``'s if that is larger, else among all, is returned
+    (``tolerance_missed``: the neighbour's surface, fitted to a looser tolerance, is farther
+    from the shared vertices than this one's tolerance; review); when every fit folds more,
+    ``best`` itself (``kept_unjoined``). Returns the state and what ``report["join"]`` says:
+    the neighbours, shared vertices and edges, knots added, the gaps (:func:`seam_gaps`, the
+    data's units) before and after, ``tolerance_missed`` and ``kept_unjoined``."""
     def surface_of(state):
         return lambda x: norm.undo(state.space.evaluate(x) @ state.fit.control_points)
 
@@ -274,11 +317,19 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
                 knots = np.vstack([knots[: state.n_interior], new, knots[state.n_interior:]])
                 if cost is None and options.feature_sensitive and options.mode == "tcb":
                     cost = _feature_cost(fit_uv, fit_q, n_int, options.seed)
-                try:
-                    space = make_space(knots, options.degree, options.mode, cost, n_int)
-                    active = np.flatnonzero(space.meets(domain))
-                except TCBError:  # (a knot on another: the pins' targets only)
-                    active = None
+                while True:  # (fewer knots, worst first, until the space fits the budget)
+                    try:
+                        space = make_space(knots, options.degree, options.mode, cost, n_int)
+                        active = np.flatnonzero(space.meets(domain))
+                    except TCBError:  # (a knot on another: the pins' targets only)
+                        active = None
+                        break
+                    if len(active) <= options.max_control_points or len(new) == 1:
+                        break
+                    new = new[: len(new) // 2]
+                    n_int = state.n_interior + len(new)
+                    knots = np.vstack([state.knots[: state.n_interior], new,
+                                       state.knots[state.n_interior:]])
                 if active is None or len(active) > options.max_control_points:
                     space, knots, n_int = state.space, state.knots, state.n_interior
                     active = state.active
@@ -304,11 +355,19 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
         fits.append((state, gaps))
         if worse >= 2:
             break
-    fits.sort(key=lambda f: f[1].max())
-    state, after = fits[0]
-    if folds is not None and len(fits) > 1:
-        limit = folds(best)
-        state, after = next(((s, g) for s, g in fits if folds(s) <= limit), fits[0])
+    m = len(fit_uv) if n_measured is None else n_measured
+
+    def error(fit):  # the criterion's error at the measured points (normalized units)
+        e = fit.errors[:m]
+        return float(e.max(initial=0.0) if options.criterion == "max"
+                     else np.sqrt(np.mean(e ** 2)))
+
+    allowed = max(options.tolerance * (2.0 if options.relative else 1.0 / norm.scale),
+                  error(best.fit))
+    limit = None if folds is None else folds(best)
+    fits = [f for f in fits if limit is None or folds(f[0]) <= limit]
+    fits.sort(key=lambda f: (error(f[0].fit) > allowed, f[1].max()))
+    state, after = fits[0] if fits else (best, before)
     return state, {
         "surfaces": len(seam_list),
         "shared_vertices": int(sum(len(m.vertices) for m in seam_list)),
@@ -317,4 +376,24 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
         "gap_max": float(after.max()), "gap_rms": float(np.sqrt(np.mean(after ** 2))),
         "gap_max_unjoined": float(before.max()),
         "gap_rms_unjoined": float(np.sqrt(np.mean(before ** 2))),
+        "tolerance_missed": bool(error(state.fit) > allowed),
+        "kept_unjoined": not fits,
     }
+
+
+def join_warning(report: dict) -> str | None:
+    """What a fit's report says of a join that did not go as asked (``report["join"]``), in
+    words, or None: the surface kept unjoined (every joined fit folded over the mesh), or the
+    joined surface's error at the data above the tolerance (the neighbour's surface is that
+    far from the shared border: fitted to a looser tolerance)."""
+    j = report.get("join") or {}
+    if j.get("kept_unjoined"):
+        return ("the surface could not be joined to its neighbours without folding over its "
+                "mesh at the shared border: it is fitted on its own (the borders "
+                f"{j['gap_max_unjoined_rel']:.2g} of the diagonal apart)")
+    if j.get("tolerance_missed"):
+        return ("joined to its neighbours, the surface misses the tolerance at its data (RMS "
+                f"{report['rms_rel']:.2g}, max {report['max_rel']:.2g} of the diagonal): the "
+                "neighbours' surfaces are that far from the shared border; fit them to the "
+                "same tolerance first, or fit this one without joining")
+    return None

@@ -37,7 +37,7 @@ from .errors import CancelledError, FileFormatError, InvalidInputError, TCBError
 from .fit import (AUTO_SMOOTHNESS, DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL,
                   SPARSE_SMOOTHNESS, DefaultSmoothness, fit_control_points)
 from .geometry import column_bounds, coordinate_order, float32_rounding
-from .join import join_fit, seams
+from .join import join_fit, join_warning, seams
 from .parallel import background
 from .parameterize import (
     Parameterization, _as_points, _check_finite, _edge_pairs, _local_planes, box_normalization,
@@ -1469,7 +1469,7 @@ class TCBSurface:
                        history=self._report.get("history", []), start_degree=self.degree,
                        projection_given=bool(self._report.get("projection_given")),
                        seam_list=seams(param, join))
-        if join is not None:  # (the surface asked for is joined; the start may not be)
+        if join:  # (the surface asked for is joined; the start may not be)
             return refined
         return self._start_unless_beaten(refined, points, options)
 
@@ -2806,7 +2806,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     if seam_list:
         best, joined = join_fit(
             best, seam_list, np.asarray(param.uv), fit_uv, fit_q, norm, options, domain,
-            folds=None if param.faces is None else lambda state: data_checks(state, None)[2])
+            folds=None if param.faces is None else lambda state: data_checks(state, None)[2],
+            n_measured=len(uv))
         checks = None  # (made again, of the joined fit)
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)
@@ -2883,6 +2884,9 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         report["join"] = joined | {
             k + "_rel": joined[k] / diagonal for k in ("gap_max", "gap_rms", "gap_max_unjoined",
                                                        "gap_rms_unjoined")}
+        words = join_warning(report)
+        if words:
+            warnings.warn(words, RuntimeWarning, stacklevel=3)
     if hist and hist[-1].get("net_capped"):  # a noisy mesh's net stopped at its vertex count
         report["net_capped"] = int(hist[-1]["net_capped"])  # (core.refine.NOISY_NET_PER_VERTEX)
     if param.faces is not None and not subsampled and len(best.fit.errors) > len(uv):

@@ -9,7 +9,7 @@ import pytest
 from core import InvalidInputError, fit_surface
 from core.fit import fit_control_points
 from core.geometry import point_mesh_distance
-from core.join import border_edges, shared_vertices
+from core.join import border_edges, shared_border_edges, shared_vertices
 from core.refine import border_rings
 from core.spline_space import build_space
 from meshes import noisy_grid, wavy_halves
@@ -119,3 +119,44 @@ def test_join_refuses_what_it_cannot_join():
     # a mesh that is not a neighbour: no border edge in common
     with pytest.raises(InvalidInputError, match="share no border edge"):
         fit_surface(whole, faces, join=(a, shared_vertices(whole, pa)[:1]))
+
+
+def test_shared_vertices_pair_every_row_of_a_repeated_coordinate():
+    (pa, fa), (pb, fb) = wavy_halves(20)
+    pairs = shared_vertices(pb, pa)
+    edges = shared_border_edges(fb, fa, pairs)[0]
+    # a loose vertex at a seam vertex's coordinates, listed first (an unwelded copy): the
+    # seam's edges are all still found through the vertex in faces
+    seam_vertex = pairs[len(pairs) // 2, 0]
+    pb2, fb2 = np.vstack([pb[seam_vertex], pb]), fb + 1
+    pairs2 = shared_vertices(pb2, pa)
+    assert len(pairs2) == len(pairs) + 1
+    mine, theirs = shared_border_edges(fb2, fa, pairs2)
+    assert len(mine) == len(edges) and np.array_equal(pb2[mine], pb[edges])
+    assert np.array_equal(pb2[mine], pa[theirs])
+    # -0.0 and 0.0 are the same coordinate (two files' writers)
+    zero = np.array([[0.0, 1.0, 2.0], [-0.0, 1.0, 2.0], [0.0, -0.0, 1.0]])
+    assert shared_vertices(zero, np.array([[-0.0, 1.0, 2.0]])).tolist() == [[0, 0], [1, 0]]
+
+
+def test_join_keeps_to_the_tolerance_and_the_budget_or_says_so():
+    (pa, fa), (pb, fb) = wavy_halves(20)
+    pairs = shared_vertices(pb, pa)
+    # joined to itself (or to an overlapping patch): refused
+    b = fit_surface(pb, fb, tolerance=1e-2)
+    with pytest.raises(InvalidInputError, match="triangles in common"):
+        fit_surface(pb, fb, tolerance=1e-2, join=(b, shared_vertices(pb, pb)))
+    # a budget that holds only some of the knots the seam asks for: those are added
+    free = fit_surface(pb, fb, tolerance=1e-3)
+    a = fit_surface(pa, fa, tolerance=1e-3)
+    budget = free.report["control_points"] + 12
+    tight = fit_surface(pb, fb, tolerance=1e-3, max_control_points=budget, join=(a, pairs))
+    assert 0 < tight.report["join"]["knots_added"]
+    assert tight.report["control_points"] <= budget
+    # a neighbour fitted 20x looser: the joined patch misses its tolerance, and says so
+    coarse = fit_surface(pa, fa, tolerance=2e-2)
+    with pytest.warns(RuntimeWarning, match="misses the tolerance at its data"):
+        loose = fit_surface(pb, fb, tolerance=1e-3, join=(coarse, pairs))
+    assert loose.report["join"]["tolerance_missed"]
+    assert not fit_surface(pb, fb, tolerance=1e-3, join=(a, pairs)).report["join"][
+        "tolerance_missed"]
