@@ -177,7 +177,7 @@ def fit_control_points(
         :func:`core.refine.adaptive_fit`).
     pins : (uv (M, 2), targets (M, 3), weight), optional
         Points the surface is drawn to besides the data (a neighbouring surface's border,
-        :func:`core.surface.join_pins`): the term ``rho sum_m |S(y_m) - t_m|^2`` is added to
+        :func:`core.join.join_pins`): the term ``rho sum_m |S(y_m) - t_m|^2`` is added to
         the data term, ``rho = weight * mean(w)``, so each pin counts as ``weight`` data points
         of the mean weight (method.md section 5's objective with extra data; not in
         method.md). The fairing is scaled by the data's trace alone, and the pins neither

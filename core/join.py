@@ -378,6 +378,12 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
         "gap_rms_unjoined": float(np.sqrt(np.mean(before ** 2))),
         "tolerance_missed": bool(error(state.fit) > allowed),
         "kept_unjoined": not fits,
+        "control_points": int(state.n_control),
+        "control_points_unjoined": int(best.n_control),
+        # how far the neighbours' surfaces are from the shared vertices (their errors there)
+        "neighbour_error_max": float(max(np.nanmax(
+            np.asarray(m.surface.errors, dtype=np.float64)[m.vertices[:, 1]], initial=0.0)
+            for m in seam_list)),
     }
 
 
@@ -392,8 +398,12 @@ def join_warning(report: dict) -> str | None:
                 "mesh at the shared border: it is fitted on its own (the borders "
                 f"{j['gap_max_unjoined_rel']:.2g} of the diagonal apart)")
     if j.get("tolerance_missed"):
+        # (not "fit them to the same tolerance": one that was had run out of control points;
+        # user test)
         return ("joined to its neighbours, the surface misses the tolerance at its data (RMS "
                 f"{report['rms_rel']:.2g}, max {report['max_rel']:.2g} of the diagonal): the "
-                "neighbours' surfaces are that far from the shared border; fit them to the "
-                "same tolerance first, or fit this one without joining")
+                "neighbours' surfaces are up to "
+                f"{j['neighbour_error_max'] / report['diagonal']:.2g} of it from the shared "
+                "border's vertices; refine them to this tolerance first (a larger budget if "
+                "they ran out of control points), or fit this one without joining")
     return None

@@ -981,9 +981,10 @@ def neighbour_joins(context, obj, part: str, data) -> tuple[list, list, list]:
     as ``fit_surface`` takes it (each neighbouring result's spline, with its net's edits, and
     the vertex pairs the two parts share: identical world coordinates), the neighbours'
     names, and a sentence for each result of another part of ``obj`` sharing a border with
-    this one that is not joined (its part renumbered or edited, or the mesh moved, since its
-    fit). Neighbours: the other results of faces of ``obj`` in the view layer, not
-    overlapping these, with a border edge in common."""
+    this one that is not joined (the selections share faces, or the mesh moved or was edited
+    since its fit). Neighbours: the other results of faces of ``obj`` in the view layer with a
+    border edge in common with these (and no face: a selection made in vertex select mode
+    takes the faces whose vertices are all selected, a neighbour's too: user test)."""
     core = _core()
     kind, mask, _ = bridge.part_of_text(part)
     if kind != "FACES" or data.faces is None:
@@ -996,8 +997,11 @@ def neighbour_joins(context, obj, part: str, data) -> tuple[list, list, list]:
                 or [s.object for s in ob.tcb.sources] != [obj] or live.deleted(ob)):
             continue
         other_kind, other_mask, digest = bridge.part_of_text(text)
-        if other_kind != "FACES" or len(other_mask) != len(mask) or (other_mask & mask).any():
-            continue  # (vertices, another mesh's numbers, or overlapping faces)
+        if other_kind != "FACES" or len(other_mask) != len(mask):
+            continue  # (vertices, or another mesh's numbers)
+        common = int((other_mask & mask).sum())
+        if common == int(mask.sum()) or common == int(other_mask.sum()):
+            continue  # (a part within the other: not a neighbour)
         try:
             other = bridge.read_part(obj, other_kind, other_mask, digest)[0]
         except bridge.SelectionError:
@@ -1005,14 +1009,22 @@ def neighbour_joins(context, obj, part: str, data) -> tuple[list, list, list]:
         pairs = core.join.shared_vertices(data.points, other.points)
         if not len(core.join.shared_border_edges(data.faces, other.faces, pairs)[0]):
             continue  # (no border in common: apart, or touching at a corner)
+        if common:
+            notes.append(
+                f"not joined to '{ob.name}': the two selections share {common} face"
+                f"{'s' if common > 1 else ''} (in vertex select mode a face whose vertices are "
+                "all selected is selected too: deselect those, or select in face select mode, "
+                "and fit again)")
+            continue
         try:
             surf = stored_surface(ob, use_net=True)
         except bridge.SelectionError:
             surf = None
         if surf is None or surf.parameterization.faces is None or not surf.fitted_to(
                 other.points, other.rounding):
-            notes.append(f"not joined to '{ob.name}': its faces moved or changed since its "
-                         "fit (fit them again, then these)")
+            # (its faces are as they were, read_part says: the object was moved; user test)
+            notes.append(f"not joined to '{ob.name}': '{obj.name}' was moved or transformed "
+                         "since that part was fitted (fit it again, then these faces)")
             continue
         join.append((surf, pairs))
         names.append(ob.name)
@@ -1025,7 +1037,10 @@ def join_words(surf, names: list) -> list:
     if not j or not names:
         return []
     who = ", ".join(f"'{n}'" for n in names)
-    added = (f"; {j['knots_added']} knots added along it" if j.get("knots_added") else "")
+    # (the joined net's size, against the patch's own: up to 4x on a coarse one; user test)
+    added = (f"; {j['knots_added']} knots added along it: {j['control_points']} control "
+             f"points, {j['control_points_unjoined']} fitted alone" if j.get("knots_added")
+             else "")
     return [f"joined to {who} along {j['shared_edges']} shared border edges: the borders "
             f"{j['gap_max']:.4g} apart at most ({j['gap_max_rel']:.2g} of the diagonal; "
             f"{j['gap_max_unjoined_rel']:.2g} unjoined{added})"]

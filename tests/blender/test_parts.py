@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from scenes import ADDON, add_mesh, delete_first, grid, select, spline_of  # noqa: E402
+from scenes import (ADDON, add_mesh, delete_first, grid, move_net_vertex, positions,  # noqa: E402
+                    select, spline_of)
 
 from test_operators import draw_panels, snapshot  # noqa: E402
 
@@ -403,3 +404,47 @@ def test_a_patch_fitted_beside_another_joins_its_surface_along_their_border(clea
     assert bpy.context.view_layer.objects.active == rest
     assert "join" not in spline_of(rest).report
     assert gap(rest) > 3 * gap_joined  # (measured 0.0198 against 0.0032)
+
+
+def test_a_patch_is_joined_to_its_neighbour_s_edits_and_says_why_it_is_not(clean_scene, capfd):
+    """The neighbour's net dragged near the seam: the patch joins the surface as edited.
+    Selections that share faces (vertex select mode takes a neighbour's faces whose vertices
+    are all selected; user test), and a source moved since the neighbour's fit, are not
+    joined, and the summary says why."""
+    bpy = clean_scene
+    ball = sphere(bpy)
+    select_faces(ball, lambda c: c[:, 2] > 0.3)
+    assert edit_fit(bpy, ball) == {"FINISHED"}
+    cap = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, ball)):
+        bpy.ops.object.mode_set(mode="OBJECT")
+    select_faces(ball, lambda c: c[:, 2] <= 0.3)
+    assert edit_fit(bpy, ball) == {"FINISHED"}
+    rest = bpy.context.view_layer.objects.active
+    before = spline_of(rest).report["join"]
+    # drag the cap's control point nearest to the seam outwards
+    net = cap.tcb.net
+    seam_z = min(v.co.z for v in cap.data.vertices)
+    p = positions(net)
+    j = int(np.argmin(np.abs(p[:, 2] - seam_z)))
+    move_net_vertex(bpy, net, j, 0.1 * p[j] / np.linalg.norm(p[j]))
+    select_faces(ball, lambda c: c[:, 2] <= 0.3)
+    assert edit_fit(bpy, ball) == {"FINISHED"}
+    edited = spline_of(rest).report["join"]
+    # the rest was drawn to the dragged cap: apart from it by more before joining, as close
+    assert edited["gap_max_unjoined"] > 1.5 * before["gap_max_unjoined"]
+    assert edited["gap_max_rel"] < 0.5 * edited["gap_max_unjoined_rel"]
+    # a selection taking two of the cap's faces too: not joined, and said
+    select_faces(ball, lambda c: (c[:, 2] <= 0.3) | ((c[:, 2] < 0.5)
+                                                   & (np.abs(np.arctan2(c[:, 1], c[:, 0])) < 0.2)))
+    capfd.readouterr()
+    assert edit_fit(bpy, ball) == {"FINISHED"}
+    words = capfd.readouterr().out
+    assert f"not joined to '{cap.name}': the two selections share" in words
+    assert "join" not in spline_of(bpy.context.view_layer.objects.active).report
+    # the ball moved since the cap's fit: not joined, and said
+    ball.location.x += 1.0
+    select_faces(ball, lambda c: c[:, 2] <= 0.3)
+    capfd.readouterr()
+    assert edit_fit(bpy, ball) == {"FINISHED"}
+    assert f"not joined to '{cap.name}': 'Ball' was moved or transformed" in capfd.readouterr().out
