@@ -2,17 +2,17 @@
 
 A mesh cut into patches (faces selected in Edit Mode, a scan split into parts) is fitted one
 patch at a time, and each fit meets its own data within its tolerance, not its neighbour's
-surface: two patches of a UV sphere fitted at 1e-3 left gaps up to 2.7e-3 of the diagonal
-along their shared border. A patch fitted with ``join=`` is drawn to its neighbours' surfaces
-along the border they share:
+surface: two patches of a UV sphere fitted at 1e-3 left gaps up to 3e-3 of the diagonal along
+their shared border. A patch fitted with ``join=`` is drawn to its neighbours' surfaces along
+the border they share:
 
 - the shared border is the mesh edges that are border edges of both patches (each used by
   one of the patch's triangles), between vertices given as the same (``shared`` pairs, or
   :func:`shared_vertices` by their coordinates);
 - a parameterization is linear on each triangle, so the point at fraction ``t`` along a shared
-  edge is at ``(1 - t) uv_i + t uv_j`` in either patch's parameters; the neighbour's surface
-  there is the target (:func:`join_pins`: the edge's vertices and :data:`EDGE_PINS` inside
-  it);
+  edge is at ``(1 - t) uv_i + t uv_j`` in either patch's parameters; the shared vertices are
+  drawn to the neighbour's surface at them, and :data:`EDGE_PINS` inside each edge to the
+  nearest point of the neighbour's border along that edge (:func:`join_pins`);
 - the patch's control points are fitted again on the knots its own run chose, with the pins
   added to the data term (``core.fit.fit_control_points``'s ``pins``, each worth
   :data:`PIN_WEIGHT` data points), so the neighbour is left as it is; where the pins are
@@ -74,12 +74,12 @@ def shared_vertices(points, other_points) -> np.ndarray:
     rows = np.dtype((np.void, 24))
     ka = np.ascontiguousarray(a + 0.0).view(rows).ravel()  # (+ 0.0: -0.0 becomes 0.0)
     kb = np.ascontiguousarray(b + 0.0).view(rows).ravel()
-    keys, code = np.unique(np.concatenate([ka, kb]), return_inverse=True)
+    code = np.unique(np.concatenate([ka, kb]), return_inverse=True)[1]
     ca, cb = code[: len(ka)], code[len(ka):]
     ob = np.argsort(cb, kind="stable")
-    lo = np.searchsorted(cb[ob], ca, side="left")
-    hi = np.searchsorted(cb[ob], ca, side="right")
-    count = hi - lo
+    sorted_b = cb[ob]
+    lo = np.searchsorted(sorted_b, ca, side="left")
+    count = np.searchsorted(sorted_b, ca, side="right") - lo
     i = np.repeat(np.arange(len(ka)), count)
     j = ob[np.repeat(lo - np.cumsum(count) + count, count) + np.arange(count.sum())]
     return np.column_stack([i, j]).astype(np.int64)
@@ -122,10 +122,11 @@ def shared_faces(faces, other_faces, pairs) -> int:
     to_other = np.full(max(int(f.max()), int(pairs[:, 0].max())) + 1, -1, dtype=np.int64)
     to_other[pairs[::-1, 0]] = pairs[::-1, 1]  # (the first pair of each vertex last: kept)
     mapped = to_other[f]
-    whole = (mapped >= 0).all(axis=1)
-    n = max(int(g.max()), int(mapped.max(initial=0))) + 1
-    key = np.array([n * n, n, 1], dtype=np.int64)
-    return int(np.isin(np.sort(mapped[whole], axis=1) @ key, np.sort(g, axis=1) @ key).sum())
+    mapped = mapped[(mapped >= 0).all(axis=1)]
+    rows = np.dtype((np.void, 24))  # (a triangle's sorted corners as one key)
+    mine = np.ascontiguousarray(np.sort(mapped, axis=1)).view(rows).ravel()
+    theirs = np.ascontiguousarray(np.sort(g, axis=1)).view(rows).ravel()
+    return int(np.isin(mine, theirs).sum())
 
 
 class Seam:
@@ -139,17 +140,29 @@ class Seam:
         self.own = own_edges
         self.other = other_edges
         self.vertices = vertices
+        self._polyline = None
 
-    def along(self, own_uv: np.ndarray, fractions) -> tuple[np.ndarray, np.ndarray]:
+    def polyline(self) -> np.ndarray:
+        """The neighbour's surface along each shared edge, ``(e, GAP_SEGMENTS + 1, 3)``
+        (made once: the neighbour does not change)."""
+        if self._polyline is None:
+            theirs = self.along(np.zeros((0, 2)), np.linspace(0.0, 1.0, GAP_SEGMENTS + 1),
+                                own=False)[1]
+            self._polyline = self.surface(theirs).reshape(len(self.own), GAP_SEGMENTS + 1, 3)
+        return self._polyline
+
+    def along(self, own_uv: np.ndarray, fractions, own: bool = True):
         """Parameters ``(own, other)`` of the points at ``fractions`` along every shared
-        edge: ``(1 - t) uv_i + t uv_j`` in each patch's parameters."""
+        edge: ``(1 - t) uv_i + t uv_j`` in each patch's parameters (``own`` False: None for
+        this patch's)."""
         t = np.asarray(fractions, dtype=np.float64)[None, :, None]
         other_uv = np.asarray(self.surface.parameterization.uv)
 
         def at(uv, edges):
-            return ((1 - t) * uv[edges[:, 0]][:, None] + t * uv[edges[:, 1]][:, None]).reshape(-1, 2)
+            return ((1 - t) * uv[edges[:, 0]][:, None]
+                    + t * uv[edges[:, 1]][:, None]).reshape(-1, 2)
 
-        return at(own_uv, self.own), at(other_uv, self.other)
+        return at(own_uv, self.own) if own else None, at(other_uv, self.other)
 
 
 def seams(param, join) -> list[Seam]:
@@ -229,11 +242,8 @@ def _borders(seam, own_uv, evaluate, fractions):
     the nearest points of the neighbour's surface along the same edges (a polyline of
     :data:`GAP_SEGMENTS` pieces) ``(e, t, 3)``, with the own parameters ``(e * t, 2)``."""
     mine, _ = seam.along(own_uv, fractions)
-    _, theirs = seam.along(own_uv, np.linspace(0.0, 1.0, GAP_SEGMENTS + 1))
-    e, t = len(seam.own), len(fractions)
-    p = evaluate(mine).reshape(e, t, 3)
-    q = seam.surface(theirs).reshape(e, 1, GAP_SEGMENTS + 1, 3)
-    return p, _nearest_on(q, p[:, :, None]), mine
+    p = evaluate(mine).reshape(len(seam.own), len(fractions), 3)
+    return p, _nearest_on(seam.polyline()[:, None], p[:, :, None]), mine
 
 
 def join_pins(seam_list, own_uv: np.ndarray, evaluate) -> tuple[np.ndarray, np.ndarray]:
