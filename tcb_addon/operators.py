@@ -526,6 +526,9 @@ def store_stats(tcb, surf, settings: dict) -> None:
     tcb.iterations = int(rep.get("iterations", 0))
     tcb.holes_filled = int(rep.get("holes_filled", 0))
     tcb.folded = float(rep.get("folded", 0.0))
+    joined = rep.get("join") or {}
+    tcb.joined_edges = int(joined.get("shared_edges", 0)) if not joined.get("kept_unjoined") else 0
+    tcb.join_gap_rel = float(joined.get("gap_max_rel", 0.0))
     tcb.stop_reason = str(rep.get("stop_reason", ""))
     for key in ("rms", "max", "rms_rel", "max_rel", "rms_area", "noise", "noise_rel", "seconds"):
         setattr(tcb, key, float(rep.get(key, 0.0)))

@@ -277,6 +277,10 @@ class TCB_PG_object(bpy.types.PropertyGroup):
     # measured, as for a cloud that met its tolerance), and over the diagonal
     noise: FloatProperty(name="Noise", precision=6)
     noise_rel: FloatProperty(name="Noise (relative)", precision=6)
+    # a patch joined to its neighbours (core.join): the shared border edges (0: not joined)
+    # and the largest gap left between the borders, over the diagonal
+    joined_edges: IntProperty(name="Joined Edges")
+    join_gap_rel: FloatProperty(name="Joined Gap (relative)", precision=6)
     # settings of the last fit / refine
     tolerance: FloatProperty(precision=6)
     relative: BoolProperty()

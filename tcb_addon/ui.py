@@ -85,6 +85,9 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
              f"{st.smoothness:.3g}"),
             *((("Holes Spanned", f"{st.holes_filled}"),) if st.holes_filled else ()),
             *((("Folded Over", f"{100 * st.folded:.2g} %"),) if folded_over(st) else ()),
+            # a patch joined to its neighbours: how far apart the borders are left
+            *((("Joined Gap (of diagonal)", f"{100 * st.join_gap_rel:.2g} %"),)
+              if st.joined_edges else ()),
             # the scan's noise, measured, which a tolerance below it would have the net follow
             # (user test: the summary said it, the panel did not)
             *((("Noise (of diagonal)", f"{100 * st.noise_rel:.3g} %"),) if st.noise > 0

@@ -375,6 +375,10 @@ def test_a_patch_fitted_beside_another_joins_its_surface_along_their_border(clea
     assert joined["gap_max_rel"] < 0.4 * joined["gap_max_unjoined_rel"]
     assert f"joined to '{cap.name}' along 32 shared border edges" in out
     assert cap["tcb_spline"] == cap_spline  # the neighbour is as it was
+    drawn = draw_panels(bpy, [rest])
+    row = drawn.index(("label", "Joined Gap (of diagonal)"))
+    assert drawn[row + 1] == ("label", f"{100 * joined['gap_max_rel']:.2g} %")
+    assert rest.tcb.joined_edges == 32 and cap.tcb.joined_edges == 0
     # the two surface meshes meet: the rest's border vertices to the cap's mesh
     point_mesh_distance = importlib.import_module(ADDON + ".core.geometry").point_mesh_distance
 
@@ -403,6 +407,7 @@ def test_a_patch_fitted_beside_another_joins_its_surface_along_their_border(clea
     assert edit_fit(bpy, ball, join_neighbours=False) == {"FINISHED"}
     assert bpy.context.view_layer.objects.active == rest
     assert "join" not in spline_of(rest).report
+    assert rest.tcb.joined_edges == 0  # (the panel's line goes)
     assert gap(rest) > 3 * gap_joined  # (measured 0.0198 against 0.0032)
 
 
