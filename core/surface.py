@@ -1314,6 +1314,26 @@ class TCBSurface:
                     or key32 is not None
                     and rounded_faces_digest(faces, points, checked=True) == key32)
 
+    def same_mesh(self, points, faces) -> bool:
+        """Whether ``faces`` on ``points`` are the mesh this surface was fitted to, whatever
+        vertices are in no face: the same polygons of the same vertex positions, in any order
+        (``report["mesh_digest"]``, :func:`mesh_digest`; False for surfaces fitted before it
+        was kept, and for clouds), or of the positions rounded to 32-bit floats
+        (``report["faces_set_digest32"]``, kept for data that are not 32-bit values). A loose
+        vertex deleted in Blender renumbers the vertices after it: Refine had refused the
+        mesh (user test). Cheap: hashes of the corners, no sort. :meth:`refine` and
+        :meth:`reordered` then parameterize the mesh again."""
+        if self._param.faces is None or faces is None:
+            return False
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            return False
+        key = self._report.get("mesh_digest")
+        key32 = self._report.get("faces_set_digest32")
+        return bool(key is not None and mesh_digest(faces, points) == key
+                    or key32 is not None
+                    and rounded_faces_digest(faces, points, checked=True) == key32)
+
     def reordered(self, points, faces=None) -> Parameterization | None:
         """The parameterization of ``points`` (and ``faces``) when they are the data this
         surface was fitted to stored in another order (Blender's Sort Elements: the vertices,
@@ -1331,7 +1351,9 @@ class TCBSurface:
         None). Parameters that were stored in 32-bit floats (a compact file) are rounded so
         too. Files saved before the set digests take no other order; values both reordered
         and rounded are found when rounded to 32-bit floats (Blender's), by surfaces fitted
-        since the thirty-seventh session. Costs a parameterization (1e5 points: a cloud 0.4 s, a
+        since the thirty-seventh session. A mesh with vertices in no face added or deleted
+        (:meth:`same_mesh`; surfaces fitted since the forty-first session) is taken too: the
+        parameterization returned is of the points given, their count. Costs a parameterization (1e5 points: a cloud 0.4 s, a
         grid mesh 3.7 s; docs/benchmarks.md)."""
         return self._reordered(points, faces)[0]
 
@@ -1342,14 +1364,17 @@ class TCBSurface:
         points = np.asarray(points, dtype=np.float64)
         old = self._param
         # (NaN rows too: a mesh's loose vertices may be NaN, as the fit allowed: review)
-        if (points.ndim != 2 or points.shape != (len(old.uv), 3)
-                or not self.same_data_set(points)):
+        same_set = (points.ndim == 2 and points.shape == (len(old.uv), 3)
+                    and self.same_data_set(points))
+        # (or the mesh with other vertices in no face: the used ones, their faces, the same)
+        loose = not same_set and self.same_mesh(points, faces)
+        if not (same_set or loose):
             return None, "points"
         if old.faces is not None:
             if faces is None:
                 return None, "no faces"
             # (the set digest, even when the faces are the fit's rows: on other points)
-            if not self._same_face_set(faces, points):
+            if not (loose or self._same_face_set(faces, points)):
                 return None, "faces"
             # (spike vertices dissolved by drop_outliers: again, else refused)
             tries = [dict(fill_holes=bool(self._report.get("holes_filled", 0)),
@@ -1399,10 +1424,14 @@ class TCBSurface:
         ``changes`` alter the degree, the mode or the smoothness.
         """
         points = np.asarray(points, dtype=np.float64)
-        if points.ndim != 2 or len(points) != len(self._param.uv):
+        if (points.ndim != 2 or len(points) != len(self._param.uv)) and not self.same_mesh(
+                points, faces):
             raise InvalidInputError(
                 "refine() needs the points this surface was fitted to "
-                f"({len(self._param.uv)} points, got {len(points)})"
+                f"({len(self._param.uv)} points, got {len(points)}"
+                + ("; a mesh's vertices in no face may differ when its faces are given"
+                   if faces is None and self._param.faces is not None
+                   and self._report.get("mesh_digest") is not None else "") + ")"
             )
         if faces is not None and self._param.faces is None:  # (ignored once: user test)
             raise InvalidInputError(
@@ -1458,12 +1487,12 @@ class TCBSurface:
         # the digests of the faces given (kept from now: a file saved before the set digest
         # gets it), else the fit's
         keys = (self._report.get("faces_digest"), self._report.get("faces_set_digest"),
-                self._report.get("faces_set_digest32"))
+                self._report.get("faces_set_digest32"), self._report.get("mesh_digest"))
         if faces is not None and keys[0] is not None:
             keys = (faces_digest(faces), faces_set_digest(faces, points),
-                    rounded_faces_digest(faces, points))
+                    rounded_faces_digest(faces, points), mesh_digest(faces, points))
         refined = _run(points, param, options, callback, faces_key=keys[0],
-                       faces_set_key=keys[1], faces_set_key32=keys[2],
+                       faces_set_key=keys[1], faces_set_key32=keys[2], mesh_key=keys[3],
                        start=self.knots[: self._n_interior],
                        rings=self.knots[self._n_interior:],
                        history=self._report.get("history", []), start_degree=self.degree,
@@ -1528,7 +1557,8 @@ class TCBSurface:
         report.pop("edited", None)
         for key in ("history", "iterations", "seconds", "stop_reason", "data_digest",
                     "data_set_digest", "data_set_digest32", "faces_digest", "faces_set_digest",
-                    "faces_set_digest32", "canonical_winding", "projection_given"):
+                    "faces_set_digest32", "mesh_digest", "canonical_winding",
+                    "projection_given"):
             if key in mine:
                 report[key] = copy.deepcopy(mine[key])
         diagonal = float(mine["diagonal"])
@@ -1858,9 +1888,10 @@ REORDERED_UV_TOL = 1e-6
 
 def _same_map(new: Parameterization, old: Parameterization) -> bool:
     """Whether ``new`` (the data parameterized again, in another order) gives the parameters of
-    ``old`` as a set: the same kind and counts, and each column of the used points' ``uv`` and
+    ``old`` as a set: the same kind and counts (of the used points, faces, boundary, holes), and each column of the used points' ``uv`` and
     of the domain polygon, sorted, within :data:`REORDERED_UV_TOL`."""
-    if new.kind != old.kind or len(new.uv) != len(old.uv) or new.flipped != old.flipped:
+    # (the count of all points may differ: a mesh's vertices in no face; TCBSurface.same_mesh)
+    if new.kind != old.kind or new.flipped != old.flipped:
         return False  # (the other canonical winding: the mirrored map)
     if int(np.count_nonzero(new.used)) != int(np.count_nonzero(old.used)):
         return False
@@ -2041,13 +2072,31 @@ def rounded_faces_digest(faces, points, checked: bool = False) -> str | None:
     triangles in 0.5-1 s). None when the faces are no integer (f, k) array of indices into
     ``points``, and (unless ``checked``: a comparison) when the points are 32-bit values,
     whose exact digest is the one to keep."""
-    f = _int_faces(faces)
-    n = len(points)
-    if f is None or f.ndim != 2 or (f.size and (f.min() < 0 or f.max() >= n)):
-        return None
     if not checked and _float32_values(points):
         return None
-    corner = _row_hashes(_rounded(points))[f]  # (f, k, 2)
+    return _polygon_multiset(faces, _rounded(points))
+
+
+def mesh_digest(faces, points) -> str | None:
+    """A digest of ``faces`` (f, k) on ``points`` as a multiset of polygons of the float64
+    vertex positions (:func:`rounded_faces_digest` unrounded; ``report["mesh_digest"]``): it
+    holds the vertices in faces and their values, not their numbers, so a vertex in no face
+    added or deleted (which renumbers the others) leaves it as it is; :meth:`TCBSurface.refine`
+    takes such a mesh (:meth:`TCBSurface.same_mesh`). None when the faces are no integer
+    (f, k) array of indices into ``points``."""
+    return _polygon_multiset(faces, points)
+
+
+def _polygon_multiset(faces, values) -> str | None:
+    """The multiset digest of ``faces`` (f, k) as polygons of the rows of ``values`` (n, d):
+    each polygon hashed from its corners' :func:`_row_hashes` from the corner of least hash on
+    (a reversed winding is another polygon), the sums over polygons (:func:`_multiset_text`).
+    None when the faces are no integer (f, k) array of indices into ``values``."""
+    f = _int_faces(faces)
+    n = len(values)
+    if f is None or f.ndim != 2 or (f.size and (f.min() < 0 or f.max() >= n)):
+        return None
+    corner = _row_hashes(values)[f]  # (f, k, 2)
     k = f.shape[1]
     out = np.zeros((len(f), 2), dtype=np.uint64)
     if k and len(f):
@@ -2672,12 +2721,12 @@ TESSELLATION_JITTER = 1e-7
 
 def _run(points, param, options, callback, start=None, rings=None, history=(), checked=False,
          start_degree=None, faces_key=None, spikes=False, faces_set_key=None,
-         projection_given=False, faces_set_key32=None, seam_list=()):
+         projection_given=False, faces_set_key32=None, seam_list=(), mesh_key=None):
     """Fit ``points`` over ``param``; ``checked``: ``parameterize_points`` has just accepted
     these very points (a cloud), so :func:`normalize` need not check them again.
-    ``faces_key``, ``faces_set_key``, ``faces_set_key32``: the digests of the given faces
-    (:func:`faces_digest`, :func:`faces_set_digest`, :func:`rounded_faces_digest`) that the
-    report keeps. ``projection_given``: the cloud was
+    ``faces_key``, ``faces_set_key``, ``faces_set_key32``, ``mesh_key``: the digests of the
+    given faces (:func:`faces_digest`, :func:`faces_set_digest`, :func:`rounded_faces_digest`,
+    :func:`mesh_digest`) that the report keeps. ``projection_given``: the cloud was
     projected along a direction the user gave (``report["projection_given"]``).
     ``seam_list``: the neighbours to join (:func:`core.join.seams`): the best fit is joined
     to them (:func:`core.join.join_fit`)."""
@@ -2871,6 +2920,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     # (not for 32-bit values: the digests above are theirs)
     if faces_set_key32 is not None:
         report["faces_set_digest32"] = faces_set_key32
+    if mesh_key is not None:  # (or with vertices in no face added or deleted: mesh_digest)
+        report["mesh_digest"] = mesh_key
     if not _float32_values(points):
         report["data_set_digest32"] = rounded_set_digest(points)
     if param.faces is not None:  # (the map is of the canonical winding: reordered() maps a
@@ -3441,6 +3492,7 @@ def fit_surface(
                 faces_key=None if faces is None else faces_digest(faces),
                 faces_set_key=None if faces is None else faces_set_digest(faces, points),
                 faces_set_key32=None if faces is None else rounded_faces_digest(faces, points),
+                mesh_key=None if faces is None else mesh_digest(faces, points),
                 spikes=faces is None and not drop_outliers,
                 projection_given=faces is None and projection is not None)
 

@@ -492,8 +492,8 @@ def source_mismatch(surf, data: bridge.InputData):
     """``(faces, what)``: the faces of ``data`` as the fit of ``surf`` read them, and how
     ``data`` differ from the data ``surf`` was fitted to, in words ("12 points then, 10 now",
     "other coordinates: moved, transformed or edited", "other faces"), or None when they are
-    the same (rounding, another order of the same points and faces, and a mirrored source's
-    turned faces are no change). Refine refuses other data; Import Spline links only the same
+    the same (rounding, another order of the same points and faces, vertices in no face added
+    or deleted, and a mirrored source's turned faces are no change). Refine refuses other data; Import Spline links only the same
     as the source."""
     key = (surf.report or {}).get("faces_digest")  # (a mesh's; None for clouds, older files)
     digest = _core().surface.faces_digest
@@ -512,6 +512,11 @@ def source_mismatch(surf, data: bridge.InputData):
     faces_changed = key is not None and (faces is None or not surf.same_faces(
         faces, data.points if same_set else None))
     if same_points and not faces_changed:
+        return faces, None
+    if faces is not None and surf.same_mesh(data.points, faces):
+        # the same faces on the same vertices, other vertices in no face: a stray vertex
+        # deleted renumbers the rest (Refine had refused it: user test); the engine
+        # parameterizes the mesh again (TCBSurface.reordered)
         return faces, None
     then, now = len(surf.parameterization.uv), len(data.points)
     return faces, (f"{then} points then, {now} now" if then != now
@@ -1677,6 +1682,9 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
             (surf.report or {}).get("data_digest"))
         self._same = (same_set and not self._reordered) or (
             not same_set and surf.fitted_to(data.points, data.rounding))
+        # ... and so is the mesh with vertices in no face added or deleted (renumbered)
+        self._reordered = self._reordered or not self._same and surf.same_mesh(
+            data.points, data.faces)
         if data.unmodified and not (self._same or self._reordered):
             # (its map had measured the other shape, 10x off, with a warning: user test)
             raise bridge.SelectionError(
@@ -1885,7 +1893,7 @@ def _reordered_distances(surf, points, faces, vertices=None, callback=None):
     None when they map to other parameters: then all points count, and the map says that the
     data changed)."""
     used = np.asarray(surf.parameterization.used, dtype=bool)
-    if not used.all():
+    if not used.all() or len(used) != len(points):  # (other vertices in no face: same_mesh)
         param = surf.reordered(points, faces)
         used = None if param is None else np.asarray(param.used, dtype=bool)
     return (*_data_distances(surf, points, faces is None, vertices, callback, used=used), used)

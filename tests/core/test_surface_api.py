@@ -309,6 +309,56 @@ def test_refine_takes_a_mesh_with_a_loose_nan_vertex_in_another_order():
     assert np.isnan(moved.errors[np.flatnonzero(perm == len(points) - 1)]).all()
 
 
+def test_refine_takes_the_mesh_with_vertices_in_no_face_deleted_or_added(tmp_path):
+    """A stray vertex in no face deleted (which renumbers the vertices after it: Blender's
+    Delete) or another one added: refine() had refused the mesh ("needs the points this
+    surface was fitted to (101 points, got 100)"; user test). The mesh's polygons on the
+    same vertex positions are its data (``same_mesh``, ``report["mesh_digest"]``): it is
+    refined as the mesh with the stray vertex, also from a compact file; a vertex in a face
+    moved, or other faces, are still refused, and so are other points without faces."""
+    points, faces = quad_grid(10)
+    stray = 37  # (in the middle: the vertices after it are renumbered when it is deleted)
+    points = np.insert(points, stray, [0.3, 0.7, 2.0], axis=0)
+    faces = np.where(faces >= stray, faces + 1, faces)
+    keep = np.delete(np.arange(len(points)), stray)
+    renumber = np.cumsum(np.isin(np.arange(len(points)), keep)) - 1
+    deleted, deleted_faces = points[keep], renumber[faces]
+    added = np.vstack([points, [[5.0, 5.0, 5.0]]])
+    args = dict(tolerance=1e-4, max_control_points=200, max_iterations=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        surf = fit_surface(points, faces, tolerance=1e-3, max_iterations=2)
+        assert surf.report["loose_vertices"] == 1
+        loaded = TCBSurface.from_bytes(surf.to_bytes(compact=True))  # (float32 parameters)
+        for s in (surf, loaded):
+            plain = s.refine(points, faces, **args)
+            assert s.same_mesh(deleted, deleted_faces) and s.same_mesh(added, faces)
+            assert not s.same_data_set(deleted) and not s.fitted_to(deleted)
+            for p, f in ((deleted, deleted_faces), (added, faces)):
+                param = s.reordered(p, f)
+                assert param is not None and len(param.uv) == len(p)
+                refined = s.refine(p, f, **args)
+                assert refined.report["control_points"] == plain.report["control_points"]
+                assert np.abs(refined.control_points - plain.control_points).max() < 1e-9
+                assert refined.report["rms"] == pytest.approx(plain.report["rms"], rel=1e-9)
+                assert refined.fitted_to(p) and len(refined.errors) == len(p)
+                # (its errors at the same vertices: those of the mesh with the stray one)
+                np.testing.assert_allclose(refined.errors[: stray], plain.errors[: stray],
+                                           rtol=0, atol=1e-12)
+        assert refined.report["loose_vertices"] == 2
+        moved = deleted.copy()
+        moved[50, 2] += 1e-3
+        for p, f in ((moved, deleted_faces), (deleted, deleted_faces[1:])):
+            assert not surf.same_mesh(p, f) and surf.reordered(p, f) is None
+            with pytest.raises(InvalidInputError, match="fitted to"):
+                surf.refine(p, f, max_iterations=1)
+        with pytest.raises(InvalidInputError,
+                           match=r"101 points, got 100; a mesh's vertices in no face may differ"):
+            surf.refine(deleted, max_iterations=1)
+    cloud = fit_surface(ridge_cloud(), max_iterations=1)
+    assert not cloud.same_mesh(ridge_cloud(), None)
+
+
 def test_refine_takes_a_cloud_stored_in_another_order_also_with_repeated_points():
     """A cloud's points permuted (some repeated exactly: any matching of those is the same
     data) are refined as in their own order; a point moved is refused."""
@@ -346,7 +396,8 @@ def test_a_surface_saved_before_the_set_digests_takes_another_order_after_one_re
         arrays = dict(np.load(io.BytesIO(surf.to_bytes())))
         report = json.loads(str(arrays["report"]))
         for key in ("data_set_digest", "faces_set_digest", "data_set_digest32",
-                    "faces_set_digest32"):  # (the rounded ones: the thirty-seventh session's)
+                    "faces_set_digest32",  # (the rounded ones: the thirty-seventh session's)
+                    "mesh_digest"):  # (the forty-first's: any order of the mesh too)
             del report[key]
         arrays["report"] = np.array(json.dumps(report))
         buf = io.BytesIO()
