@@ -51,6 +51,13 @@ INSERT_SHARE = 0.25
 # points per shared edge at which the gap between the surfaces is measured (ends included)
 GAP_SAMPLES = 17
 GAP_SEGMENTS = 32
+# the seam's fold check (seam_samples): a barycentric grid of this many steps on each of the
+# patch's triangles that hold a shared edge (153 points, the triangle's edges included). The
+# folds a join made were thin lips along the shared edges that the whole mesh's check
+# (core.surface.mesh_folds, 10 000 points drawn by area) missed: the 64 x 32 sphere's rest
+# joined to its cap turned its normal over at 23 of 20 800 such points, on 4 of its 64 seam
+# triangles, reported "folded 0"
+SEAM_FOLD_STEPS = 16
 
 
 def border_edges(faces: np.ndarray) -> np.ndarray:
@@ -279,8 +286,40 @@ def seam_gaps(seam_list, own_uv: np.ndarray, evaluate) -> np.ndarray:
     return np.concatenate(gaps) if gaps else np.zeros(0)
 
 
+def seam_samples(seam_list, faces, own_uv, points) -> tuple[np.ndarray, np.ndarray]:
+    """Points of the patch's triangles ``faces`` (counter-clockwise in ``own_uv``, the
+    canonical winding) that hold a shared edge of ``seam_list``: their parameters ``(s, 2)``
+    (a barycentric grid of :data:`SEAM_FOLD_STEPS` steps on each, edges included) and their
+    triangle's normal ``(b - a) x (c - a)`` on the mesh ``points`` ``(s, 3)``, along which the
+    mesh's own map has ``S_u x S_v`` (as for ``core.surface.mesh_folds``)."""
+    f = np.asarray(faces, dtype=np.int64)
+    n = max(len(own_uv), 1)
+    own = np.sort(np.vstack([seam.own for seam in seam_list]), axis=1)
+    e = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 3, 2), axis=2)
+    tris = f[np.isin(e[..., 0] * n + e[..., 1], own[:, 0] * n + own[:, 1]).any(axis=1)]
+    steps = SEAM_FOLD_STEPS
+    i, j = np.meshgrid(np.arange(steps + 1), np.arange(steps + 1), indexing="ij")
+    inside = i + j <= steps
+    bary = np.c_[i[inside], j[inside], steps - i[inside] - j[inside]] / steps
+    uv = np.einsum("sk,tkd->tsd", bary, np.asarray(own_uv, dtype=np.float64)[tris])
+    p = np.asarray(points, dtype=np.float64)
+    normal = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
+    return uv.reshape(-1, 2), np.repeat(normal, len(bary), axis=0)
+
+
+def seam_folds(samples, space, control_points) -> int:
+    """How many of the seam's ``samples`` (:func:`seam_samples`) the surface ``space`` with
+    ``control_points`` turns over at: ``S_u x S_v`` against the triangle's normal."""
+    uv, normal = samples
+    if not len(uv):
+        return 0
+    su = space.evaluate(uv, (1, 0)) @ control_points
+    sv = space.evaluate(uv, (0, 1)) @ control_points
+    return int(np.count_nonzero(np.einsum("ij,ij->i", np.cross(su, sv), normal) < 0))
+
+
 def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, folds=None,
-             n_measured=None):
+             n_measured=None, mesh=None):
     """``best`` (a ``core.refine.IterationState`` of the normalized data ``fit_uv``,
     ``fit_q``; ``norm`` their normalization) joined to the neighbours of ``seam_list``: its
     control points fitted again, same points and smoothness, with the pins of
@@ -293,18 +332,26 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
     would not fit); at most :data:`JOIN_ROUNDS` fits after the first. Of the fits that fold
     over the mesh no more than ``best`` (``folds(state) -> share of the mesh's area``,
     ``core.surface.mesh_folds``: knots inserted at a coarse mesh's seam had folded its surface
-    over 0.3% of its area, a UV sphere of 32 x 16 cut at z = 0.3), the one with the smallest
+    over 0.3% of its area, a UV sphere of 32 x 16 cut at z = 0.3) and, with ``mesh`` (the
+    patch's ``(points, faces)``, the faces in the canonical winding), turn over at no more of
+    the seam's triangles' points than ``best`` (:func:`seam_folds`), the one with the smallest
     largest gap among those whose error at the first ``n_measured`` points (the criterion's)
     is within the tolerance, or ``best``'s if that is larger, else among all, is returned
     (``tolerance_missed``: the neighbour's surface, fitted to a looser tolerance, is farther
     from the shared vertices than this one's tolerance; review); when every fit folds more,
     ``best`` itself (``kept_unjoined``). Returns the state and what ``report["join"]`` says:
     the neighbours, shared vertices and edges, knots added, the gaps (:func:`seam_gaps`, the
-    data's units) before and after, ``tolerance_missed`` and ``kept_unjoined``."""
+    data's units) before and after, ``tolerance_missed``, ``kept_unjoined`` and the seam's
+    points turned over (``seam_folds`` of ``seam_samples``)."""
     def surface_of(state):
         return lambda x: norm.undo(state.space.evaluate(x) @ state.fit.control_points)
 
     before = seam_gaps(seam_list, own_uv, surface_of(best))
+    samples = (np.zeros((0, 2)), np.zeros((0, 3))) if mesh is None else seam_samples(
+        seam_list, mesh[1], own_uv, mesh[0])
+
+    def turned(state) -> int:
+        return seam_folds(samples, state.space, state.fit.control_points)
     smoothness = float(best.fit.smoothness)
     goal = GAP_SHARE * options.tolerance * (2.0 if options.relative else 1.0 / norm.scale)
     cost = None
@@ -375,7 +422,9 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
     allowed = max(options.tolerance * (2.0 if options.relative else 1.0 / norm.scale),
                   error(best.fit))
     limit = None if folds is None else folds(best)
-    fits = [f for f in fits if limit is None or folds(f[0]) <= limit]
+    seam_limit = turned(best)
+    fits = [f for f in fits if turned(f[0]) <= seam_limit
+            and (limit is None or folds(f[0]) <= limit)]
     fits.sort(key=lambda f: (error(f[0].fit) > allowed, f[1].max()))
     state, after = fits[0] if fits else (best, before)
     return state, {
@@ -390,6 +439,7 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
         "kept_unjoined": not fits,
         "control_points": int(state.n_control),
         "control_points_unjoined": int(best.n_control),
+        "seam_samples": int(len(samples[0])), "seam_folds": turned(state),
         # how far the neighbours' surfaces are from the shared vertices (their errors there)
         "neighbour_error_max": float(max(np.nanmax(
             np.asarray(m.surface.errors, dtype=np.float64)[m.vertices[:, 1]], initial=0.0)
