@@ -13,8 +13,10 @@ the largest and RMS distance from the second's border to the first's along the s
 over the diagonal), alone -> joined; *mesh gap*: the same seen on the tessellations at
 resolution 256 (the largest distance from the second mesh's border vertices near the seam to
 the first mesh), measured without ``core.join``; the second patch's RMS at its vertices over
-the diagonal, its control points and seconds, alone -> joined; and the share of its mesh's
-area where the joined surface folds over (``report["folded"]``).
+the diagonal, its control points and seconds, alone -> joined; the share of its mesh's
+area where the joined surface folds over (``report["folded"]``); and at how many of the points
+on its triangles along the seam it turns over (``report["join"]["seam_folds"]`` of
+``"seam_samples"``, ``core.join.seam_folds``).
 """
 
 from __future__ import annotations
@@ -36,30 +38,7 @@ from core import fit_surface  # noqa: E402
 from core.geometry import point_mesh_distance  # noqa: E402
 from core.join import border_edges, shared_border_edges, shared_vertices  # noqa: E402
 from core.meshio import read_geometry  # noqa: E402
-from meshes import split_mesh  # noqa: E402
-
-
-def uv_sphere(segments: int, rings: int):
-    """A closed UV sphere of radius 1 (poles as vertices): points, triangles."""
-    th = np.pi * np.arange(1, rings) / rings
-    ph = 2 * np.pi * np.arange(segments) / segments
-    t, h = np.meshgrid(th, ph, indexing="ij")
-    ring = np.c_[(np.sin(t) * np.cos(h)).ravel(), (np.sin(t) * np.sin(h)).ravel(),
-                 np.cos(t).ravel()]
-    pts = np.vstack([[0, 0, 1], ring, [0, 0, -1]])
-    i, j = np.meshgrid(np.arange(rings - 2), np.arange(segments), indexing="ij")
-    a = 1 + i * segments + j
-    b = 1 + (i + 1) * segments + j
-    c = 1 + (i + 1) * segments + (j + 1) % segments
-    d = 1 + i * segments + (j + 1) % segments
-    top = np.c_[np.zeros(segments, int), 1 + np.arange(segments),
-                1 + (np.arange(segments) + 1) % segments]
-    last = 1 + (rings - 2) * segments
-    bottom = np.c_[np.full(segments, len(pts) - 1), last + (np.arange(segments) + 1) % segments,
-                   last + np.arange(segments)]
-    faces = np.vstack([top, np.c_[a.ravel(), b.ravel(), c.ravel()],
-                       np.c_[a.ravel(), c.ravel(), d.ravel()], bottom])
-    return pts, faces
+from meshes import split_mesh, uv_sphere  # noqa: E402
 
 
 def bump_grid(n: int = 80):
@@ -109,8 +88,8 @@ def main() -> None:
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     print("| case | shared edges | gap max alone -> joined | gap RMS | mesh gap | second's RMS "
-          "| control points | seconds | folded |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "| control points | seconds | folded | seam turned |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name, tol, ((pa, fa), (pb, fb)) in cases(args.quick):
         first = fit_surface(pa, fa, tolerance=tol)
         pairs = shared_vertices(pb, pa)
@@ -133,7 +112,8 @@ def main() -> None:
               f"| {gaps[0]:.2e} -> {gaps[1]:.2e} | {alone.report['rms_rel']:.2e} -> "
               f"{joined.report['rms_rel']:.2e} | {alone.report['control_points']} -> "
               f"{joined.report['control_points']} | {t_alone:.1f} -> {t_joined:.1f} "
-              f"| {joined.report.get('folded', 0.0):.2g} |", flush=True)
+              f"| {joined.report.get('folded', 0.0):.2g} "
+              f"| {j['seam_folds']} of {j['seam_samples']} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -10,9 +10,12 @@ the border they share:
   one of the patch's triangles), between vertices given as the same (``shared`` pairs, or
   :func:`shared_vertices` by their coordinates);
 - a parameterization is linear on each triangle, so the point at fraction ``t`` along a shared
-  edge is at ``(1 - t) uv_i + t uv_j`` in either patch's parameters; the shared vertices are
-  drawn to the neighbour's surface at them, and :data:`EDGE_PINS` inside each edge to the
-  nearest point of the neighbour's border along that edge (:func:`join_pins`);
+  edge is at ``(1 - t) uv_i + t uv_j`` in either patch's parameters; the points at
+  :data:`EDGE_PINS` along each edge and at its ends are drawn to the nearest point of the
+  neighbour's border along that edge, but not in across the patch's own border
+  (:func:`join_pins`, :func:`inward_directions`): where the neighbour's border lies over the
+  patch (its fit's error there), the two surfaces overlap rather than the patch's border
+  folding back over its own data (it had: thin lips along the seam);
 - the patch's control points are fitted again on the knots its own run chose, with the pins
   added to the data term (``core.fit.fit_control_points``'s ``pins``, each worth
   :data:`PIN_WEIGHT` data points), so the neighbour is left as it is; where the pins are
@@ -22,8 +25,10 @@ the border they share:
   (:func:`join_fit`): a patch's knots follow its own data, and its border is often coarser
   than its neighbour's.
 
-The gap that is left (:func:`seam_gaps`, at :data:`GAP_SAMPLES` points per shared edge) is
-what the patch's spline space cannot follow of its neighbour between the pins.
+The gap that is left (:func:`seam_gaps`, at :data:`GAP_SAMPLES` points per shared edge, the
+overlap not counted) is what the patch's spline space cannot follow of its neighbour between
+the pins. A joined fit that turns over on the patch's triangles along the seam
+(:func:`seam_folds`) is not returned.
 """
 
 from __future__ import annotations
@@ -253,35 +258,84 @@ def _borders(seam, own_uv, evaluate, fractions):
     return p, _nearest_on(seam.polyline()[:, None], p[:, :, None]), mine
 
 
-def join_pins(seam_list, own_uv: np.ndarray, evaluate) -> tuple[np.ndarray, np.ndarray]:
+def inward_directions(seam_list, faces, points) -> list[np.ndarray]:
+    """For each seam, unit vectors ``(e, 3)`` from its shared edges into the patch's mesh:
+    each in the plane of the triangle holding the edge, across the edge."""
+    f = np.asarray(faces, dtype=np.int64)
+    p = np.asarray(points, dtype=np.float64)
+    n = max(len(p), 1)
+    e = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    third = f[:, [2, 0, 1]].ravel()  # (the corner opposite each edge)
+    key = e[:, 0] * n + e[:, 1]
+    order = np.argsort(key, kind="stable")
+    out = []
+    for seam in seam_list:
+        own = np.sort(seam.own, axis=1)
+        at = order[np.searchsorted(key[order], own[:, 0] * n + own[:, 1])]
+        a, b, c = p[own[:, 0]], p[own[:, 1]], p[third[at]]
+        u = (b - a) / np.maximum(np.linalg.norm(b - a, axis=1), 1e-300)[:, None]
+        w = (c - a) - np.einsum("ij,ij->i", c - a, u)[:, None] * u
+        out.append(w / np.maximum(np.linalg.norm(w, axis=1), 1e-300)[:, None])
+    return out
+
+
+def _not_inward(targets, at, inward):
+    """``targets`` (m, 3) without the part of ``targets - at`` along the unit vectors
+    ``inward`` (m, 3) where it points that way (into the patch)."""
+    into = np.einsum("ij,ij->i", targets - at, inward)
+    return targets - np.maximum(into, 0.0)[:, None] * inward
+
+
+def join_pins(seam_list, own_uv: np.ndarray, evaluate,
+              inward=None) -> tuple[np.ndarray, np.ndarray]:
     """Pins of the seams (``core.fit.fit_control_points``'s ``pins``, in the data's units):
-    ``(uv, targets)``: each shared border vertex, to the neighbour's surface at that vertex,
-    and the points :data:`EDGE_PINS` along each shared edge, to the point of the neighbour's
+    ``(uv, targets)``: without ``inward``, each shared border vertex, to the neighbour's
+    surface at that vertex, and the points :data:`EDGE_PINS` along each shared edge (with
+    ``inward``, its ends too, in place of the vertices' pins), to the point of the neighbour's
     surface along that edge nearest to the surface ``evaluate(uv) -> (m, 3)`` there (so the
     border is drawn to the neighbour's and may slide along it: the two surfaces' speeds along
-    an edge differ, and pinning equal fractions had made the border wiggle between them)."""
+    an edge differ, and pinning equal fractions had made the border wiggle between them).
+    ``inward`` (:func:`inward_directions`): a target is not taken into the patch, across its
+    border (the part of ``target - surface`` along the edge's direction into the patch is
+    dropped where positive): where the neighbour's border lies over the patch's own surface
+    (its fit's error there), drawing the patch's border in over its data folded the surface
+    into a lip along the seam (64 x 32 sphere; the two surfaces overlap there instead). The
+    vertices then take the pins at their edges' ends, each edge's own: a vertex's target,
+    taken back along both its edges' directions, had been pinned apart from its edges' pins
+    where the seam zigzags over a grid's triangles (1.3e-3 of the diagonal at a vertex)."""
     uvs, targets = [], []
-    for seam in seam_list:
-        other_uv = np.asarray(seam.surface.parameterization.uv)
-        uvs.append(own_uv[seam.vertices[:, 0]])
-        targets.append(seam.surface(other_uv[seam.vertices[:, 1]]))
-        if EDGE_PINS:
-            _, near, mine = _borders(seam, own_uv, evaluate, EDGE_PINS)
+    fractions = EDGE_PINS if inward is None else (0.0,) + tuple(EDGE_PINS) + (1.0,)
+    for k, seam in enumerate(seam_list):
+        if inward is None:
+            other_uv = np.asarray(seam.surface.parameterization.uv)
+            uvs.append(own_uv[seam.vertices[:, 0]])
+            targets.append(seam.surface(other_uv[seam.vertices[:, 1]]))
+        if fractions:
+            p, near, mine = _borders(seam, own_uv, evaluate, fractions)
+            near = near.reshape(-1, 3)
+            if inward is not None:
+                near = _not_inward(near, p.reshape(-1, 3),
+                                   np.repeat(inward[k], len(fractions), axis=0))
             uvs.append(mine)
-            targets.append(near.reshape(-1, 3))
+            targets.append(near)
     return np.vstack(uvs), np.vstack(targets)
 
 
-def seam_gaps(seam_list, own_uv: np.ndarray, evaluate) -> np.ndarray:
+def seam_gaps(seam_list, own_uv: np.ndarray, evaluate, inward=None) -> np.ndarray:
     """Distances from the surface ``evaluate(uv) -> (m, 3)`` (the data's units) along the
     shared edges, at :data:`GAP_SAMPLES` points per edge (ends included), to each neighbour's
     surface along the same edge (a polyline of :data:`GAP_SEGMENTS` pieces of it, the
     distance to the nearest piece): the geometric gap between the two borders, whatever their
-    speeds along the edge."""
+    speeds along the edge. ``inward`` (:func:`inward_directions`): the part of the distance
+    into the patch, across its border, is not counted (the neighbour's border lies over the
+    patch's surface there: the two overlap, as :func:`join_pins` leaves them)."""
     t = np.linspace(0.0, 1.0, GAP_SAMPLES)
     gaps = []
-    for seam in seam_list:
+    for k, seam in enumerate(seam_list):
         p, near, _ = _borders(seam, own_uv, evaluate, t)
+        if inward is not None:
+            p, near = p.reshape(-1, 3), near.reshape(-1, 3)
+            near = _not_inward(near, p, np.repeat(inward[k], len(t), axis=0))
         gaps.append(np.linalg.norm(p - near, axis=-1).ravel())
     return np.concatenate(gaps) if gaps else np.zeros(0)
 
@@ -346,7 +400,8 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
     def surface_of(state):
         return lambda x: norm.undo(state.space.evaluate(x) @ state.fit.control_points)
 
-    before = seam_gaps(seam_list, own_uv, surface_of(best))
+    inward = None if mesh is None else inward_directions(seam_list, mesh[1], mesh[0])
+    before = seam_gaps(seam_list, own_uv, surface_of(best), inward)
     samples = (np.zeros((0, 2)), np.zeros((0, 3))) if mesh is None else seam_samples(
         seam_list, mesh[1], own_uv, mesh[0])
 
@@ -357,7 +412,7 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
     cost = None
     state, fits, worse = best, [], 0
     for round_ in range(JOIN_ROUNDS + 1):
-        pin_uv, targets = join_pins(seam_list, own_uv, surface_of(state))
+        pin_uv, targets = join_pins(seam_list, own_uv, surface_of(state), inward)
         targets = norm.apply(targets)
         space, knots, n_int, active = state.space, state.knots, state.n_interior, state.active
         if round_:
@@ -404,7 +459,7 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
             break
         state = dataclasses.replace(state, knots=knots, n_interior=n_int, space=space,
                                     fit=fit, active=active)
-        gaps = seam_gaps(seam_list, own_uv, surface_of(state))
+        gaps = seam_gaps(seam_list, own_uv, surface_of(state), inward)
         if fits and gaps.max() >= min(g.max() for _, g in fits):
             worse += 1
         else:

@@ -99,3 +99,26 @@ def wavy_halves(n: int = 40) -> list[tuple[np.ndarray, np.ndarray]]:
     pts, faces = noisy_grid(n, noise=0.0)
     c = pts[faces].mean(axis=1)
     return split_mesh(pts, faces, c[:, 0] < 0.5 + 0.1 * np.sin(9 * c[:, 1]))
+
+
+def uv_sphere(segments: int, rings: int):
+    """A closed UV sphere of radius 1 (poles as vertices): points, triangles."""
+    th = np.pi * np.arange(1, rings) / rings
+    ph = 2 * np.pi * np.arange(segments) / segments
+    t, h = np.meshgrid(th, ph, indexing="ij")
+    ring = np.c_[(np.sin(t) * np.cos(h)).ravel(), (np.sin(t) * np.sin(h)).ravel(),
+                 np.cos(t).ravel()]
+    pts = np.vstack([[0, 0, 1], ring, [0, 0, -1]])
+    i, j = np.meshgrid(np.arange(rings - 2), np.arange(segments), indexing="ij")
+    a = 1 + i * segments + j
+    b = 1 + (i + 1) * segments + j
+    c = 1 + (i + 1) * segments + (j + 1) % segments
+    d = 1 + i * segments + (j + 1) % segments
+    top = np.c_[np.zeros(segments, int), 1 + np.arange(segments),
+                1 + (np.arange(segments) + 1) % segments]
+    last = 1 + (rings - 2) * segments
+    bottom = np.c_[np.full(segments, len(pts) - 1), last + (np.arange(segments) + 1) % segments,
+                   last + np.arange(segments)]
+    faces = np.vstack([top, np.c_[a.ravel(), b.ravel(), c.ravel()],
+                       np.c_[a.ravel(), c.ravel(), d.ravel()], bottom])
+    return pts, faces

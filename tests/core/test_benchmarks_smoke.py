@@ -183,16 +183,18 @@ def test_noisy_borders_quick():
 
 def test_join_quick():
     """``benchmarks/join.py --quick``: the rest of a UV sphere (64 x 32, 32 x 16) fitted on its
-    own and joined to its cap's surface: the borders and the meshes at least 3x closer
-    (measured 8.5x and 4.6x; the meshes 11x and 4.3x), no fold."""
+    own and joined to its cap's surface, no fold over the mesh or at the seam: the borders'
+    largest and RMS gaps and the meshes' gap at least 3x smaller for the 64 x 32 (measured
+    8.4x, 12x, 11.7x), 2x, 3x and 2x for the 32 x 16 (3.3x, 8.2x, 3.4x: its cap's own fit, at
+    3e-3, is 0.011 off at the seam, and the rest's data hold it)."""
     res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "join.py"), "--quick"],
                          capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert res.returncode == 0, res.stderr[-3000:]
     rows = [[c.strip() for c in line.split("|")[1:-1]] for line in res.stdout.splitlines()
             if line.startswith("| sphere")]
     assert len(rows) == 2
-    for row in rows:
-        for column in (2, 4):  # the borders' largest gap, the meshes'
+    for row, gains in zip(rows, ((3, 3, 3), (2, 3, 2))):
+        for column, gain in zip((2, 3, 4), gains):  # the borders' largest, RMS; the meshes'
             alone, joined = (float(x) for x in row[column].split("->"))
-            assert 3 * joined < alone, row
-        assert float(row[8]) == 0.0, row
+            assert gain * joined < alone, row
+        assert float(row[8]) == 0.0 and row[9].startswith("0 of "), row

@@ -9,10 +9,11 @@ import pytest
 from core import InvalidInputError, fit_surface
 from core.fit import fit_control_points
 from core.geometry import point_mesh_distance
-from core.join import border_edges, shared_border_edges, shared_vertices
+from core.join import (border_edges, inward_directions, seam_folds, seam_samples, seams,
+                       shared_border_edges, shared_vertices)
 from core.refine import border_rings
 from core.spline_space import build_space
-from meshes import noisy_grid, wavy_halves
+from meshes import noisy_grid, split_mesh, uv_sphere, wavy_halves
 
 
 def test_pins_draw_the_fit_to_their_targets_and_are_not_counted_as_data():
@@ -94,6 +95,40 @@ def test_a_joined_patch_meets_its_neighbour_along_their_shared_border():
     # refine() joins again when asked
     again = joined.refine(pb, fb, join=(a, pairs), max_iterations=2)
     assert again.report["join"]["gap_max_rel"] < 5e-4
+
+
+def test_a_joined_sphere_turns_over_nowhere_at_its_seam():
+    """The rest of a 64 x 32 UV sphere joined to its cap's surface: its normals on a fine
+    tessellation all point outward (the joined fits had turned over in thin lips along the
+    seam, at 23 of its 2.1e5 vertices at 512, where the patch's border was drawn in over its
+    own data to the cap's border; the mesh's fold check, 1e4 points drawn by area, had said 0).
+    The pins no longer draw a border in across itself, and a fit that turns over on the
+    seam's triangles is not returned; the borders are still 3x closer than unjoined."""
+    pts, faces = uv_sphere(64, 32)
+    (pa, fa), (pb, fb) = split_mesh(pts, faces, pts[faces].mean(axis=1)[:, 2] > 0.2)
+    cap = fit_surface(pa, fa, tolerance=1e-3)
+    pairs = shared_vertices(pb, pa)
+    rest = fit_surface(pb, fb, tolerance=1e-3, join=(cap, pairs))
+    j = rest.report["join"]
+    assert not j["kept_unjoined"] and j["seam_folds"] == 0 and j["seam_samples"] > 5000
+    assert 3 * j["gap_max"] < j["gap_max_unjoined"]
+    uv, _ = rest.tessellation_uv(512)
+    x = rest(uv)
+    outward = np.einsum("ij,ij->i", rest.normals(uv), x / np.linalg.norm(x, axis=1)[:, None])
+    assert outward.min() > 0.5, (np.count_nonzero(outward < 0), len(outward))
+    # the seam's check itself: against the triangles' reversed normals the surface turns over
+    # at every point; the directions into the patch are across the shared edges, downward
+    samples = seam_samples(seams(rest.parameterization, (cap, pairs)), rest.parameterization.faces,
+                           rest.parameterization.uv, pb)
+    assert seam_folds(samples, rest.space, rest.coefficients) == 0
+    reversed_ = (samples[0], -samples[1])
+    assert seam_folds(reversed_, rest.space, rest.coefficients) == len(samples[0])
+    seam = seams(rest.parameterization, (cap, pairs))
+    edges = inward_directions(seam, rest.parameterization.faces, pb)[0]
+    along = pb[seam[0].own[:, 1]] - pb[seam[0].own[:, 0]]
+    assert np.allclose(np.linalg.norm(edges, axis=1), 1.0)
+    assert np.abs(np.einsum("ij,ij->i", edges, along)).max() < 1e-9
+    assert (edges[:, 2] < 0).all() and edges.shape == (len(seam[0].own), 3)
 
 
 def test_join_refuses_what_it_cannot_join():
