@@ -434,7 +434,12 @@ def _fit(args) -> int:
                     + (f": the mesh within {sag:.3g} of the spline" if sag is not None
                        and np.isfinite(sag) else "") + ")"),
     ]
-    if "join" in r:
+    if "join" in r and r["join"].get("kept_unjoined"):  # (warned of above; it had said
+        j = r["join"]  # "joined": user test)
+        rows.append(("joined", f"no: fitted on its own (every joined fit folded over the mesh "
+                               f"at the shared border); the borders {j['gap_max']:.4g} apart "
+                               f"at most ({j['gap_max_rel']:.2e} of the diagonal)"))
+    elif "join" in r:
         j = r["join"]
         rows.append(("joined", f"{j['surfaces']} neighbour{'s' if j['surfaces'] > 1 else ''} "
                                f"along {j['shared_edges']} shared border edges: the borders "

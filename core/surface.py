@@ -2868,7 +2868,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         best, joined = join_fit(
             best, seam_list, np.asarray(param.uv), fit_uv, fit_q, norm, options, domain,
             folds=None if param.faces is None else lambda state: data_checks(state, None)[2],
-            n_measured=len(uv), mesh=(points, param.faces))
+            n_measured=len(uv), mesh=(points, param.faces), fold_allowance=FOLDED_SHARE)
         checks = swings = None  # (the fold and swing checks made again, of the joined fit)
     # back to the user's units (affine, exact up to rounding: partition of unity)
     C = norm.undo(best.fit.control_points)

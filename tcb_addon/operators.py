@@ -1045,6 +1045,9 @@ def join_words(surf, names: list) -> list:
     if not j or not names:
         return []
     who = ", ".join(f"'{n}'" for n in names)
+    if j.get("kept_unjoined"):  # (the warning says why; it had said "joined": user test)
+        return [f"not joined to {who}: fitted on its own, the borders {j['gap_max']:.4g} apart "
+                f"at most ({j['gap_max_rel']:.2g} of the diagonal)"]
     # (the joined net's size, against the patch's own: up to 4x on a coarse one; user test)
     added = (f"; {j['knots_added']} knots added along it: {j['control_points']} control "
              f"points, {j['control_points_unjoined']} fitted alone" if j.get("knots_added")

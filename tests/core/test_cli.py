@@ -678,8 +678,10 @@ def test_ctrl_c_during_a_fit_is_one_line(tmp_path):
     assert "Traceback" not in rest and rest.strip().endswith("error: cancelled (Ctrl-C)"), rest
 
 
-def test_join_fits_a_patch_to_its_neighbour_s_spline(tmp_path, capsys):
-    """--join MESH SPLINE: the second patch of a mesh cut in two joins the first's surface."""
+def test_join_fits_a_patch_to_its_neighbour_s_spline(tmp_path, capsys, monkeypatch):
+    """--join MESH SPLINE: the second patch of a mesh cut in two joins the first's surface; a
+    patch kept unjoined (every joined fit folded) says so in its row (it had said "joined 1
+    neighbour along 56 shared border edges" under the warning: user test)."""
     from core import cli
     from meshes import wavy_halves
 
@@ -698,6 +700,22 @@ def test_join_fits_a_patch_to_its_neighbour_s_spline(tmp_path, capsys):
     assert joined["gap_max_rel"] < 0.25 * joined["gap_max_unjoined_rel"]
     row = next(line for line in out.splitlines() if line.startswith("joined"))
     assert "1 neighbour along" in row and f"{joined['gap_max_rel']:.2e} of the diagonal" in row
+    import core.surface
+
+    join_fit = core.surface.join_fit
+
+    def folding(best, *args, **kwargs):  # (as join_fit returns when every joined fit folds)
+        info = join_fit(best, *args, **kwargs)[1]
+        return best, info | {"kept_unjoined": True, "gap_max": info["gap_max_unjoined"]}
+
+    monkeypatch.setattr(core.surface, "join_fit", folding)
+    with pytest.warns(RuntimeWarning, match="could not be joined"):
+        assert cli.main(["fit", str(b_mesh), "-o", str(tmp_path / "b_s.obj"), "--join",
+                         str(a_mesh), str(a_spline), "--quiet"]) == 0
+    row = next(line for line in capsys.readouterr().out.splitlines()
+               if line.startswith("joined"))
+    assert "no: fitted on its own" in row and "neighbour along" not in row, row
+    monkeypatch.undo()
     # what it cannot join, in one line and a non-zero exit
     for args, words in (
             ([str(b_mesh), str(a_spline)], "was not fitted to"),  # the wrong mesh
