@@ -289,9 +289,8 @@ def _not_inward(targets, at, inward):
 def join_pins(seam_list, own_uv: np.ndarray, evaluate,
               inward=None) -> tuple[np.ndarray, np.ndarray]:
     """Pins of the seams (``core.fit.fit_control_points``'s ``pins``, in the data's units):
-    ``(uv, targets)``: without ``inward``, each shared border vertex, to the neighbour's
-    surface at that vertex, and the points :data:`EDGE_PINS` along each shared edge (with
-    ``inward``, its ends too, in place of the vertices' pins), to the point of the neighbour's
+    ``(uv, targets)``: the points :data:`EDGE_PINS` along each shared edge and its ends, to
+    the point of the neighbour's
     surface along that edge nearest to the surface ``evaluate(uv) -> (m, 3)`` there (so the
     border is drawn to the neighbour's and may slide along it: the two surfaces' speeds along
     an edge differ, and pinning equal fractions had made the border wiggle between them).
@@ -300,24 +299,20 @@ def join_pins(seam_list, own_uv: np.ndarray, evaluate,
     dropped where positive): where the neighbour's border lies over the patch's own surface
     (its fit's error there), drawing the patch's border in over its data folded the surface
     into a lip along the seam (64 x 32 sphere; the two surfaces overlap there instead). The
-    vertices then take the pins at their edges' ends, each edge's own: a vertex's target,
+    vertices take the pins at their edges' ends, each edge's own: a vertex's target,
     taken back along both its edges' directions, had been pinned apart from its edges' pins
-    where the seam zigzags over a grid's triangles (1.3e-3 of the diagonal at a vertex)."""
+    where the seam zigzags over a grid's triangles (1.3e-3 of the diagonal at a vertex; each
+    vertex had had a pin of its own, to the neighbour's surface at it)."""
     uvs, targets = [], []
-    fractions = EDGE_PINS if inward is None else (0.0,) + tuple(EDGE_PINS) + (1.0,)
+    fractions = (0.0, *EDGE_PINS, 1.0)
     for k, seam in enumerate(seam_list):
-        if inward is None:
-            other_uv = np.asarray(seam.surface.parameterization.uv)
-            uvs.append(own_uv[seam.vertices[:, 0]])
-            targets.append(seam.surface(other_uv[seam.vertices[:, 1]]))
-        if fractions:
-            p, near, mine = _borders(seam, own_uv, evaluate, fractions)
-            near = near.reshape(-1, 3)
-            if inward is not None:
-                near = _not_inward(near, p.reshape(-1, 3),
-                                   np.repeat(inward[k], len(fractions), axis=0))
-            uvs.append(mine)
-            targets.append(near)
+        p, near, mine = _borders(seam, own_uv, evaluate, fractions)
+        near = near.reshape(-1, 3)
+        if inward is not None:
+            near = _not_inward(near, p.reshape(-1, 3),
+                               np.repeat(inward[k], len(fractions), axis=0))
+        uvs.append(mine)
+        targets.append(near)
     return np.vstack(uvs), np.vstack(targets)
 
 
@@ -481,10 +476,10 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
                   error(best.fit))
     limit = None if folds is None else max(folds(best), fold_allowance)
     seam_limit = turned(best)
-    fits = [f for f in fits if turned(f[0]) <= seam_limit
-            and (limit is None or folds(f[0]) <= limit)]
+    fits = [(*f, turns) for f in fits for turns in (turned(f[0]),)
+            if turns <= seam_limit and (limit is None or folds(f[0]) <= limit)]
     fits.sort(key=lambda f: (error(f[0].fit) > allowed, f[1].max()))
-    state, after = fits[0] if fits else (best, before)
+    state, after, turns = fits[0] if fits else (best, before, seam_limit)
     return state, {
         "surfaces": len(seam_list),
         "shared_vertices": int(sum(len(m.vertices) for m in seam_list)),
@@ -497,7 +492,7 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
         "kept_unjoined": not fits,
         "control_points": int(state.n_control),
         "control_points_unjoined": int(best.n_control),
-        "seam_samples": int(len(samples[0])), "seam_folds": turned(state),
+        "seam_samples": int(len(samples[0])), "seam_folds": int(turns),
         # how far the neighbours' surfaces are from the shared vertices (their errors there)
         "neighbour_error_max": float(max(np.nanmax(
             np.asarray(m.surface.errors, dtype=np.float64)[m.vertices[:, 1]], initial=0.0)

@@ -1354,7 +1354,8 @@ class TCBSurface:
         and rounded are found when rounded to 32-bit floats (Blender's), by surfaces fitted
         since the thirty-seventh session. A mesh with vertices in no face added or deleted
         (:meth:`same_mesh`; surfaces fitted since the forty-first session) is taken too: the
-        parameterization returned is of the points given, their count. Costs a parameterization (1e5 points: a cloud 0.4 s, a
+        parameterization returned is of the points given, their count. Costs a
+        parameterization (1e5 points: a cloud 0.4 s, a
         grid mesh 3.7 s; docs/benchmarks.md)."""
         return self._reordered(points, faces)[0]
 
@@ -1889,7 +1890,8 @@ REORDERED_UV_TOL = 1e-6
 
 def _same_map(new: Parameterization, old: Parameterization) -> bool:
     """Whether ``new`` (the data parameterized again, in another order) gives the parameters of
-    ``old`` as a set: the same kind and counts (of the used points, faces, boundary, holes), and each column of the used points' ``uv`` and
+    ``old`` as a set: the same kind and counts (of the used points, faces, boundary, holes),
+    and each column of the used points' ``uv`` and
     of the domain polygon, sorted, within :data:`REORDERED_UV_TOL`."""
     # (the count of all points may differ: a mesh's vertices in no face; TCBSurface.same_mesh)
     if new.kind != old.kind or new.flipped != old.flipped:
