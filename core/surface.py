@@ -1359,17 +1359,19 @@ class TCBSurface:
         grid mesh 3.7 s; docs/benchmarks.md)."""
         return self._reordered(points, faces)[0]
 
-    def _reordered(self, points, faces=None) -> tuple[Parameterization | None, str]:
+    def _reordered(self, points, faces=None,
+                   mesh: bool | None = None) -> tuple[Parameterization | None, str]:
         """:meth:`reordered` and, when None, why: ``"points"`` (other values, or no set digest
         kept), ``"faces"`` (other faces), ``"no faces"`` (a mesh's points without faces) or
-        ``"map"`` (the same data mapped to other parameters)."""
+        ``"map"`` (the same data mapped to other parameters). ``mesh``: :meth:`same_mesh`
+        of them when the caller has it (None: found here if needed)."""
         points = np.asarray(points, dtype=np.float64)
         old = self._param
         # (NaN rows too: a mesh's loose vertices may be NaN, as the fit allowed: review)
         same_set = (points.ndim == 2 and points.shape == (len(old.uv), 3)
                     and self.same_data_set(points))
         # (or the mesh with other vertices in no face: the used ones, their faces, the same)
-        loose = not same_set and self.same_mesh(points, faces)
+        loose = not same_set and (self.same_mesh(points, faces) if mesh is None else mesh)
         if not (same_set or loose):
             return None, "points"
         if old.faces is not None:
@@ -1426,8 +1428,10 @@ class TCBSurface:
         ``changes`` alter the degree, the mode or the smoothness.
         """
         points = np.asarray(points, dtype=np.float64)
-        if (points.ndim != 2 or len(points) != len(self._param.uv)) and not self.same_mesh(
-                points, faces):
+        mesh = None  # (same_mesh, when the count differs: a hash of the faces, made once)
+        if points.ndim != 2 or len(points) != len(self._param.uv):
+            mesh = self.same_mesh(points, faces)
+        if mesh is False:
             raise InvalidInputError(
                 "refine() needs the points this surface was fitted to "
                 f"({len(self._param.uv)} points, got {len(points)}"
@@ -1449,7 +1453,7 @@ class TCBSurface:
         same_faces = faces is None or self.same_faces(faces)
         param = self._param
         if not (same_points and same_faces):
-            param, why = self._reordered(points, faces)
+            param, why = self._reordered(points, faces, mesh)
             if why == "no faces":
                 raise InvalidInputError(
                     f"refine() was given the {len(points)} points this surface was fitted to "

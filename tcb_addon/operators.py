@@ -493,8 +493,8 @@ def source_mismatch(surf, data: bridge.InputData):
     ``data`` differ from the data ``surf`` was fitted to, in words ("12 points then, 10 now",
     "other coordinates: moved, transformed or edited", "other faces"), or None when they are
     the same (rounding, another order of the same points and faces, vertices in no face added
-    or deleted, and a mirrored source's turned faces are no change). Refine refuses other data; Import Spline links only the same
-    as the source."""
+    or deleted, and a mirrored source's turned faces are no change). Refine refuses other
+    data; Import Spline links only the same as the source."""
     key = (surf.report or {}).get("faces_digest")  # (a mesh's; None for clouds, older files)
     digest = _core().surface.faces_digest
     faces = data.faces
