@@ -881,6 +881,10 @@ class IterationState:
         return len(self.active) if self.active is not None else self.space.n_basis
 
 
+# how many times a fit of the loop is checked for straying between its points (stray_check) and
+# fitted again with the points added
+STRAY_ROUNDS = 2
+
 # Above this many points the iterations of the loop (criterion "rms") fit a seeded random subset
 # of this size; the chosen space is then fitted once to all points. The insertion needs the
 # error pattern, not every point, and the RMS of 2e5 random points estimates the full one to
@@ -1132,6 +1136,7 @@ def adaptive_fit(
     start_degree: int | None = None,
     measured_only: bool = False,
     normals: np.ndarray | None = None,
+    stray_check=None,
 ) -> tuple[IterationState, list[dict], str]:
     """Run the loop of method.md section 6 on parameters ``uv`` and (normalized) ``points``.
 
@@ -1208,6 +1213,13 @@ def adaptive_fit(
     net grows no further, and reaching that is the error having stopped falling
     (:data:`STALLED`, the last report's ``net_capped``), not the user's budget. (A first fit
     above it, of a tiny mesh or a larger net to refine, is not refused: the run stops there.)
+    ``stray_check`` (a mesh's: :class:`core.surface.FaceCheck`; not in method.md) is called
+    after each fit, unless the iterations fit a subset, as ``stray_check(space,
+    control_points, uv, errors)`` with the points fitted and their errors; it returns points
+    ``(uv, points)`` to fit as well (where the surface strays between the fitted ones), or
+    None. They are appended to the points (after the measured ones, which stay first), the
+    space is fitted again, and checked again, up to :data:`STRAY_ROUNDS` times per fit; the
+    report says ``stray_samples`` (how many were added).
     Returns the best iteration, the per-iteration reports and why the loop stopped.
     """
     options.validate()
@@ -1397,6 +1409,19 @@ def adaptive_fit(
         if (n_ctrl > options.max_control_points and it > 0 and not fresh) or shrunk_away:
             reason = "control-point budget reached"
             break
+        added, t_check = 0, time.perf_counter()
+        for _ in range(STRAY_ROUNDS if stray_check is not None and not sampled else 0):
+            more = stray_check(space, fit.control_points, uv, fit.errors)
+            if more is None or not len(more[0]):
+                break
+            uv, points = np.vstack([uv, more[0]]), np.vstack([points, more[1]])
+            if weights is not None:
+                weights = np.concatenate([weights, np.ones(len(more[0]))])
+            full = (uv, points, weights, n_measured)
+            added += len(more[0])
+            fit = fit_control_points(space, uv, points, weights, loop_smoothness,
+                                     normals=across)
+        t_check = time.perf_counter() - t_check
         state = IterationState(knots, len(interior), space, fit, active=active,
                                iteration=history_offset + it + 1)
         e = fit.errors[:n_measured]
@@ -1422,6 +1447,10 @@ def adaptive_fit(
             "phases": {"configurations": t_space, **fit.timings},
             "knots_placed": ("afresh" if fresh else "continued" if it == 0 else "inserted"),
         }
+        if stray_check is not None and not sampled:
+            report["phases"]["face check"] = t_check
+        if added:
+            report["stray_samples"] = added
         if rms_area is not None:
             report["rms_area"] = rms_area * unit
             report["rms_area_rel"] = rms_area / diagonal
@@ -1669,8 +1698,10 @@ def adaptive_fit(
     if sampled or auto:
         t0 = time.perf_counter()
         fu, fp, fw, fm = full if sampled else (uv, points, weights, n_measured)
+        # (a basis of fewer points than fu: samples were added to the fit after best's)
+        same = not sampled and len(best.fit.errors) == len(fu)
         fit = fit_control_points(best.space, fu, fp, fw, "auto" if auto else loop_smoothness,
-                                 scored=fm, basis=None if sampled else best.fit.basis,
+                                 scored=fm, basis=best.fit.basis if same else None,
                                  sparse=sparse or stalled or thin)
         best.fit.basis = None
         selection = None

@@ -45,8 +45,8 @@ from .parameterize import (
     local_noise, local_scatter, normalize, open_holes, parameterize, spike_points,
     trim_distance, gaps_beyond,
 )
-from .refine import (STALLED, RefineOptions, _cancel_requested, adaptive_fit, area_weights,
-                     check_callback, prefetch_swing_triangles, swing_places)
+from .refine import (ITERATION_POINTS, STALLED, RefineOptions, _cancel_requested, adaptive_fit,
+                     area_weights, check_callback, prefetch_swing_triangles, swing_places)
 from .smooth_faces import (clough_tocher_points, face_gradients, mean_gradients,
                            vertex_adjacency, vertex_gradients)
 from .spline_space import SplineSpace, _whole, derivative_order, frozen
@@ -2384,7 +2384,8 @@ def _distance_to_polygon(x: np.ndarray, poly: np.ndarray) -> np.ndarray:
 
 
 def mesh_samples(points, uv, faces, count: int, seed: int = 0, curved: bool = True,
-                 vertex_normals=None, area_table=None):
+                 vertex_normals=None, area_table=None, smooth=None, with_faces=False,
+                 prepared=None):
     """Points sampled on the triangles of a parameterized mesh, with their parameters.
 
     ``count`` samples, allotted to the faces in proportion to their 3D area; each at random
@@ -2401,17 +2402,22 @@ def mesh_samples(points, uv, faces, count: int, seed: int = 0, curved: bool = Tr
     the parameters) 146 and 1.0e-3; on the C^1 surface 146 and 3.6e-4
     (benchmarks/coarse_meshes.py). ``vertex_normals``: :func:`_vertex_normals` of ``(points,
     faces)`` and ``area_table``: :func:`_area_table` when known (the fit's fold check uses
-    them too).
+    them too). ``smooth``: on the C^1 surface or the point-normal triangles whatever the count
+    (default: by the count, as above); ``prepared``: :func:`smooth_corners` when made already;
+    ``with_faces``: the face of each sample too (a third array).
     """
     face, bary = _area_samples(points, faces, count, seed, area_table)
     tri = faces[face]
     x = np.einsum("nk,nkj->nj", bary, uv[tri])
+    if smooth is None:
+        smooth = count >= SMOOTH_SAMPLES_PER_FACE * len(faces)
     if curved and len(face):
-        if count >= SMOOTH_SAMPLES_PER_FACE * len(faces):
-            return smooth_points(points, uv, faces, face, bary,
-                                 vertex_normals=vertex_normals), x
-        return curved_points(points, faces, face, bary, vertex_normals=vertex_normals), x
-    return np.einsum("nk,nkj->nj", bary, points[tri]), x
+        p = (smooth_points(points, uv, faces, face, bary, vertex_normals=vertex_normals,
+                           prepared=prepared) if smooth else
+             curved_points(points, faces, face, bary, vertex_normals=vertex_normals))
+    else:
+        p = np.einsum("nk,nkj->nj", bary, points[tri])
+    return (p, x, face) if with_faces else (p, x)
 
 
 # mesh_samples puts the samples on the C^1 surface (smooth_points) when there are at least this
@@ -2433,6 +2439,110 @@ def mesh_sample_count(vertices: int, max_control_points: int) -> int:
     cloud 0.8 s: user test)."""
     cap = min(200_000, max(50_000, 25 * int(max_control_points)))
     return int(np.clip(20 * vertices, 5_000, cap))
+
+
+# the face check of a mesh's fits (FaceCheck): each fit is checked at this many samples per
+# control point of its space (at least STRAY_CHECK_MIN), new ones each time until the pool
+# holds STRAY_POOL_PER_CONTROL per control point of the budget (within STRAY_POOL), then again
+# from its start; a sample strays when its error is above STRAY_RATIO times the largest of
+# its STRAY_NEIGHBOURS nearest fitted points' (in the parameters) and above the floor: the
+# tolerance, and at least STRAY_FLOOR of the diagonal
+STRAY_CHECK_PER_CONTROL = 5
+STRAY_CHECK_MIN = 2_000
+STRAY_POOL_PER_CONTROL = 20
+STRAY_POOL = (5_000, 100_000)
+STRAY_RATIO = 3.0
+STRAY_NEIGHBOURS = 6
+STRAY_FLOOR = 1e-5
+STRAY_SEED = 0x5EED  # the pool's draws are seeded with the fit's seed plus this (and a count)
+FACE_CHECK = True  # (off: benchmarks/fins.py's peer, the loop before the check)
+
+
+class FaceCheck:
+    """Where a fit of a mesh strays from it between the points it fitted, and more samples
+    there (not in method.md; :func:`core.refine.adaptive_fit`'s ``stray_check``).
+
+    A coarse mesh is fitted through its vertices and :func:`mesh_samples` on its faces, at a
+    density that does not follow the net. Near a crease, where the knots crowd, a net of
+    ~1000 control points had fewer than 3 fitted points each, and between them the surface
+    swung off the mesh as a fin: a sheet of 231 vertices bent by 90 degrees, fitted at 1e-4,
+    was 2.6 off it (of a diagonal of 173) where the report said 0.074 at the vertices and
+    0.23 at the samples, all it measured (user test; benchmarks/fins.py).
+
+    Each call draws samples of the same surface as the fit's (``mesh_samples`` of the same
+    kind, other seeds; ``smooth`` as the fit's were) into a pool, and evaluates the fit at
+    them. A sample strays when its error is more than :data:`STRAY_RATIO` times the largest
+    error at its :data:`STRAY_NEIGHBOURS` nearest fitted points and above ``floor``
+    (normalized units). The pool's samples on the faces that hold a stray one are returned
+    to be fitted as well (and leave the pool). ``added`` keeps what was returned, in order.
+    :meth:`errors` gives a fit's errors at the pool's samples not fitted (the report's errors
+    on the faces count them)."""
+
+    def __init__(self, points, uv, faces, budget: int, floor: float, seed: int = 0,
+                 curved: bool = True, smooth: bool = True, vertex_normals=None,
+                 area_table=None, prepared=None):
+        self.mesh = (points, uv, faces)
+        self.cap = int(np.clip(STRAY_POOL_PER_CONTROL * int(budget), *STRAY_POOL))
+        self.floor = float(floor)
+        self.seed, self.curved, self.smooth = int(seed) + STRAY_SEED, curved, smooth
+        self.vertex_normals, self.area_table = vertex_normals, area_table
+        self.prepared = prepared  # smooth_corners (made at the first draw if not given)
+        self.uv, self.points = np.zeros((0, 2)), np.zeros((0, 3))
+        self.face, self.free = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
+        self.start = 0  # where the next check starts in the pool
+        self.draws = 0
+        self.added: list = []
+
+    def _draw(self, count: int) -> None:
+        points, uv, faces = self.mesh
+        if self.curved and self.smooth and self.prepared is None:
+            self.prepared = smooth_corners(points, uv, faces, self.vertex_normals)
+        p, x, f = mesh_samples(points, uv, faces, count, seed=self.seed + self.draws,
+                               curved=self.curved, vertex_normals=self.vertex_normals,
+                               area_table=self.area_table, smooth=self.smooth,
+                               with_faces=True, prepared=self.prepared)
+        self.draws += 1
+        self.uv, self.points = np.vstack([self.uv, x]), np.vstack([self.points, p])
+        self.face = np.concatenate([self.face, f])
+        self.free = np.concatenate([self.free, np.ones(len(x), dtype=bool)])
+
+    def errors(self, space, control_points) -> np.ndarray:
+        """The errors of the surface at the pool's samples not fitted (normalized units)."""
+        keep = np.flatnonzero(self.free)
+        return _distances(space, control_points, self.uv[keep], self.points[keep])
+
+    def __call__(self, space, control_points, uv, errors):
+        m = min(self.cap, max(STRAY_CHECK_MIN, STRAY_CHECK_PER_CONTROL * space.n_basis))
+        if self.start + m > len(self.uv) and len(self.uv) < self.cap:
+            self._draw(min(self.start + m, self.cap) - len(self.uv))
+        if not len(self.uv) or not len(uv):
+            return None
+        pick = (self.start + np.arange(min(m, len(self.uv)))) % len(self.uv)
+        self.start = int(pick[-1] + 1) % self.cap
+        pick = pick[self.free[pick]]
+        if not len(pick):
+            return None
+        x = self.uv[pick]
+        e = _distances(space, control_points, x, self.points[pick])
+        k = min(STRAY_NEIGHBOURS, len(uv))
+        near = cKDTree(uv).query(x, k=k, workers=-1)[1].reshape(len(x), k)
+        stray = e > np.maximum(STRAY_RATIO * errors[near].max(axis=1), self.floor)
+        if not stray.any():
+            return None
+        take = np.flatnonzero(self.free & np.isin(self.face, self.face[pick[stray]]))
+        self.free[take] = False
+        self.added.append((self.uv[take], self.points[take]))
+        return self.added[-1]
+
+
+def _distances(space, control_points, uv, points) -> np.ndarray:
+    """``|S(uv_j) - p_j|`` in chunks (the basis of 2e5 points is ~16 MB)."""
+    out = np.empty(len(uv))
+    for s in range(0, len(uv), 200_000):
+        A = space.evaluate(uv[s : s + 200_000])
+        out[s : s + 200_000] = np.linalg.norm(A @ control_points - points[s : s + 200_000],
+                                              axis=1)
+    return out
 
 
 # a corner of a face whose vertex normal turns more than this many degrees from the face's own
@@ -2549,7 +2659,7 @@ def flat_corners(points, faces, normals: bool = False, vertex_normals=None):
     return (own, normal, unit) if normals else own
 
 
-def smooth_points(points, uv, faces, face, bary, vertex_normals=None):
+def smooth_points(points, uv, faces, face, bary, vertex_normals=None, prepared=None):
     """Points at barycentric coordinates ``bary`` (n, 3) in the faces ``face`` (n,) of the mesh
     ``(points, faces)`` parameterized by ``uv``, on the C^1 Clough-Tocher interpolant of its
     map (:mod:`core.smooth_faces`). The gradient at a face's corner is the face's own linear
@@ -2564,7 +2674,16 @@ def smooth_points(points, uv, faces, face, bary, vertex_normals=None):
     meet: they had parted, up to 1.1e-3 of the diagonal on patch-01.off and 2.9e-2 on a
     5 x 5 bump (review); giving all faces at such a vertex their own gradients closed that
     too but faceted coarse meshes (an 8 x 8 grid of waves: 502 control points instead of
-    180). ``vertex_normals``: :func:`_vertex_normals` when known."""
+    180). ``vertex_normals``: :func:`_vertex_normals` when known; ``prepared``:
+    :func:`smooth_corners` of the mesh when made already (they depend on the mesh alone)."""
+    gradients, straight = (smooth_corners(points, uv, faces, vertex_normals)
+                           if prepared is None else prepared)
+    return clough_tocher_points(points, uv, faces, face, bary, gradients, straight)
+
+
+def smooth_corners(points, uv, faces, vertex_normals=None):
+    """The gradients (f, 3, 2, 3) at the faces' corners and the edges that start along their
+    chords (f, 3, 3) or None, of :func:`smooth_points` (its docstring says which)."""
     own = flat_corners(points, faces, vertex_normals=vertex_normals)
     n = len(points)
     mean = mean_gradients(points, uv, faces)
@@ -2589,7 +2708,7 @@ def smooth_points(points, uv, faces, face, bary, vertex_normals=None):
         any_own = np.zeros(len(keys), dtype=bool)
         np.logical_or.at(any_own, inverse, flagged.ravel())
         straight = any_own[inverse].reshape(key.shape) & (k_of != m_of)
-    return clough_tocher_points(points, uv, faces, face, bary, gradients, straight)
+    return gradients, straight
 
 
 def _area_table(points, faces):
@@ -2805,7 +2924,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         at = norm.apply(points)
         vertex_normals = _vertex_normals(at, np.asarray(param.faces))
         area_table = _area_table(at, np.asarray(param.faces))
-    curved = None
+    curved = face_check = None
     if param.faces is not None:
         # fit the mesh's surface: vertices plus points sampled on its faces, curved through the
         # vertices unless the vertices' noise outweighs the facets' sag (facet_sag)
@@ -2814,10 +2933,22 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
                                          vertex_normals, area_table)
                                >= FACET_SAG_OVER_NOISE * noise)
         count = mesh_sample_count(len(kept), options.max_control_points)
-        sp_, su_ = mesh_samples(at, np.asarray(param.uv), param.faces, count,
-                                seed=options.seed, curved=curved,
-                                vertex_normals=vertex_normals, area_table=area_table)
+        faces = np.asarray(param.faces)
+        smooth = count >= SMOOTH_SAMPLES_PER_FACE * len(faces)
+        prepared = (smooth_corners(at, np.asarray(param.uv), faces, vertex_normals)
+                    if curved and smooth else None)  # (for the samples and the face check)
+        sp_, su_ = mesh_samples(at, np.asarray(param.uv), faces, count, seed=options.seed,
+                                curved=curved, vertex_normals=vertex_normals,
+                                area_table=area_table, smooth=smooth, prepared=prepared)
         fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
+        if FACE_CHECK and len(fit_uv) <= ITERATION_POINTS and not subsampled:
+            # each fit checked between its points, on samples of the same surface (FaceCheck)
+            tol_norm = max(options.tolerance, 0.0) * (diag_norm if options.relative
+                                                       else 1.0 / norm.scale)
+            face_check = FaceCheck(
+                at, np.asarray(param.uv), faces, options.max_control_points,
+                max(tol_norm, STRAY_FLOOR * diag_norm), options.seed, curved, smooth,
+                vertex_normals=vertex_normals, area_table=area_table, prepared=prepared)
     # the vertices' normals, smooth over the noise: the errors across the surface, and the
     # fold check's
     planes = _local_planes(q, NOISE_NORMAL_NEIGHBOURS) if counts else None
@@ -2828,8 +2959,16 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         callback=callback, history_offset=len(history), unit=norm.scale,
         n_measured=None if subsampled else len(uv), domain=domain,
         balance=param.faces is None, start_degree=start_degree, measured_only=counts,
-        normals=None if planes is None else planes[0],
+        normals=None if planes is None else planes[0], stray_check=face_check,
     )
+    later = None  # samples the face check added to the fits after the best one
+    if face_check is not None and face_check.added:  # (the samples the loop added, in order;
+        # the best fit's are those it was fitted to, the first len(best.fit.errors))
+        fit_uv = np.vstack([fit_uv, *(a for a, _ in face_check.added)])
+        fit_q = np.vstack([fit_q, *(b for _, b in face_check.added)])
+        n_fit = len(best.fit.errors)
+        later = fit_uv[n_fit:], fit_q[n_fit:]
+        fit_uv, fit_q = fit_uv[:n_fit], fit_q[:n_fit]
 
     def data_checks(fit_state, errs):
         """The layers and spikes checks of a fit (below), for a cloud: the layers' gap and
@@ -2964,6 +3103,11 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # vertices are small (a CAD plate of 34 vertices: max 0.019 mm at them, 0.81 mm on a
         # face at a crease, and the report said only the first: user test)
         on_faces = best.fit.errors[len(uv):] * norm.scale
+        if face_check is not None:  # (and at the face check's samples not fitted)
+            on_faces = np.concatenate([
+                on_faces, face_check.errors(best.space, best.fit.control_points) * norm.scale,
+                _distances(best.space, best.fit.control_points, *later) * norm.scale
+                if later is not None else []])
         report["faces_rms"] = float(np.sqrt(np.mean(on_faces**2)))
         report["faces_max"] = float(on_faces.max())
         report["faces_rms_rel"] = report["faces_rms"] / diagonal

@@ -1,0 +1,131 @@
+"""Fins: a fit of a coarse creased mesh swinging off the mesh between the points it fitted, with
+and without the face check (``core.surface.FaceCheck``), in the same run.
+
+A mesh is fitted to its vertices and to points sampled on its faces (``mesh_sample_count``: 20
+per vertex, at least 5000), whatever the net's size. At a tight tolerance a creased CAD mesh
+gets a net of ~1000 control points, crowded at the crease, with fewer than 3 fitted points
+each there, and between them the surface swung off the mesh as a fin that no error reported
+(user test of the forty-first session: a bent sheet 2.6 off at 1e-4, reported 0.074). The face
+check evaluates each fit of the loop at samples drawn apart from the fitted ones; where it
+strays, it fits the samples of those faces as well.
+
+Rows: each case with the check ``off`` (``FACE_CHECK = False``: the loop before it) and ``on``
+(as shipped). Columns: control points; the reported max error at the vertices and on the faces
+(``faces_max``: the fitted samples, and with the check its samples not fitted too); the
+distance from the surface tessellated at 256 steps to the mesh's faces (``off mesh``: max and
+99th percentile; the truth a user sees); samples the check added; seconds. Over the bounding
+box's diagonal where it says so.
+
+    .venv/bin/python benchmarks/fins.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import core.surface as surface_module  # noqa: E402
+from core import fit_surface  # noqa: E402
+from core.geometry import point_mesh_distance  # noqa: E402
+from core.meshio import read_geometry  # noqa: E402
+
+
+def bent_sheet(n: int = 11, size: float = 100.0):
+    """A sheet of ``size`` x ``size`` bent up by 90 degrees along its middle: (2n - 1) x n
+    vertices, a flat half and an upright half (the user test's 231-vertex sheet)."""
+    s_ = np.linspace(0, 2, 2 * n - 1)
+    t_ = np.linspace(0, 1, n)
+    s, t = (a.ravel() for a in np.meshgrid(s_, t_))
+    points = np.c_[np.minimum(s, 1.0), t, np.maximum(s - 1.0, 0.0)] * size
+    m = len(s_)
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(n - 1), np.arange(m - 1), indexing="ij"))
+    a, b, c, d = i * m + j, i * m + j + 1, (i + 1) * m + j + 1, (i + 1) * m + j
+    return points, np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+
+
+def folded_grid(n: int = 21):
+    """An n x n grid over [-1, 1]^2 folded along y = 0 by 90 degrees: z = |y|."""
+    g = np.linspace(-1, 1, n)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
+    a = (j * n + i).ravel()
+    return np.c_[x, y, np.abs(y)], np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]
+
+
+def smooth_grid(n: int = 41):
+    """An n x n grid over [-1, 1]^2 of ``0.3 sin 2x cos y`` (no crease: the check's cost)."""
+    points, faces = folded_grid(n)
+    points[:, 2] = 0.3 * np.sin(2 * points[:, 0]) * np.cos(points[:, 1])
+    return points, faces
+
+
+def cases(quick: bool):
+    """(name, (points, faces), fit_surface keywords)."""
+    sheet = bent_sheet()
+    out = [("bent sheet, 231 vertices, 1e-4", sheet,
+            dict(tolerance=1e-4, max_control_points=3000))]
+    if quick:
+        return out
+    patch = read_geometry(ROOT / "data" / "patch-01.off")[:2]
+    out += [("bent sheet, 231 vertices, 1e-3", sheet,
+             dict(tolerance=1e-3, max_control_points=3000)),
+            ("folded grid 21 x 21, 1e-4", folded_grid(21), dict(tolerance=1e-4)),
+            ("patch-01.off, 0.05 absolute", patch, dict(tolerance=0.05, relative=False)),
+            ("patch-01.off, 1e-3", patch, {}),
+            ("smooth grid 41 x 41, 1e-4", smooth_grid(41), dict(tolerance=1e-4))]
+    for name in ("nefertiti", "three_peaks"):
+        out.append((f"{name}.off, 1e-3", read_geometry(ROOT / "data" / f"{name}.off")[:2], {}))
+    return out
+
+
+def run(mesh, kwargs: dict, check: bool) -> dict:
+    points, faces = (np.asarray(a) for a in mesh)
+    surface_module.FACE_CHECK = check
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            t0 = time.perf_counter()
+            surf = fit_surface(points, faces, **kwargs)
+            seconds = time.perf_counter() - t0
+    finally:
+        surface_module.FACE_CHECK = True
+    r = surf.report
+    v, _ = surf.tessellate(256)
+    d = point_mesh_distance(v, points, faces, k=24)
+    return {"cp": r["control_points"], "max": r["max"], "faces": r["faces_max"],
+            "off": d.max(), "p99": np.percentile(d, 99), "diag": r["diagonal"],
+            "added": sum(h.get("stray_samples", 0) for h in r["history"]),
+            "seconds": seconds}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="the bent sheet at 1e-4 only")
+    args = ap.parse_args()
+    print("| case | check | control points | max at vertices | faces max (reported) | "
+          "off mesh max | off mesh p99 | off mesh max / diagonal | samples added | seconds |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    rows = []
+    for name, mesh, kwargs in cases(args.quick):
+        for check in (False, True):
+            x = run(mesh, kwargs, check)
+            rows.append((name, check, x))
+            print(f"| {name} | {'on' if check else 'off'} | {x['cp']} | {x['max']:.3g} | "
+                  f"{x['faces']:.3g} | {x['off']:.3g} | {x['p99']:.3g} | "
+                  f"{x['off'] / x['diag']:.2e} | {x['added']} | {x['seconds']:.1f} |",
+                  flush=True)
+    off = sum(x["seconds"] for _, c, x in rows if not c)
+    on = sum(x["seconds"] for _, c, x in rows if c)
+    print(f"\ntime with the check / without: {on / off:.2f} ({on:.1f} s / {off:.1f} s)")
+
+
+if __name__ == "__main__":
+    main()
