@@ -133,7 +133,7 @@ def run(mesh, truth, variant: str, seeds: int) -> dict:
         return original(*args, **{**kwargs, "curved": variant != "flat" and
                                   kwargs.get("curved", True)})
 
-    def point_normal(points, uv, faces, face, bary, vertex_normals=None):
+    def point_normal(points, uv, faces, face, bary, vertex_normals=None, prepared=None):
         return surface_module.curved_points(points, faces, face, bary, vertex_normals)
 
     surface_module.mesh_samples = samples

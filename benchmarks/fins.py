@@ -31,24 +31,13 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
 
 import core.surface as surface_module  # noqa: E402
 from core import fit_surface  # noqa: E402
 from core.geometry import point_mesh_distance  # noqa: E402
 from core.meshio import read_geometry  # noqa: E402
-
-
-def bent_sheet(n: int = 11, size: float = 100.0):
-    """A sheet of ``size`` x ``size`` bent up by 90 degrees along its middle: (2n - 1) x n
-    vertices, a flat half and an upright half (the user test's 231-vertex sheet)."""
-    s_ = np.linspace(0, 2, 2 * n - 1)
-    t_ = np.linspace(0, 1, n)
-    s, t = (a.ravel() for a in np.meshgrid(s_, t_))
-    points = np.c_[np.minimum(s, 1.0), t, np.maximum(s - 1.0, 0.0)] * size
-    m = len(s_)
-    i, j = (a.ravel() for a in np.meshgrid(np.arange(n - 1), np.arange(m - 1), indexing="ij"))
-    a, b, c, d = i * m + j, i * m + j + 1, (i + 1) * m + j + 1, (i + 1) * m + j
-    return points, np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+from meshes import bent_sheet  # noqa: E402
 
 
 def folded_grid(n: int = 21):

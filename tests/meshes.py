@@ -122,3 +122,16 @@ def uv_sphere(segments: int, rings: int):
     faces = np.vstack([top, np.c_[a.ravel(), b.ravel(), c.ravel()],
                        np.c_[a.ravel(), c.ravel(), d.ravel()], bottom])
     return pts, faces
+
+
+def bent_sheet(n: int = 11, size: float = 100.0):
+    """A sheet of ``size`` x ``size`` bent up by 90 degrees along its middle, (2n - 1) x n
+    vertices: a flat half and an upright half (a user test's 231-vertex sheet)."""
+    s_ = np.linspace(0, 2, 2 * n - 1)
+    t_ = np.linspace(0, 1, n)
+    s, t = (a.ravel() for a in np.meshgrid(s_, t_))
+    points = np.c_[np.minimum(s, 1.0), t, np.maximum(s - 1.0, 0.0)] * size
+    m = len(s_)
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(n - 1), np.arange(m - 1), indexing="ij"))
+    a, b, c, d = i * m + j, i * m + j + 1, (i + 1) * m + j + 1, (i + 1) * m + j
+    return points, np.r_[np.c_[a, b, c], np.c_[a, c, d]]
