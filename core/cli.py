@@ -256,16 +256,25 @@ def default_resolution(control_points: int, surf=None) -> int:
     return int(max(base, min(MAX_RESOLUTION, cap * finer, np.ceil(want))))
 
 
-def _progress(quiet: bool):
+def _progress(quiet: bool, relative: bool = True):
+    """The per-iteration lines: the errors over the diagonal, or with ``relative`` False
+    (--absolute) in the data's units, as the tolerance was given (they had been over the
+    diagonal either way: user test)."""
+    rms, worst, fmt = ("rms_rel", "max_rel", ".2e") if relative else ("rms", "max", ".4g")
+
     def callback(r: dict) -> bool:
         if not quiet:
             sampled = f", {r['sampled_points']} sampled points" if "sampled_points" in r else ""
             # an uneven cloud meets the tolerance over its area too: why a run goes on
-            area = f"  over area {r['rms_area_rel']:.2e}" if "rms_area_rel" in r else ""
+            area = (f"  over area {r[rms.replace('rms', 'rms_area')]:{fmt}}"
+                    if "rms_area_rel" in r else "")
+            # samples the face check added where the surface strayed between a mesh's points
+            stray = (f", {r['stray_samples']} face samples added where it strayed"
+                     if r.get("stray_samples") else "")
             print(
                 f"  iteration {r['iteration']:3d}  knots {r['knots']:6d}  control points "
-                f"{r['control_points']:6d}  rms {r['rms_rel']:.2e}{area}  max {r['max_rel']:.2e}  "
-                f"({r['seconds']:.1f} s{sampled})"
+                f"{r['control_points']:6d}  rms {r[rms]:{fmt}}{area}  max {r[worst]:{fmt}}  "
+                f"({r['seconds']:.1f} s{sampled}{stray})"
                 + (f"  swings between the data at {r['swings']} places: the "
                    f"{r['knots_taken_back']} new knots taken back" if "knots_taken_back" in r
                    else ""),
@@ -347,7 +356,7 @@ def _fit(args) -> int:
             points, faces, degree=args.degree, mode=args.mode, tolerance=args.tolerance,
             relative=args.relative, max_control_points=args.max_control_points,
             max_iterations=args.max_iterations, smoothness=args.smoothness,
-            criterion=args.criterion, callback=_progress(args.quiet),
+            criterion=args.criterion, callback=_progress(args.quiet, args.relative),
             drop_outliers=args.drop_outliers, projection=args.projection,
             fill_holes=args.fill_holes, join=join,
         )

@@ -64,6 +64,23 @@ def test_point_cloud_input_with_absolute_tolerance(tmp_path):
     assert 0.8 * rms < area < 1.25 * rms  # an even cloud: about the same
 
 
+def test_progress_lines_give_the_errors_as_the_tolerance_was_given(capsys):
+    """With --absolute the progress lines gave the errors over the diagonal, the tolerance in
+    the data's units (user test): now in those units; over the diagonal with --relative. A
+    line says how many samples the face check added to a mesh's fit where it strayed."""
+    from core.cli import _progress
+
+    r = {"iteration": 3, "knots": 50, "control_points": 120, "rms": 0.0123, "max": 0.0456,
+         "rms_rel": 1.23e-5, "max_rel": 4.56e-5, "seconds": 0.5, "stray_samples": 70}
+    assert _progress(False, relative=False)(r) is False
+    _progress(False)(dict(r, stray_samples=0))
+    _progress(True)(r)
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2
+    assert "rms 0.0123  max 0.0456  (0.5 s, 70 face samples added where it strayed)" in err[0]
+    assert "rms 1.23e-05  max 4.56e-05  (0.5 s)" in err[1]
+
+
 def test_a_surface_swinging_off_the_data_is_a_warning_line_and_a_row(tmp_path, capsys):
     """A 20 m step fitted along z: the knot insertions that make the surface swing between
     the data are taken back (core.refine.adaptive_fit), and the progress lines say so. With
