@@ -775,8 +775,10 @@ class TCBSurface:
         for a mesh; not in method.md), mirrored (``u -> w - u``, ``w`` the box's width in them)
         for a mesh wound against its canonical winding, so that the triangles of
         :meth:`tessellate` run counter-clockwise in them as seen from the side their normals
-        face (an image is not shown mirrored)."""
+        face (an image is not shown mirrored). One parameter pair (2,) gives
+        (1, 2), as ``surf(uv)`` gives one point (1, 3)."""
         x = np.asarray(uv, dtype=np.float64)
+        x = x[None] if x.shape == (2,) else x
         if x.ndim != 2 or x.shape[1] != 2:
             raise InvalidInputError(f"uv must be an (M, 2) array; got shape {x.shape}")
         poly = np.asarray(self._param.domain_polygon, dtype=np.float64)

@@ -318,6 +318,9 @@ def test_texture_coordinates_map_the_domain_to_the_unit_square_unmirrored():
         assert up == (-1 if k == 1 else 1) or k == 2, k
     with pytest.raises(Exception, match=r"uv must be an \(M, 2\) array"):
         fits[0].texture_coordinates(np.zeros((3, 3)))
+    # one pair, as surf(uv) takes it (it had been refused: user test)
+    one = fits[0].texture_coordinates(uv[5])
+    assert one.shape == (1, 2) and np.array_equal(one, fits[0].texture_coordinates(uv[5:6]))
 
 
 def test_the_reach_of_a_cloud_s_mesh_ignores_the_order_and_doubles_of_its_points():
