@@ -1931,14 +1931,34 @@ def _parameterize_points(points, drop_outliers, projection, spikes, strays) -> P
 # --------------------------------------------------------------------------------------------
 
 
-def _welded_pieces(points: np.ndarray, tris: np.ndarray) -> int:
+# vertices of separate pieces this share of the diagonal apart or closer are a seam not quite
+# welded (_welded_pieces): exports round a seam's two copies apart (1e-7 of the diagonal: user
+# test); Blender's Merge by Distance takes 1e-4 m by default
+WELD_GAP = 1e-5
+
+
+def _welded_pieces(points: np.ndarray, tris: np.ndarray, distance: float = 0.0
+                   ) -> tuple[int, float]:
     """Pieces of the triangles joined through their edges once vertices at exactly equal
-    positions are one. Through edges, not vertices: two patches that touch at one vertex of
-    equal position were "1 once merged", and after Merge by Distance the fit refused the
-    mesh again for its non-manifold vertex (user test)."""
+    positions are one, or with ``distance`` > 0 also vertices at most that far apart; and the
+    largest distance between two vertices so joined (0 at equal positions). Through edges,
+    not vertices: two patches that touch at one vertex of equal position were "1 once
+    merged", and after Merge by Distance the fit refused the mesh again for its non-manifold
+    vertex (user test)."""
     _, first = np.unique(points, axis=0, return_inverse=True)
-    t = first.reshape(-1)[tris]
+    first = first.reshape(-1)
     m = int(first.max()) + 1
+    gap = 0.0
+    if distance > 0:  # (pairs within it, among the distinct positions, made one)
+        pairs = cKDTree(points).query_pairs(distance, output_type="ndarray")
+        pairs = pairs[first[pairs[:, 0]] != first[pairs[:, 1]]]
+        if len(pairs):
+            gap = float(np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1).max())
+            graph = sp.coo_matrix((np.ones(len(pairs)), (first[pairs[:, 0]], first[pairs[:, 1]])),
+                                  shape=(m, m))
+            first = connected_components(graph, directed=False)[1][first]
+            m = int(first.max()) + 1
+    t = first[tris]
     a, b = t.reshape(-1), np.roll(t, -1, axis=1).reshape(-1)
     _, edge = np.unique(np.minimum(a, b) * m + np.maximum(a, b), return_inverse=True)
     face = np.repeat(np.arange(len(tris)), 3)
@@ -1947,7 +1967,7 @@ def _welded_pieces(points: np.ndarray, tris: np.ndarray) -> int:
     graph = sp.coo_matrix((np.ones(len(face)), (face, len(tris) + edge.reshape(-1))),
                           shape=(len(tris) + n_edges,) * 2)
     _, label = connected_components(graph, directed=False)
-    return len(np.unique(label[: len(tris)]))
+    return len(np.unique(label[: len(tris)])), gap
 
 
 def _ragged_polygons(faces) -> list[np.ndarray] | None:
@@ -3297,20 +3317,28 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     graph = label = None  # (freed: the arrays of the edges and half-edges are most of what
     # a large mesh's map holds besides its factors, 0.9 GB at 1e6 vertices)
     if n_pieces > 1:
-        welded = _welded_pieces(p, tris)
+        welded, gap = _welded_pieces(p, tris)
+        if welded == n_pieces:  # none at equal positions: at nearly equal ones?
+            lo, hi = column_bounds(p[used])
+            welded, gap = _welded_pieces(p, tris, WELD_GAP * float(np.linalg.norm(hi - lo)))
+        # (a seam whose copies an export rounded apart: the distance to merge by)
+        where = ("equal positions" if gap == 0 else
+                 f"nearly equal positions (up to {gap:.3g} apart)")
+        merge = ("merge vertices at equal positions" if gap == 0 else
+                 f"merge vertices by a distance above {gap:.3g}"
+                 ) + " (Blender: Mesh > Clean Up > Merge by Distance) and fit again"
         if welded < n_pieces / 2:  # STL-style: corners not shared
+            at = "the same position as" if gap == 0 else "nearly the position of"
             raise TopologyError(
                 f"the mesh has {n_pieces} separate pieces because its faces do not share "
-                "vertices: each corner is its own vertex at the same position as its "
-                "neighbours' (as in STL files); merge vertices at equal positions (Blender: "
-                "Mesh > Clean Up > Merge by Distance) and fit again"
+                f"vertices: each corner is its own vertex at {at} its neighbours' (as in STL "
+                f"files); {merge}"
             )
         if welded < n_pieces:  # pieces that meet at vertices of equal positions: a seam
             raise TopologyError(
                 f"the mesh has {n_pieces} separate pieces, which meet along a seam of "
-                "vertices at equal positions (duplicated there, as by a UV seam split or an "
-                f"export): merged, they are {welded}; merge vertices at equal positions "
-                "(Blender: Mesh > Clean Up > Merge by Distance) and fit again")
+                f"vertices at {where} (duplicated there, as by a UV seam split or an "
+                f"export): merged, they are {welded}; {merge}")
         shown = ", ".join(str(int(k)) for k in sizes[sizes > 0][:5]) + (
             ", ..." if n_pieces > 5 else "")
         raise TopologyError(

@@ -1041,6 +1041,13 @@ def test_a_mesh_whose_faces_share_no_vertices_is_told_to_merge_them() -> None:
     with pytest.raises(TopologyError, match=r"2 separate pieces, which meet along a seam .*"
                                             r"merged, they are 1; .*Merge by Distance"):
         parameterize(np.concatenate([pts, pts[column]]), split)
+    # ... and its copies 1e-7 apart (rounded apart by an export): merge by that distance, not
+    # "keep the largest piece" (user test); 0.01 apart (of a diagonal of 1.4) are two pieces
+    for shift, words in ((1e-7, r"seam of vertices at nearly equal positions \(up to 1e-07 "
+                                r"apart\).*merge vertices by a distance above 1e-07 \(Blender"),
+                         (1e-2, "keep the largest piece")):
+        with pytest.raises(TopologyError, match=words):
+            parameterize(np.concatenate([pts, pts[column] + [shift, 0, 0]]), split)
     # two patches whose corners touch at one position: merged, they would meet at a vertex
     # only (a non-manifold one, the next error after Merge by Distance: user test)
     far, near = np.argmax(pts[:, 0] + pts[:, 1]), np.argmin(pts[:, 0] + pts[:, 1])
