@@ -1411,6 +1411,24 @@ def test_drop_outliers_also_leaves_out_spikes_inside_the_cloud() -> None:
         assert parameterize_points(np.c_[xy, many], True).used.all()
 
 
+def test_a_surface_turning_vertical_at_the_cloud_s_edge_has_no_spikes() -> None:
+    """A noise-free half cylinder seen along z (its sides turn vertical at x = -1 and 1): the
+    quadratic of an edge point's neighbours, all to one side and steep, missed the point, and
+    the fit warned of 3 spikes, drop_outliers=True dropped 14 exact points (user test). A
+    spike at the edge of a flat cloud, whose neighbours' surface is flat, is still one."""
+    rng = np.random.default_rng(1)
+    t, length = rng.uniform(0, np.pi, 8000), rng.uniform(0, 3, 8000)
+    pts = np.c_[np.cos(t), length, np.sin(t)]
+    assert len(pz.spike_points(pts, np.array([0.0, 0.0, 1.0]))) == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        assert parameterize_points(pts, True, projection="z").used.all()
+    flat = np.c_[rng.uniform(0, 3, (8000, 2)), np.zeros(8000)]
+    edge = int(np.argmin(flat[:, 0]))
+    flat[edge, 2] = 0.5
+    assert list(pz.spike_points(flat, np.array([0.0, 0.0, 1.0]))) == [edge]
+
+
 def test_drop_outliers_leaves_out_poles_and_tree_crowns() -> None:
     """Compact groups over a terrain: a pole of 10 points stacked within 0.15 m, 3-15 m up,
     and a crown of 40 points 8 m across, 9 m up, over a tile of 2e4 points 1.4 m apart. Each
