@@ -1355,14 +1355,14 @@ _SPIKE_SLOPE = 1.0
 _SPIKE_MAX_SHARE = 0.05
 _SPIKE_REUSE = 64  # a pass whose pool lost at most this many points reuses the last KD-tree
 _SPIKE_FLOOR_SAMPLE = 2000  # spike_points(only=...): points sampled for the noise level
-# a point at the edge of the cloud where its neighbours' surface is steep (gradient above
-# _SPIKE_EDGE_GRADIENT: a surface turning vertical towards its edge, as a half cylinder seen
-# along its axis's normal) is no spike: its neighbours lie to one side (their mean offset is
-# above _SPIKE_ONE_SIDED times their median distance), and their quadratic, extrapolated,
-# misses it (a noise-free half cylinder: 3 "spikes" warned of, 14 points dropped with
-# drop_outliers: user test). Of a uniform cloud's points that ratio is 0.24 inside (median;
-# 0.60 at the 99th percentile) and 0.59 at the edge (0.35 at the 5th; /tmp/s42/spk.py)
-_SPIKE_EDGE_GRADIENT = 1.0
+# a point at the edge of the cloud (its neighbours to one side: their mean offset above
+# _SPIKE_ONE_SIDED times their median distance) that their quadratic misses by less than its
+# slope rises over that distance is no spike: a surface turning vertical towards its edge (a
+# half cylinder seen across its axis) is extrapolated badly there (a noise-free one: 3
+# "spikes" warned of, 14 points dropped with drop_outliers: user test; its 41 points so
+# missed by 0.11-0.33 of that rise, spikes of +5 at the edge of sin 3x by 3.5-9.1 of it,
+# /tmp/s42/spk2.py). Of a uniform cloud's points the ratio is 0.24 inside (median; 0.60 at
+# the 99th percentile) and 0.59 at the edge (0.35 at the 5th; /tmp/s42/spk.py).
 _SPIKE_ONE_SIDED = 0.35
 _STACK_NEIGHBOURS = 8  # stacks: the neighbours looked at for one steeply above or below
 _STACK_MAX_SHARE = 0.1  # ... and the largest share of points with one (more: steep surface)
@@ -1396,11 +1396,12 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
 
     and it lies above (below) all of the neighbours kept by more than ``d_i / 2``, which fit
     their quadratic within ``d_i / 2``; unless the point is at the cloud's edge (the mean of
-    its neighbours' across offsets more than 0.35 times their median distance) where their
-    quadratic is steeper than 45 degrees (a surface turning vertical towards its edge, whose
-    extrapolated quadratic misses the edge's points: a noise-free half cylinder projected
-    across its axis had 3 such points warned of, 14 dropped; user test). (The mean offset
-    is over 0.35 of the median distance at most edge points, and at some inside ones.) A point at a step, with neighbours on both levels, is
+    its neighbours' across offsets more than 0.35 times their median distance ``s_i``) and
+    ``d_i`` is less than their quadratic's slope times ``s_i`` (a surface turning vertical
+    towards its edge, whose extrapolated quadratic misses the edge's points: a noise-free
+    half cylinder projected across its axis had 3 such points warned of, 14 dropped; user
+    test). (The mean offset is over 0.35 ``s_i`` at most edge points, and at some inside
+    ones, where a spike is far beyond the slope's rise.) A point at a step, with neighbours on both levels, is
     between them (a steep surface can fit such neighbours and miss the point: 2 of 3e4
     points of a noisy 20 m step were flagged without this). Spikes among each other's
     neighbours: the test is made again (up to 4 passes) without the spikes found, at the
@@ -1520,8 +1521,8 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
         hit &= np.nanmax(rs, axis=1) < 0.5 * d
         # and not at the cloud's edge where its surface turns steep (extrapolated there)
         side = np.linalg.norm(np.nanmean(np.where(use[:, :, None], uv, np.nan), axis=1), axis=1)
-        hit &= ~((side > _SPIKE_ONE_SIDED * spacing)
-                 & (np.hypot(coef[:, 1], coef[:, 2]) > _SPIKE_EDGE_GRADIENT))
+        rise = np.hypot(coef[:, 1], coef[:, 2]) * spacing  # (over one spacing)
+        hit &= ~((side > _SPIKE_ONE_SIDED * spacing) & (d < rise))
         return hit, far, nbr, coef
 
     def tested(points, pool):
