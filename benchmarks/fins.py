@@ -50,7 +50,8 @@ def folded_grid(n: int = 21):
 
 
 def smooth_grid(n: int = 41):
-    """An n x n grid over [-1, 1]^2 of ``0.3 sin 2x cos y`` (no crease: the check's cost)."""
+    """An n x n grid over [-1, 1]^2 of ``0.3 sin 2x cos y`` (no crease: what the check costs;
+    121 x 121: 14 641 vertices, 50 000 samples)."""
     points, faces = folded_grid(n)
     points[:, 2] = 0.3 * np.sin(2 * points[:, 0]) * np.cos(points[:, 1])
     return points, faces
@@ -69,7 +70,8 @@ def cases(quick: bool):
             ("folded grid 21 x 21, 1e-4", folded_grid(21), dict(tolerance=1e-4)),
             ("patch-01.off, 0.05 absolute", patch, dict(tolerance=0.05, relative=False)),
             ("patch-01.off, 1e-3", patch, {}),
-            ("smooth grid 41 x 41, 1e-4", smooth_grid(41), dict(tolerance=1e-4))]
+            ("smooth grid 41 x 41, 1e-4", smooth_grid(41), dict(tolerance=1e-4)),
+            ("smooth grid 121 x 121, 1e-4", smooth_grid(121), dict(tolerance=1e-4))]
     for name in ("nefertiti", "three_peaks"):
         out.append((f"{name}.off, 1e-3", read_geometry(ROOT / "data" / f"{name}.off")[:2], {}))
     return out

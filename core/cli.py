@@ -419,8 +419,11 @@ def _fit(args) -> int:
         ("max error", f"{r['max']:.4g} ({r['max_rel']:.2e} of the diagonal)"),
     ]
     if "faces_max" in r:  # a mesh: between its vertices too
+        # (and the samples fitted where the surface had strayed between the others)
+        stray = (f"; fitted to {r['stray_samples']} more samples where it strayed between them"
+                 if r.get("stray_samples") else "")
         rows.append(("on the faces", f"RMS {r['faces_rms']:.4g}, max {r['faces_max']:.4g} "
-                                     f"({r['faces_max_rel']:.2e} of the diagonal)"))
+                                     f"({r['faces_max_rel']:.2e} of the diagonal){stray}"))
     near = args.tolerance > 0 and noise_near_tolerance(r, args.tolerance, args.relative,
                                                         args.criterion)
     if stopped_at_noise(r) or near:  # core.parameterize.local_noise

@@ -2964,6 +2964,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         normals=None if planes is None else planes[0], stray_check=face_check,
     )
     later = None  # samples the face check added to the fits after the best one
+    sampled_first = len(fit_uv)  # (the face check's samples come after these)
     if face_check is not None and face_check.added:  # (the samples the loop added, in order;
         # the best fit's are those it was fitted to, the first len(best.fit.errors))
         fit_uv = np.vstack([fit_uv, *(a for a, _ in face_check.added)])
@@ -3111,6 +3112,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
                 _distances(best.space, best.fit.control_points, *later) * norm.scale
                 if later is not None else []])
         report["faces_rms"] = float(np.sqrt(np.mean(on_faces**2)))
+        if face_check is not None:  # the face check's samples the surface was fitted to
+            report["stray_samples"] = int(len(fit_uv) - sampled_first)
         report["faces_max"] = float(on_faces.max())
         report["faces_rms_rel"] = report["faces_rms"] / diagonal
         report["faces_max_rel"] = report["faces_max"] / diagonal

@@ -159,6 +159,30 @@ def test_a_surface_folding_over_its_mesh_is_a_warning_line_and_a_row(tmp_path, c
     assert "\nnoise " not in out  # (the tolerance reached: next test)
 
 
+def test_the_table_says_how_many_samples_the_face_check_fitted(tmp_path, capsys):
+    """A sheet of 91 vertices bent by 90 degrees at 1e-4: the face check
+    (core.surface.FaceCheck) fits samples where the surface strayed between the others; the
+    "on the faces" row says how many (the report's ``stray_samples``), and the progress lines
+    the samples added in each iteration."""
+    from core import cli
+    from meshes import bent_sheet
+
+    mesh = tmp_path / "sheet.obj"
+    write_mesh(mesh, *bent_sheet(7))
+    spline = tmp_path / "s.npz"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert cli.main(["fit", str(mesh), "-o", str(tmp_path / "s.obj"), "--tolerance", "1e-4",
+                         "--spline", str(spline)]) == 0
+    out, err = capsys.readouterr()
+    r = TCBSurface.load(spline).report
+    assert r["stray_samples"] > 0
+    assert re.search(rf"^on the faces\s+RMS .*; fitted to {r['stray_samples']} more samples "
+                     r"where it strayed between them$", out, re.M), out
+    added = [int(x) for x in re.findall(r"(\d+) face samples added where it strayed", err)]
+    assert added and sum(added) >= r["stray_samples"], err
+
+
 def test_a_noisy_mesh_whose_error_stopped_falling_has_its_noise_in_the_table(tmp_path, capsys):
     """A grid mesh with noise of 0.2% of its diagonal at the default tolerance (0.1%): the
     error stops falling (core.surface.NOISE_COUNTS), and the table gives the mesh's noise

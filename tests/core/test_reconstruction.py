@@ -3022,7 +3022,7 @@ def test_a_creased_coarse_mesh_grows_no_fin_between_its_samples():
     r = s.report
     off = point_mesh_distance(s.tessellate(256)[0], V, F, k=24)
     assert off.max() < 0.5 and np.percentile(off, 99) < 0.05, (off.max(), np.percentile(off, 99))
-    assert sum(h.get("stray_samples", 0) for h in r["history"]) > 0
+    assert sum(h.get("stray_samples", 0) for h in r["history"]) >= r["stray_samples"] > 0
     assert off.max() < 2 * max(r["faces_max"], r["max"])
 
 
