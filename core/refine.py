@@ -1359,11 +1359,13 @@ def adaptive_fit(
     split = False  # ... the start halfway between a coarser one that missed and the finer one
     shrink_max = np.inf  # ... whose max error is held to this (SHRINK_MAX)
 
-    def insert(knots, triangles, steer, count) -> np.ndarray:
-        """New knots (insertion_points), none in the regions where they made it swing."""
+    def insert(knots, triangles, at, steer, count) -> np.ndarray:
+        """New knots (insertion_points), steered by ``steer`` at the points ``at`` (those of
+        the fit it was made of: the face check may add points after it), none in the regions
+        where they made it swing."""
         if frozen:
-            steer = np.where(_in_discs(uv, frozen), 0.0, steer)
-        new = insertion_points(knots, triangles, uv, steer, count, options.criterion)
+            steer = np.where(_in_discs(at, frozen), 0.0, steer)
+        new = insertion_points(knots, triangles, at, steer, count, options.criterion)
         return new[~_in_discs(new, frozen)] if frozen else new
     reason = "iteration limit"
     t_start = time.perf_counter()
@@ -1647,7 +1649,7 @@ def adaptive_fit(
         if rms_area is not None and rms_area > rms:  # the sparse parts miss the tolerance
             steer = fit.errors.copy()
             steer[: len(e)] *= np.sqrt(area[(id(uv), len(e))])
-        last_insertion = (knots, space.configurations.triangles[0], steer, count)
+        last_insertion = (knots, space.configurations.triangles[0], uv, steer, count)
         new = insert(*last_insertion)
         if len(new) == 0:
             reason = SWINGS_LEFT if frozen else "no triangle has enough data to refine"

@@ -3067,6 +3067,43 @@ def test_the_face_check_returns_the_samples_of_the_faces_where_a_fit_strays():
         assert not (cKDTree(x1).query(x2[0])[0] == 0).any()
 
 
+def test_an_insertion_taken_back_after_the_face_check_added_points(monkeypatch):
+    """The face check (adaptive_fit's stray_check) appends points after a fit; when the swing
+    check then takes that insertion back, the insertion is made again from the fit before it,
+    whose steer was made at the points before the append: it had been paired with the longer
+    points and raised a broadcasting ValueError (review). A stub check adds 40 points at the
+    second fit, whose insertion is made to swing at one place."""
+    rng = np.random.default_rng(1)
+    uv = rng.random((3000, 2))
+    pts = np.column_stack([uv, np.sin(6 * uv[:, 0]) * np.cos(5 * uv[:, 1])])
+    calls = {"check": 0, "swing": 0}
+
+    def stray(space, control_points, at, errors):
+        calls["check"] += 1
+        assert len(errors) == len(at)
+        if calls["check"] == 2:
+            u = rng.random((40, 2))
+            return u, np.column_stack([u, np.sin(6 * u[:, 0]) * np.cos(5 * u[:, 1])])
+        return None
+
+    swings = refine.swing_places
+
+    def swing_at_the_second(space, control_points, at, p, e, **kw):
+        calls["swing"] += 1
+        out = swings(space, control_points, at, p, e, **kw)
+        return ((at[:1].copy(),) + tuple(out[1:])) if calls["swing"] == 2 else out
+
+    monkeypatch.setattr(refine, "swing_places", swing_at_the_second)
+    opts = refine.RefineOptions(tolerance=1e-5, initial_knots=30, max_iterations=4,
+                                max_control_points=3000)
+    best, hist, reason = refine.adaptive_fit(uv, pts, opts, diagonal=np.sqrt(3),
+                                             n_measured=3000, stray_check=stray)
+    # (made again away from the one place, the same knots: the loop stops there)
+    assert hist[1]["stray_samples"] == 40 and hist[1]["knots_taken_back"] == 10
+    assert reason == refine.SWINGS_LEFT and best.iteration == 1
+    assert len(best.fit.errors) == 3000
+
+
 def test_a_coarse_mesh_whose_net_outgrows_it_is_warned_of():
     """A 4 x 4 grid mesh of a smooth function got 581 control points (its 21 x 21 grid 149):
     its flat faces are data, and the creases between them take many control points; no word
