@@ -1048,6 +1048,17 @@ def test_a_mesh_whose_faces_share_no_vertices_is_told_to_merge_them() -> None:
                          (1e-2, "keep the largest piece")):
         with pytest.raises(TopologyError, match=words):
             parameterize(np.concatenate([pts, pts[column] + [shift, 0, 0]]), split)
+    # two vertices 5e-6 apart inside one piece (a sliver) neither join pieces nor set the
+    # distance to merge by (they had: review)
+    # (a face left of the seam split in three at a point 5e-6 from its first corner)
+    tri = int(np.flatnonzero(~right)[0])
+    i, a, b = split[tri]
+    inward = pts[[i, a, b]].mean(axis=0) - pts[i]
+    sliver = np.concatenate([pts, pts[column] + [1e-7, 0, 0],
+                             [pts[i] + 5e-6 * inward / np.linalg.norm(inward)]])
+    k = len(sliver) - 1
+    cut = np.concatenate([np.delete(split, tri, axis=0), [[i, a, k], [a, b, k], [b, i, k]]])
+    assert pz._welded_pieces(sliver, cut, 1e-5) == (1, pytest.approx(1e-7, rel=1e-6))
     # two patches whose corners touch at one position: merged, they would meet at a vertex
     # only (a non-manifold one, the next error after Merge by Distance: user test)
     far, near = np.argmax(pts[:, 0] + pts[:, 1]), np.argmin(pts[:, 0] + pts[:, 1])
