@@ -2926,6 +2926,8 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         at = norm.apply(points)
         vertex_normals = _vertex_normals(at, np.asarray(param.faces))
         area_table = _area_table(at, np.asarray(param.faces))
+    # the tolerance in normalized units (the face check's floor; the smoother fit's limit)
+    tol_norm = max(options.tolerance, 0.0) * (diag_norm if options.relative else 1.0 / norm.scale)
     curved = face_check = None
     if param.faces is not None:
         # fit the mesh's surface: vertices plus points sampled on its faces, curved through the
@@ -2945,8 +2947,6 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         fit_uv, fit_q = np.vstack([uv, su_]), np.vstack([q, sp_])
         if FACE_CHECK and len(fit_uv) <= ITERATION_POINTS and not subsampled:
             # each fit checked between its points, on samples of the same surface (FaceCheck)
-            tol_norm = max(options.tolerance, 0.0) * (diag_norm if options.relative
-                                                       else 1.0 / norm.scale)
             face_check = FaceCheck(
                 at, np.asarray(param.uv), faces, options.max_control_points,
                 max(tol_norm, STRAY_FLOOR * diag_norm), options.seed, curved, smooth,
@@ -3001,8 +3001,6 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         early = background(lambda state=best: data_checks(
             state, state.fit.errors[: len(uv)] * norm.scale))
         # what the smoother fit must still meet when the loop reached the tolerance
-        tol_norm = max(options.tolerance, 0.0) * (diag_norm if options.relative
-                                                   else 1.0 / norm.scale)
         limit = tol_norm if reason == "tolerance reached" and options.tolerance > 0 else None
         looped = best
         best, swings = _smoother_if_swinging(
@@ -3022,11 +3020,7 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     C = norm.undo(best.fit.control_points)
     errors = np.full(len(points), np.nan)
     if subsampled:
-        e = np.empty(len(uv))
-        for s in range(0, len(uv), 200_000):
-            A = best.space.evaluate(uv[s : s + 200_000])
-            e[s : s + 200_000] = np.linalg.norm(A @ best.fit.control_points - q[s : s + 200_000], axis=1)
-        errors[kept] = e * norm.scale
+        errors[kept] = _distances(best.space, best.fit.control_points, uv, q) * norm.scale
     else:
         errors[kept] = best.fit.errors[: len(uv)] * norm.scale
     if checks is None:
@@ -3112,11 +3106,11 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
                 _distances(best.space, best.fit.control_points, *later) * norm.scale
                 if later is not None else []])
         report["faces_rms"] = float(np.sqrt(np.mean(on_faces**2)))
-        if face_check is not None:  # the face check's samples the surface was fitted to
-            report["stray_samples"] = int(len(fit_uv) - sampled_first)
         report["faces_max"] = float(on_faces.max())
         report["faces_rms_rel"] = report["faces_rms"] / diagonal
         report["faces_max_rel"] = report["faces_max"] / diagonal
+        if face_check is not None:  # the face check's samples the surface was fitted to
+            report["stray_samples"] = int(len(fit_uv) - sampled_first)
         # (above rounding: a planar mesh is fitted to 1e-16 at its vertices and its faces)
         if (report["faces_max"] > FACES_MAX_RATIO * report["max"]
                 and report["faces_max_rel"] > FACES_MIN_REL):
