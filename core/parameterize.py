@@ -1360,8 +1360,8 @@ _SPIKE_FLOOR_SAMPLE = 2000  # spike_points(only=...): points sampled for the noi
 # slope rises over that distance is no spike: a surface turning vertical towards its edge (a
 # half cylinder seen across its axis) is extrapolated badly there (a noise-free one: 3
 # "spikes" warned of, 14 points dropped with drop_outliers: user test; its 41 points so
-# missed by 0.11-0.33 of that rise, spikes of +5 at the edge of sin 3x by 3.5-9.1 of it,
-# /tmp/s42/spk2.py). Of a uniform cloud's points the ratio is 0.24 inside (median; 0.60 at
+# missed by 0.11-0.33 of that rise, the spikes of +5 found on sin 3x, slope up to 3, by
+# 3.5-9.1 of it, /tmp/s42/spk2.py). Of a uniform cloud's points the ratio is 0.24 inside (median; 0.60 at
 # the 99th percentile) and 0.59 at the edge (0.35 at the 5th; /tmp/s42/spk.py).
 _SPIKE_ONE_SIDED = 0.35
 _STACK_NEIGHBOURS = 8  # stacks: the neighbours looked at for one steeply above or below
@@ -1401,11 +1401,12 @@ def spike_points(q: np.ndarray, direction: np.ndarray | None = None,
     towards its edge, whose extrapolated quadratic misses the edge's points: a noise-free
     half cylinder projected across its axis had 3 such points warned of, 14 dropped; user
     test). (The mean offset is over 0.35 ``s_i`` at most edge points, and at some inside
-    ones, where a spike is far beyond the slope's rise.) A point at a step, with neighbours on both levels, is
-    between them (a steep surface can fit such neighbours and miss the point: 2 of 3e4
-    points of a noisy 20 m step were flagged without this). Spikes among each other's
-    neighbours: the test is made again (up to 4 passes) without the spikes found, at the
-    points whose neighbours held one and at those that passed the slope test only. If more
+    ones, where a spike is far beyond the slope's rise.) A point at a step, with neighbours
+    on both levels, is between them (a steep surface can fit such neighbours and miss the
+    point: 2 of 3e4 points of a noisy 20 m step were flagged without this). Spikes among
+    each other's neighbours: the test is made again (up to 4 passes) without the spikes
+    found, at the points whose neighbours held one and at those that passed the slope test
+    only. If more
     than 5% of the points are spikes, the surface is rough rather than spiky and none is
     returned (``stats``, when given, receives ``too_many``: the count at which the search
     stopped, or 0; a cloud of fewer than 15 points has none).
