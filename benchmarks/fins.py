@@ -14,8 +14,9 @@ Rows: each case with the check ``off`` (``FACE_CHECK = False``: the loop before 
 (``faces_max``: the fitted samples, and with the check its samples not fitted too); the
 distance from the surface tessellated at 256 steps to the mesh's faces (``off mesh``: max and
 99th percentile; the truth a user sees); the check's samples the surface was fitted to
-(``report["stray_samples"]``); seconds. Over the bounding
-box's diagonal where it says so.
+(``report["stray_samples"]``); seconds. Over the bounding box's diagonal where it says so.
+The grids are benchmarks/coarse_meshes.py's: the folded one ``z = |y|``, the smooth ones
+``0.3 sin 2x cos y``, over [-1, 1]^2.
 
     .venv/bin/python benchmarks/fins.py [--quick]
 """
@@ -38,24 +39,8 @@ import core.surface as surface_module  # noqa: E402
 from core import fit_surface  # noqa: E402
 from core.geometry import point_mesh_distance  # noqa: E402
 from core.meshio import read_geometry  # noqa: E402
+from coarse_meshes import crease, grid, smooth  # noqa: E402
 from meshes import bent_sheet  # noqa: E402
-
-
-def folded_grid(n: int = 21):
-    """An n x n grid over [-1, 1]^2 folded along y = 0 by 90 degrees: z = |y|."""
-    g = np.linspace(-1, 1, n)
-    x, y = (a.ravel() for a in np.meshgrid(g, g))
-    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
-    a = (j * n + i).ravel()
-    return np.c_[x, y, np.abs(y)], np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]
-
-
-def smooth_grid(n: int = 41):
-    """An n x n grid over [-1, 1]^2 of ``0.3 sin 2x cos y`` (no crease: what the check costs;
-    121 x 121: 14 641 vertices, 50 000 samples)."""
-    points, faces = folded_grid(n)
-    points[:, 2] = 0.3 * np.sin(2 * points[:, 0]) * np.cos(points[:, 1])
-    return points, faces
 
 
 def cases(quick: bool):
@@ -68,11 +53,12 @@ def cases(quick: bool):
     patch = read_geometry(ROOT / "data" / "patch-01.off")[:2]
     out += [("bent sheet, 231 vertices, 1e-3", sheet,
              dict(tolerance=1e-3, max_control_points=3000)),
-            ("folded grid 21 x 21, 1e-4", folded_grid(21), dict(tolerance=1e-4)),
+            ("folded grid 21 x 21, 1e-4", grid(21, crease)[0], dict(tolerance=1e-4)),
             ("patch-01.off, 0.05 absolute", patch, dict(tolerance=0.05, relative=False)),
             ("patch-01.off, 1e-3", patch, {}),
-            ("smooth grid 41 x 41, 1e-4", smooth_grid(41), dict(tolerance=1e-4)),
-            ("smooth grid 121 x 121, 1e-4", smooth_grid(121), dict(tolerance=1e-4))]
+            # (no crease: what the check costs; 121 x 121: 14 641 vertices, 50 000 samples)
+            ("smooth grid 41 x 41, 1e-4", grid(41, smooth)[0], dict(tolerance=1e-4)),
+            ("smooth grid 121 x 121, 1e-4", grid(121, smooth)[0], dict(tolerance=1e-4))]
     for name in ("nefertiti", "three_peaks"):
         out.append((f"{name}.off, 1e-3", read_geometry(ROOT / "data" / f"{name}.off")[:2], {}))
     return out
