@@ -896,6 +896,12 @@ ITERATION_POINTS = 200_000
 # least MIN_PROBE_KNOTS (smaller starts are not probed)
 PROBE_FRACTION = 4
 MIN_PROBE_KNOTS = 8
+# ... of the start of this budget, whatever the budget given (smaller budgets: at most twice
+# their own start); the fresh starts of the sizing have at most that start's knots. With the
+# budget's own start, a larger budget that the fit did not reach gave a larger net
+# (three_peaks.off at 1e-3: 559, 647, 1313 control points at budgets 1000, 2000, 5000; user
+# test F7; benchmarks/budgets.py)
+PROBE_BUDGET = 2000
 # a fresh start that meets the tolerance is followed by a coarser one when the error-rate
 # model predicts at most this share of its knots (and at least MIN_START_KNOTS)
 SHRINK_FRACTION = 0.7
@@ -1156,7 +1162,8 @@ def adaptive_fit(
     both counts (``control_points`` and ``functions``).
     With a tolerance and the automatic start, the first fits size the start: a probe with a
     quarter of its knots, then fresh starts with the count :func:`next_start` predicts; they
-    count as iterations. A fresh start that meets the tolerance with room to spare is followed
+    count as iterations. That start is the one of the default budget (PROBE_BUDGET), or twice
+    the budget's own when that is smaller: a budget the run does not reach does not change it. A fresh start that meets the tolerance with room to spare is followed
     by a coarser fresh start, with the knots :func:`predicted_knots` gives for SHRINK_TARGET
     of the tolerance when that is at most SHRINK_FRACTION of them (at least MIN_START_KNOTS),
     as long as they meet it, and with a max error within SHRINK_MAX times the tolerance or the
@@ -1255,20 +1262,28 @@ def adaptive_fit(
     # sizing (next_start; not in method.md section 6): with a tolerance and the automatic
     # start, the first fit is a probe with a quarter of the start's knots; the following
     # fresh starts take the knot count the measured convergence predicts for the tolerance
-    # (at most the start's), so the net follows the tolerance instead of the budget
+    # (at most the start's), so the net follows the tolerance instead of the budget. The
+    # probe and the start the sizing jumps to are those of the default budget (PROBE_BUDGET),
+    # not of the one given: a budget that is not reached does not change the run
     sizing = False
     if start_knots is None:
+        held = max(len(uv) // 8, 6)  # what the points hold
         n0 = int(min(options.initial_knots or automatic_start(options.mode,
                                                               options.max_control_points),
-                     max(len(uv) // 8, 6)))
+                     held))
         if options.initial_knots is not None and options.initial_knots > n0:
             # (it had been cut silently: user test)
             warnings.warn(f"initial_knots={options.initial_knots} is more than {len(uv)} "
                           f"points hold: the first fit has {n0} interior knots (one per 8 "
                           "points at most)", RuntimeWarning, stacklevel=4)
+        # the largest start of the sizing: the default budget's, at most twice the budget's
+        # own start (about half the budget) and what the points hold
+        sized_start = min(automatic_start(options.mode, PROBE_BUDGET), held,
+                          2 * automatic_start(options.mode, options.max_control_points))
+        probe = sized_start // PROBE_FRACTION
         sizing = (options.initial_knots is None and tol > 0 and options.max_iterations > 1
-                  and n0 // PROBE_FRACTION >= MIN_PROBE_KNOTS)
-        interior, ring_knots = place(n0 // PROBE_FRACTION if sizing else n0)
+                  and probe >= MIN_PROBE_KNOTS)
+        interior, ring_knots = place(probe if sizing else n0)
     else:
         interior = np.asarray(start_knots, dtype=np.float64)
         if ring_knots is None:
@@ -1613,9 +1628,10 @@ def adaptive_fit(
                 best = quiet
             break
         if sizing:
-            restart = next_start(len(interior), value, tol, sized, options.degree, n0)
+            restart = next_start(len(interior), value, tol, sized, options.degree,
+                                 sized_start)
             sized = (len(interior), value)
-            sizing = restart is not None and restart < n0
+            sizing = restart is not None and restart < sized_start
             if restart is not None:  # a fresh start with the predicted knot count
                 interior, ring_knots = place(restart)
                 n_before, pending, prev, fresh = len(interior), np.zeros((0, 2)), None, True
