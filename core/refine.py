@@ -1283,6 +1283,10 @@ def adaptive_fit(
         probe = sized_start // PROBE_FRACTION
         sizing = (options.initial_knots is None and tol > 0 and options.max_iterations > 1
                   and probe >= MIN_PROBE_KNOTS)
+        if not sizing and options.initial_knots is None and tol > 0:
+            # (one iteration, or a probe too small to size from: the default budget's start
+            # too, within the budget's own)
+            n0 = min(n0, sized_start)
         interior, ring_knots = place(probe if sizing else n0)
     else:
         interior = np.asarray(start_knots, dtype=np.float64)

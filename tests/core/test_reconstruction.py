@@ -135,7 +135,8 @@ def test_a_budget_the_fit_does_not_reach_does_not_change_it():
     that is smaller: with them sized from the budget, budgets of 1000, 2000 and 5000 gave
     three_peaks.off at 1e-3 nets of 559, 647 and 1313 control points (user test F7;
     benchmarks/budgets.py). Here Franke at 2e-3: the same net, bit for bit, at all three; a
-    small budget probes with fewer knots and stays within it."""
+    small budget probes with fewer knots and stays within it. One iteration (no sizing) fits
+    that start too: budget 5000 had 400 interior knots, 2000 166."""
     xy = np.random.default_rng(3).random((8000, 2))
     P = np.c_[xy, franke(*xy.T)]
     runs = {b: fit_surface(P, tolerance=2e-3, max_control_points=b) for b in (1000, 2000, 5000)}
@@ -149,6 +150,11 @@ def test_a_budget_the_fit_does_not_reach_does_not_change_it():
     small = fit_surface(P, tolerance=2e-3, max_control_points=300).report
     assert small["history"][0]["interior_knots"] == 2 * automatic_start("tcb", 300) // 4
     assert small["control_points"] <= 300
+    # one iteration (no sizing): the default budget's start too, or the budget's own if smaller
+    once = {b: fit_surface(P, tolerance=2e-3, max_control_points=b, max_iterations=1).report
+            for b in (300, 2000, 5000)}
+    assert [once[b]["history"][0]["interior_knots"] for b in once] == [
+        automatic_start("tcb", 300), *[automatic_start("tcb", refine.PROBE_BUDGET)] * 2]
 
 
 def test_a_loose_tolerance_on_a_smooth_shape_gets_a_small_net(monkeypatch):
