@@ -1118,7 +1118,7 @@ def _stalled(history: list[dict], n_points: int | None = None,
         n1 = history[j]["interior_knots"]
         # a window of STALL_WINDOW insertions and 1.5x the knots, or of insertions that at
         # least doubled them (refine() grows a net by up to that per step) from at least
-        # MIN_PROBE_KNOTS (initial_knots=1 stopped after one insertion of 10 knots, at 3.7e-2
+        # MIN_PROBE_KNOTS (initial_knots=1 stopped after one insertion, to 10 knots, at 3.7e-2
         # on clean Franke: user test)
         doubled = n1 <= n / 2 and n1 >= MIN_PROBE_KNOTS
         if doubled or (n1 <= n / 1.5 and j <= len(history) - 1 - STALL_WINDOW):

@@ -487,9 +487,9 @@ def test_few_noisy_points_per_control_point_stop_on_the_error_at_new_points():
 
 def test_a_tiny_start_is_not_taken_for_a_stall_after_one_insertion():
     """The stall rule's window of insertions that doubled the knots (refine's steps) counts
-    from at least MIN_PROBE_KNOTS: from 1 interior knot, one insertion of 10 made a window, and
-    clean Franke stopped as "the error stopped falling" at 23 control points, RMS 3.7e-2 of
-    the diagonal, with a warning that the cloud may fold (user test)."""
+    from at least MIN_PROBE_KNOTS: from 1 interior knot, one insertion (to 10 knots) made a
+    window, and clean Franke stopped as "the error stopped falling" at 23 control points, RMS
+    3.7e-2 of the diagonal, with a warning that the cloud may fold (user test)."""
     xy = np.random.default_rng(0).random((3000, 2))
     r = fit_surface(np.c_[xy, franke(*xy.T)], initial_knots=1).report
     assert r["stop_reason"] == "tolerance reached" and r["rms_rel"] <= 1e-3
