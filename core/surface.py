@@ -3112,9 +3112,14 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         if face_check is not None:  # the face check's samples the surface was fitted to
             report["stray_samples"] = int(len(fit_uv) - sampled_first)
         # (above rounding: a planar mesh is fitted to 1e-16 at its vertices and its faces)
-        if (report["faces_max"] > FACES_MAX_RATIO * report["max"]
-                and report["faces_max_rel"] > FACES_MIN_REL):
-            warnings.warn(faces_warning(report), RuntimeWarning, stacklevel=3)
+        # (criterion "max": a bound the user asked for, so over it on the faces is said too;
+        # patch-01.off at 3e-3 reached it at the vertices, 1.9x it on the faces: user test)
+        bound = (options.criterion == "max" and options.tolerance > 0
+                 and report["faces_max"] > tol_norm * norm.scale * (1 + 1e-9))
+        if bound or (report["faces_max"] > FACES_MAX_RATIO * report["max"]
+                     and report["faces_max_rel"] > FACES_MIN_REL):
+            warnings.warn(faces_warning(report, tol_norm * norm.scale if bound else None),
+                          RuntimeWarning, stacklevel=3)
     if param.faces is not None and report["control_points"] > COARSE_MESH_RATIO * report["points"]:
         # (the largest bend between its faces, which says whether creases made the net big)
         report["coarse_mesh_crease"] = largest_crease(points, np.asarray(param.faces))
@@ -3399,15 +3404,20 @@ def folds_warning(report: dict) -> str:
             "show); the likely causes: " + "; ".join(causes[k] for k in order))
 
 
-def faces_warning(report: dict) -> str:
-    """The words for a mesh fitted far from its faces between the vertices (``_run``)."""
+def faces_warning(report: dict, bound: float | None = None) -> str:
+    """The words for a mesh fitted far from its faces between the vertices (``_run``); with
+    ``bound`` (criterion "max": the tolerance in the data's units) for one over that bound."""
+    ratio = report["faces_max"] / max(report["max"], 1e-300)
+    times = (f"{report['faces_max'] / bound:.1f} times the max error asked for ({bound:.4g}; it "
+             f"holds at the vertices, up to {report['max']:.4g})" if bound is not None else
+             f"{ratio:.0f} times the largest error at the vertices ({report['max']:.4g}; the "
+             "errors reported are those at the vertices)")
     return (f"at the points the fit sampled on the mesh's faces, between its vertices, the "
             f"surface is up to {report['faces_max']:.4g} off ({report['faces_max_rel']:.2e} of "
-            f"the diagonal), {report['faces_max'] / max(report['max'], 1e-300):.0f} times the "
-            f"largest error at the vertices ({report['max']:.4g}; the errors reported are "
-            "those at the vertices), and it may be farther between those points: the spline "
+            f"the diagonal), {times}, and it may be farther between those points: the spline "
             "does not follow long faces there, as at a sharp crease of a coarse CAD mesh; a "
-            "finer mesh (subdivided or remeshed) holds the surface to the faces")
+            "finer mesh (subdivided or remeshed) holds the surface to the faces"
+            + ("; so may a tighter tolerance" if bound is not None else ""))
 
 
 def far_stall_check(surf: "TCBSurface", points: np.ndarray, seed: int = 0) -> None:
