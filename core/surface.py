@@ -3435,7 +3435,10 @@ def far_stall_check(surf: "TCBSurface", points: np.ndarray, seed: int = 0) -> No
     if far_stall(report) and not report.get("spikes"):
         # (spikes pull the surface away from the points around them too: their warning says
         # what to do; the fold's advice was wrong for 10 spikes among 3000 points: user test)
-        warnings.warn(far_stall_warning(report), RuntimeWarning, stacklevel=4)
+        given = surf.options.smoothness
+        stiff = (None if isinstance(given, DefaultSmoothness) or given == "auto"
+                 or not float(given) > STIFF_SMOOTHNESS * DEFAULT_SMOOTHNESS else float(given))
+        warnings.warn(far_stall_warning(report, stiff), RuntimeWarning, stacklevel=4)
 
 
 def far_stall(report: dict) -> bool:
@@ -3909,20 +3912,30 @@ def data_layers(uv, residuals, seed: int = 0) -> float:
     return float(np.median(above - below))
 
 
+# a smoothness given over this many times the default is named as the cause of a far stall
+STIFF_SMOOTHNESS = 100.0
+
 # what the command line and Blender say of a run that missed its tolerance with spike points
 # in the cloud (report["spikes"], whose warning names them), before the option to leave them out
 SPIKES_HELD_OFF = ("the points that stick out like spikes (the warning above) pull the "
                    "surface")
 
 
-def far_stall_warning(report: dict) -> str:
-    """The warning of an error that stopped falling far above the data's scatter (``_run``)."""
+def far_stall_warning(report: dict, stiff: float | None = None) -> str:
+    """The warning of an error that stopped falling far above the data's scatter (``_run``);
+    ``stiff``: a smoothness given that is over STIFF_SMOOTHNESS times the default, named first
+    as the likely cause (smoothness=1000 on clean Franke was told of folds only: user test)."""
     d = report["distance_rms"]
     given = bool(report.get("projection_given"))
+    cause = ("" if stiff is None else
+             f" The smoothness given ({stiff:g}, {stiff / DEFAULT_SMOOTHNESS:.0f} times the "
+             "default) likely holds the surface off the data: lower it, or leave it to the "
+             "default. Otherwise the cloud may ")
     return (f"the error stopped falling with the data {d:.4g} from the surface (RMS of their "
             f"distances, {100 * d / report['diagonal']:.1f}% of the diagonal), "
             f"{d / max(report['scatter'], 1e-300):.0f} times their scatter about their local "
-            f"planes ({report['scatter']:.3g}): that is not noise. The cloud may "
+            f"planes ({report['scatter']:.3g}): that is not noise."
+            + (cause or " The cloud may ")
             + ("not be a height field along the direction given (parts of it seen edge-on "
                "along it, or overlapping): split it into patches that each face one "
                "direction, give another direction, "

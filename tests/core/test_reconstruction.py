@@ -1470,6 +1470,18 @@ def test_an_insertion_that_makes_the_surface_swing_is_taken_back(monkeypatch):
     assert r["places"] > 0
 
 
+def test_a_far_stall_under_a_stiff_smoothness_given_names_it_first():
+    """smoothness=1000 on clean Franke stops far from the data; the warning had named only
+    folds over the projection plane (user test). It now names the smoothness given first;
+    the fold advice follows, as "otherwise"."""
+    xy = np.random.default_rng(0).random((3000, 2))
+    with pytest.warns(RuntimeWarning, match=r"that is not noise. The smoothness given "
+                      r"\(1000, 10000000 times the default\) likely holds") as caught:
+        r = fit_surface(np.c_[xy, franke(*xy.T)], smoothness=1000.0).report
+    assert r["stop_reason"] == "the error stopped falling"
+    assert "Otherwise the cloud may fold" in str(caught[0].message)
+
+
 def test_an_error_stopped_far_above_the_data_s_scatter_is_warned_of():
     """Renka's F7 on a 71 x 71 grid, turned and with noise of 0.5% of its extent
     (benchmarks/fold_check.py --noisy, case 42): the fold check passes it under the noise,
