@@ -854,19 +854,30 @@ def local_origin(points: np.ndarray) -> np.ndarray:
     return (np.round(center / step) * step).astype(np.float32).astype(np.float64)
 
 
-def replace_mesh(obj, mesh, name: str | None = None) -> None:
-    """Give ``obj`` a new mesh datablock, keeping its materials; free the old one if unused.
-    Once it is freed the new mesh takes ``name`` (default: the old mesh's), which the old one
-    held while the new one was made: every Refine or Re-tessellate had added a suffix (.001,
-    .002; user test)."""
+def replace_mesh(obj, mesh, name: str | None = None) -> list:
+    """Give ``obj`` a new mesh datablock, keeping its materials and the names of its vertex
+    groups (empty: the new mesh has other vertices; they live on the mesh, and modifiers that
+    name a group had lost it without a word: user test); free the old one if unused. Once it
+    is freed the new mesh takes ``name`` (default: the old mesh's), which the old one held
+    while the new one was made: every Refine or Re-tessellate had added a suffix (.001, .002;
+    user test). Returns the names of the old mesh's shape keys, which do not carry over to
+    other vertices (the caller says so)."""
     old = obj.data
     name = old.name if name is None else name
     for mat in old.materials:
         mesh.materials.append(mat)
+    groups = [(g.name, g.lock_weight) for g in obj.vertex_groups]
+    active = obj.vertex_groups.active_index
+    keys = [kb.name for kb in old.shape_keys.key_blocks] if old.shape_keys is not None else []
     obj.data = mesh
+    for group_name, lock in groups:
+        obj.vertex_groups.new(name=group_name).lock_weight = lock
+    if groups:
+        obj.vertex_groups.active_index = active
     if old.users == 0:
         bpy.data.meshes.remove(old)
         mesh.name = name
+    return keys
 
 
 def result_collection(context, name: str) -> bpy.types.Collection:

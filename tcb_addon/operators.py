@@ -594,21 +594,49 @@ def moved_note(surface_obj, what: str = WRITTEN_BACK) -> str | None:
 
 
 def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = None,
-                       tessellation=None):
+                       tessellation=None) -> tuple[str | None, bool]:
     """The surface mesh of ``surf`` at ``resolution`` into ``surface_obj`` (``tessellation``:
-    its ``(verts, faces)`` computed already, as Re-tessellate's job does)."""
+    its ``(verts, faces)`` computed already, as Re-tessellate's job does). Returns what the
+    report says of the old mesh's shape keys and vertex groups (:func:`rewrite_note`) and
+    whether shape keys were dropped (a warning)."""
     verts, faces = tessellation if tessellation is not None else surf.tessellate(resolution)
     local = bridge.to_local(surface_obj, verts)
     name = name or surface_obj.data.name
     mesh = bridge.new_mesh(name, local, faces)
     set_texture(mesh, surf, resolution)
     mesh.shade_smooth()
-    bridge.replace_mesh(surface_obj, mesh, name)
+    keys = bridge.replace_mesh(surface_obj, mesh, name)
     # the Deviation Map's material shows colours the new mesh does not have (it rendered
     # near-black after Refine, Re-tessellate or Fit again: user test)
     bridge.drop_deviation_material(mesh)
     surface_obj.tcb.has_deviation = False
     remember_placement(surface_obj)
+    return rewrite_note(surface_obj, keys), bool(keys)
+
+
+def rewrite_note(obj, keys: list) -> str | None:
+    """What a new mesh of ``obj`` left of the old one's shape keys (``keys``, their names:
+    dropped, as they hold positions of the old vertices) and vertex groups (their names kept,
+    so modifiers naming them still find them, with no weights on the new vertices); None
+    when it had neither (both had gone without a word: user test)."""
+    groups = [g.name for g in obj.vertex_groups]
+    parts = []
+    if keys:
+        many = len(keys) > 1
+        parts.append(f"its shape key{'s' * many} ({_quoted(keys)}) {'were' if many else 'was'} "
+                     f"removed with the old mesh (Ctrl+Z brings {'them' if many else 'it'} back)")
+    if groups:
+        many = len(groups) > 1
+        parts.append(f"its vertex group{'s' * many} ({_quoted(groups)}) "
+                     f"{'are' if many else 'is'} kept by name, with no weights on the new "
+                     "vertices")
+    if not parts:
+        return None
+    return f"'{obj.name}' has a new mesh of other vertices: {'; '.join(parts)}"
+
+
+def _quoted(names) -> str:
+    return ", ".join(f"'{n}'" for n in names)
 
 
 def set_texture(mesh, surf, resolution: int) -> None:
@@ -1318,6 +1346,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             _CHOSEN_RESOLUTION[surf] = surf.auto_resolution()
         resolution = chosen_resolution(surf, self.resolution) if auto else self.resolution
         kept = []
+        self._rewrite_warnings = []  # (shape keys of a replaced surface: write_surface_mesh)
         part = getattr(self, "_part", "")
         previous = previous_result(context, data.sources, kept, part) if self.replace else None
         replaced = kept[:1] if previous is None else []
@@ -1330,7 +1359,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             surface, net = _new_result(coll, name, surf, resolution)
         else:  # the same objects, rewritten (as Refine does), at the data
             surface = previous
-            write_surface_mesh(surface, surf, resolution)
+            rewrite, dropped = write_surface_mesh(surface, surf, resolution)
             net = live.own_net(surface)
             if net is None or net.type != "MESH" or not net.users_collection:  # deleted
                 live.relink(surface, surf, resolution)  # (drops a deleted net's link)
@@ -1341,6 +1370,8 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             write_net_mesh(net, surf)  # (in its own frame)
             replaced.append(f"replaced the previous result '{surface.name}' (Ctrl+Z brings "
                             "it back; turn off Replace Previous Result to keep both)")
+            if rewrite:
+                (self._rewrite_warnings if dropped else replaced).append(rewrite)
             if drop_deviation_points(surface):
                 replaced.append("its Deviation Points were removed (run Deviation Map again)")
         surface[FITTED_KEY] = time.time()  # (the latest of several results is replaced)
@@ -1386,7 +1417,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         report_result(self, surf,
                       read + list(data.notes) + self._ignored + reused + replaced + spanned
                       + join_words(surf, getattr(self, "_joined", [])),
-                      _engine_notes(self), seconds=seconds, auto=auto)
+                      self._rewrite_warnings + _engine_notes(self), seconds=seconds, auto=auto)
         return {"FINISHED"}
 
     def draw(self, context):
@@ -1520,7 +1551,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         moved = moved_note(surface)
         if st.auto_resolution:  # (chosen again: a refined fit's mesh needs a finer one)
             st.resolution = chosen_resolution(surf, st.resolution)
-        write_surface_mesh(surface, surf, st.resolution)
+        rewrite, dropped = write_surface_mesh(surface, surf, st.resolution)
         if st.net is not None:
             write_net_mesh(live.own_net(surface), surf)
         live.relink(surface, surf, st.resolution, self.report)
@@ -1528,8 +1559,10 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         store_stats(st, surf, self._settings)
         mods = net_modifier_problem(surface)
         warnings = (list(getattr(self, "_warnings", ())) + ([moved] if moved else [])
-                    + ([mods] if mods else []) + _engine_notes(self))
-        notes = list(getattr(self, "_notes", ()))
+                    + ([mods] if mods else []) + ([rewrite] if dropped else [])
+                    + _engine_notes(self))
+        notes = list(getattr(self, "_notes", ())) + ([rewrite] if rewrite and not dropped
+                                                      else [])
         if drop_deviation_points(surface):
             notes.append("the Deviation Points of the previous surface were removed (run "
                          "Deviation Map again)")
@@ -1630,14 +1663,18 @@ class TCB_OT_retessellate(_EngineOperator, bpy.types.Operator):
         surface, surf = self._surface, self._surf
         verts, faces, weights = result
         moved = moved_note(surface)
-        write_surface_mesh(surface, surf, self.resolution, tessellation=(verts, faces))
+        rewrite, dropped = write_surface_mesh(surface, surf, self.resolution,
+                                              tessellation=(verts, faces))
         if live.relink(surface, surf, self.resolution, self.report, weights=weights):
             store_spline(surface, surf)  # the net was dropped: its edits are kept
         surface.tcb.resolution = self.resolution
         surface.tcb.auto_resolution = False  # (the user's choice: Refine keeps it; review)
-        for problem in (moved, net_vertex_problem(surface), net_modifier_problem(surface)):
+        for problem in (moved, net_vertex_problem(surface), net_modifier_problem(surface),
+                        rewrite if dropped else None):
             if problem:
                 self.report({"WARNING"}, f"TCB: {problem}")
+        if rewrite and not dropped:
+            self.report({"INFO"}, f"TCB: {rewrite}")
         return {"FINISHED"}
 
 

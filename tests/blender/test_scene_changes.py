@@ -640,3 +640,36 @@ def test_a_reused_fit_stays_in_the_cache_as_the_newest(clean_scene, addon, monke
         bpy.context.view_layer.update()
         assert fit(bpy, obj) == {"FINISHED"}
     assert len(calls) == 3  # A, B, C: both later fits of A reused the first
+
+
+def test_a_rewritten_surface_keeps_its_vertex_group_names_and_says_what_it_dropped(
+        clean_scene, capfd):
+    """Re-tessellate, Refine and a replacing Fit had dropped the surface's vertex groups, names
+    too (a modifier naming one lost it), and its shape keys, without a word: the names stay
+    (empty groups) and the report says the shape keys were removed."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    surface.shape_key_add(name="Basis")
+    surface.shape_key_add(name="Lift").value = 0.5
+    surface.vertex_groups.new(name="Mask").add(list(range(20)), 1.0, "REPLACE")
+    surface.vertex_groups.new(name="Rim").lock_weight = True
+    surface.modifiers.new("Push", "DISPLACE").vertex_group = "Mask"
+    capfd.readouterr()
+    assert run(bpy, bpy.ops.tcb.retessellate, surface, resolution=30) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert surface.data.shape_keys is None
+    assert [g.name for g in surface.vertex_groups] == ["Mask", "Rim"]
+    assert surface.vertex_groups["Rim"].lock_weight
+    assert "its shape keys ('Basis', 'Lift') were removed with the old mesh" in out
+    assert "its vertex groups ('Mask', 'Rim') are kept by name" in out
+    for op, props in ((bpy.ops.tcb.refine, {}), (fit, dict(tolerance=1e-2, replace=True))):
+        if op is fit:
+            assert fit(bpy, src, **props) == {"FINISHED"}
+        else:
+            assert run(bpy, op, surface, **props) == {"FINISHED"}
+        assert bpy.context.view_layer.objects.active == surface
+        assert [g.name for g in surface.vertex_groups] == ["Mask", "Rim"]
+        assert "its vertex groups ('Mask', 'Rim') are kept by name" in capfd.readouterr().out
+    assert surface.modifiers["Push"].vertex_group in surface.vertex_groups
