@@ -333,6 +333,38 @@ def net_modifier_problem(surface_obj) -> str | None:
             "turn them off or remove them")
 
 
+def net_shape_keys(net) -> list:
+    """The names of the shape keys of the control net ``net`` besides its basis (the reference
+    key, the net's own vertices): none for no net."""
+    keys = net.data.shape_keys if net is not None and net.type == "MESH" else None
+    if keys is None:
+        return []
+    return [kb.name for kb in keys.key_blocks if kb != keys.reference_key]
+
+
+def net_shape_key_problem(surface_obj) -> str | None:
+    """Why an edit of the control net through shape keys is not in the spline, or None. The
+    live surface follows the net as shown, shape keys mixed in, while Export Spline, Refine
+    and the Deviation Map read the net's own vertices (its basis), as with modifiers on the
+    net (:func:`net_modifier_problem`): an edit made in a shape key was exported and measured
+    as if not made, and Refine removed the keys without a word (user test). Not read as
+    edits: a mix of keys is animated and a spline is one shape; Apply All (Shape Key Specials)
+    makes the mix the net's own vertices."""
+    net = surface_obj.tcb.net
+    keys = net_shape_keys(net)
+    if not keys:
+        return None
+    many = len(keys) > 1
+    live_net = surface_obj.modifiers.get(live.MODIFIER_NAME) is not None
+    return (f"the control net '{net.name}' has the shape key{'s' * many} {_quoted(keys)}"
+            + (", whose mix the live surface follows, while" if live_net else ":")
+            + " Export Spline, Refine and Deviation Map use the net's own vertices (its basis), "
+            f"and Refine removes the key{'s' * many}: to keep the shape, apply "
+            f"{'them' if many else 'it'} to the net (Object Data > Shape Keys > Shape Key "
+            "Specials > Apply All), else delete "
+            + ("them" if many else "it"))
+
+
 def stack_problem(surface_obj) -> str | None:
     """Why the live net may not drive the surface, or None: modifiers above the live-net
     modifier in the surface's stack (one that adds vertices makes the live link pass the mesh
@@ -646,12 +678,23 @@ def set_texture(mesh, surf, resolution: int) -> None:
     bridge.set_uv_map(mesh, surf.texture_coordinates(surf.tessellation_uv(resolution)[0]))
 
 
-def write_net_mesh(net_obj, surf, name: str | None = None):
+def write_net_mesh(net_obj, surf, name: str | None = None) -> str | None:
+    """The control net of ``surf`` into ``net_obj`` (in its own frame); the report's words on
+    the old net's shape keys, which go with its mesh (:func:`net_shape_key_problem`), or
+    None."""
+    keys = net_shape_keys(net_obj)
     pts, faces = surf.control_net()
     name = name or net_obj.data.name
     mesh = bridge.new_mesh(name, bridge.to_local(net_obj, pts), faces)
     bridge.replace_mesh(net_obj, mesh, name)
     _remember_net_rounding(net_obj)
+    if not keys:
+        return None
+    many = len(keys) > 1
+    return (f"the shape key{'s' * many} {_quoted(keys)} of the control net '{net_obj.name}' "
+            f"{'were' if many else 'was'} removed with its old mesh: the new net is the fit's, "
+            f"and {'they were' if many else 'it was'} not part of the spline (Ctrl+Z brings "
+            f"{'them' if many else 'it'} back)")
 
 
 # the largest float32 spacing of a net's coordinates when they were written, in world units: a
@@ -1346,7 +1389,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             _CHOSEN_RESOLUTION[surf] = surf.auto_resolution()
         resolution = chosen_resolution(surf, self.resolution) if auto else self.resolution
         kept = []
-        self._rewrite_warnings = []  # (shape keys of a replaced surface: write_surface_mesh)
+        self._rewrite_warnings = []  # (shape keys of a replaced surface and of its net)
         part = getattr(self, "_part", "")
         previous = previous_result(context, data.sources, kept, part) if self.replace else None
         replaced = kept[:1] if previous is None else []
@@ -1367,11 +1410,13 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                         else context.scene.collection)
                 net = _new_net(coll, f"{name} TCB Net", surf, np.zeros(3))
                 net.matrix_world = surface.matrix_world.copy()  # the surface's frame
-            write_net_mesh(net, surf)  # (in its own frame)
+            keys = write_net_mesh(net, surf)  # (in its own frame)
             replaced.append(f"replaced the previous result '{surface.name}' (Ctrl+Z brings "
                             "it back; turn off Replace Previous Result to keep both)")
             if rewrite:
                 (self._rewrite_warnings if dropped else replaced).append(rewrite)
+            if keys:
+                self._rewrite_warnings.append(keys)
             if drop_deviation_points(surface):
                 replaced.append("its Deviation Points were removed (run Deviation Map again)")
         surface[FITTED_KEY] = time.time()  # (the latest of several results is replaced)
@@ -1552,14 +1597,14 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         if st.auto_resolution:  # (chosen again: a refined fit's mesh needs a finer one)
             st.resolution = chosen_resolution(surf, st.resolution)
         rewrite, dropped = write_surface_mesh(surface, surf, st.resolution)
-        if st.net is not None:
-            write_net_mesh(live.own_net(surface), surf)
+        keys = write_net_mesh(live.own_net(surface), surf) if st.net is not None else None
         live.relink(surface, surf, st.resolution, self.report)
         store_spline(surface, surf)
         store_stats(st, surf, self._settings)
         mods = net_modifier_problem(surface)
         warnings = (list(getattr(self, "_warnings", ())) + ([moved] if moved else [])
                     + ([mods] if mods else []) + ([rewrite] if dropped else [])
+                    + ([keys] if keys else [])
                     + _engine_notes(self))
         notes = list(getattr(self, "_notes", ())) + ([rewrite] if rewrite and not dropped
                                                       else [])
@@ -1670,7 +1715,7 @@ class TCB_OT_retessellate(_EngineOperator, bpy.types.Operator):
         surface.tcb.resolution = self.resolution
         surface.tcb.auto_resolution = False  # (the user's choice: Refine keeps it; review)
         for problem in (moved, net_vertex_problem(surface), net_modifier_problem(surface),
-                        rewrite if dropped else None):
+                        net_shape_key_problem(surface), rewrite if dropped else None):
             if problem:
                 self.report({"WARNING"}, f"TCB: {problem}")
         if rewrite and not dropped:
@@ -1879,7 +1924,8 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.deviation_rms:.4g}, max "
                               f"{st.deviation_data_max:.4g}{back}; color range 0 - {vmax:.4g}"
                               f"{note}")  # fmt: skip
-        for problem in (moved, changed, net_modifier_problem(surface)):
+        for problem in (moved, changed, net_modifier_problem(surface),
+                        net_shape_key_problem(surface)):
             if problem:
                 self.report({"WARNING"}, f"TCB: {problem}")
         return {"FINISHED"}
@@ -2045,9 +2091,10 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
         except OSError as ex:  # (not the engine's temporary file's name: user test)
             self.report({"ERROR"}, f"Could not write {path}: {ex.strerror or ex}")
             return {"CANCELLED"}
-        problem = net_vertex_problem(surface) or net_modifier_problem(surface)
-        self.report({"WARNING"} if problem else {"INFO"},
-                    f"TCB: saved {path}" + (f"; {problem}" if problem else ""))
+        problems = [p for p in (net_vertex_problem(surface) or net_modifier_problem(surface),
+                                net_shape_key_problem(surface)) if p]
+        self.report({"WARNING"} if problems else {"INFO"},
+                    f"TCB: saved {path}" + "".join(f"; {p}" for p in problems))
         return {"FINISHED"}
 
 

@@ -9,8 +9,8 @@ import bpy
 from . import bridge
 from .operators import (NO_DATA_KEY, SPLINE_KEY, converted_problem, folded_over, is_max,
                         live_link_problem, live_moved_problem, net_copy_note,
-                        net_modifier_problem, net_vertex_problem, result_objects, source_words,
-                        stack_problem, uneven_density)
+                        net_modifier_problem, net_shape_key_problem, net_vertex_problem,
+                        result_objects, source_words, stack_problem, uneven_density)
 from .properties import FIT_KEYS, RESULT_KEYS, draw_fit_settings
 
 
@@ -104,7 +104,7 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
             col.label(text="No spline stored: refit from the source", icon="ERROR")
         for problem in (converted_problem(surface), net_vertex_problem(surface),
                         live_link_problem(surface), net_modifier_problem(surface),
-                        stack_problem(surface)):
+                        net_shape_key_problem(surface), stack_problem(surface)):
             if problem:
                 col.label(text=problem[0].upper() + problem[1:], icon="ERROR")
         copy = net_copy_note(context.active_object)

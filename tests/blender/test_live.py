@@ -337,6 +337,47 @@ def test_modifiers_on_the_net_never_make_the_live_surface_garbage(clean_scene, a
     assert "modifiers on the control net" not in capfd.readouterr().out
 
 
+def test_shape_keys_on_the_net_are_said_everywhere_the_net_is_read(clean_scene, addon, capfd,
+                                                                     tmp_path):
+    """The live surface follows a net's shape keys, while Export Spline, Deviation Map and
+    Refine read the net's own vertices: an edit made in a shape key had been exported and
+    measured as if not made, and Refine removed the keys, all without a word (user test).
+    As with modifiers on the net, the panel and each of them say so; Refine says it removed
+    them."""
+    bpy = clean_scene
+    _, _, _, surface = fitted(bpy)
+    net = surface.tcb.net
+    surf = spline_of(surface)
+    j = central(surf, 20)
+    net.shape_key_add(name="Basis")
+    assert not any("shape key" in label for label in panel_labels(bpy, surface))
+    lift = net.shape_key_add(name="Lift")
+    lift.data[j].co.z += 0.3
+    lift.value = 1.0
+    bpy.context.view_layer.update()
+    moved = positions(net)
+    moved[j, 2] += 0.3
+    live = surf.with_control_points(moved).tessellate(20)[0]
+    assert np.allclose(evaluated(bpy, surface), live, atol=1e-4)  # the live surface: the mix
+    problem = ("The control net 'Wave TCB Net' has the shape key 'Lift', whose mix the live "
+               "surface follows, while Export Spline, Refine and Deviation Map use the net's "
+               "own vertices (its basis)")
+    assert any(label.startswith(problem) for label in panel_labels(bpy, surface))
+    capfd.readouterr()
+    assert run(bpy, bpy.ops.tcb.export_spline, surface,
+               filepath=str(tmp_path / "keys.npz")) == {"FINISHED"}
+    assert problem[1:] in capfd.readouterr().out
+    for op in (bpy.ops.tcb.retessellate, bpy.ops.tcb.deviation_map):
+        assert run(bpy, op, surface) == {"FINISHED"}
+        assert problem[1:] in capfd.readouterr().out
+    assert run(bpy, bpy.ops.tcb.refine, surface) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert net.data.shape_keys is None
+    assert ("the shape key 'Lift' of the control net 'Wave TCB Net' was removed with its old "
+            "mesh") in out
+    assert not any("shape key" in label for label in panel_labels(bpy, surface))
+
+
 def test_the_live_net_modifier_goes_first_in_the_stack(clean_scene, addon):
     """Fit with Live Net into a surface that has the user's Subdivision: the live-net
     modifier came after it, saw 4x the vertices and passed the mesh through, and drags of the
