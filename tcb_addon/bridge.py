@@ -880,6 +880,26 @@ def replace_mesh(obj, mesh, name: str | None = None) -> list:
     return keys
 
 
+def hiding_collections(view_layer, obj) -> list:
+    """The names of the collections that hide ``obj`` in ``view_layer``'s viewports (hidden
+    with the outliner's eye or monitor icon, or excluded), on every path to it through the
+    view layer's collections (one shown path shows it); [] when it is not hidden so."""
+    names: list = []
+
+    def walk(lc, hider):
+        coll = lc.collection
+        if hider is None and (lc.exclude or lc.hide_viewport or coll.hide_viewport):
+            hider = coll.name
+        found = obj.name in coll.objects
+        if found and hider is None:
+            return True
+        if found and hider not in names:
+            names.append(hider)
+        return any([walk(child, hider) for child in lc.children])
+
+    return [] if walk(view_layer.layer_collection, None) else names
+
+
 def result_collection(context, name: str) -> bpy.types.Collection:
     coll = bpy.data.collections.new(name)
     context.scene.collection.children.link(coll)

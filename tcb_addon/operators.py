@@ -1174,19 +1174,29 @@ def _new_result(coll, name: str, surf, resolution: int, tessellation=None):
 
 
 def set_up_result(context, surface, net, surf, sources, settings: dict, live_net: bool,
-                  show_net: bool, part: str = "") -> None:
+                  show_net: bool, part: str = "") -> list:
     """Make ``surface`` and ``net`` (written from ``surf``) a TCB result: its spline stored,
     roles, ``sources`` (and ``part``, the faces of the source fitted: ``bridge.part_text``,
     "" for all of it), links, statistics and ``settings`` (:func:`store_stats`), the live net
     attached (or a replaced result's detached), the net shown or hidden and the surface shown,
-    selected and active (Fit Surface, Import Spline)."""
+    selected and active (Fit Surface, Import Spline). Returns a warning for a replaced result
+    that stays hidden because its collection is (the user's collection is left as it is)."""
     # a replaced surface hidden by the user is shown, as a new one is (it had stayed
-    # hidden, and only its net came back: user test)
+    # hidden, and only its net came back: user test), also one disabled in viewports (the
+    # outliner's monitor icon: the report said it was replaced, and nothing showed)
     for obj, hide in ((net, not show_net), (surface, False)):
         try:
             obj.hide_set(hide)
         except RuntimeError:  # a replaced result's object outside the current view layer
             pass
+        if not hide:
+            obj.hide_viewport = False
+    hidden = [(obj, bridge.hiding_collections(context.view_layer, obj))
+              for obj in ((surface, net) if show_net else (surface,))]
+    warnings = [f"'{obj.name}' stays hidden: its collection{'s' * (len(names) > 1)} "
+                f"{', '.join(repr(n) for n in names)} {'are' if len(names) > 1 else 'is'} "
+                "hidden or excluded in the outliner (show or include it to see the result)"
+                for obj, names in hidden if names]
     store_spline(surface, surf)
     st = surface.tcb
     st.role = "SURFACE"
@@ -1209,6 +1219,7 @@ def set_up_result(context, surface, net, surf, sources, settings: dict, live_net
         obj.select_set(False)
     surface.select_set(True)
     context.view_layer.objects.active = surface
+    return warnings
 
 
 # the engine's words for a mesh that is no disk as a whole, where a patch of it may be one (Fit
@@ -1432,7 +1443,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             live.drop_deleted_results()
             surface.name, net.name = f"{name} TCB Surface", f"{name} TCB Net"
 
-        set_up_result(context, surface, net, surf, data.sources,
+        self._rewrite_warnings += set_up_result(context, surface, net, surf, data.sources,
                       {k: getattr(self, k) for k in FIT_KEYS}
                       | {"resolution": resolution, "auto_resolution": auto},
                       live_net=self.live_net, show_net=self.show_net, part=part)

@@ -673,3 +673,33 @@ def test_a_rewritten_surface_keeps_its_vertex_group_names_and_says_what_it_dropp
         assert [g.name for g in surface.vertex_groups] == ["Mask", "Rim"]
         assert "its vertex groups ('Mask', 'Rim') are kept by name" in capfd.readouterr().out
     assert surface.modifiers["Push"].vertex_group in surface.vertex_groups
+
+
+def test_fit_again_shows_a_result_disabled_in_viewports_and_warns_of_a_hidden_collection(
+        clean_scene, capfd):
+    """Fit with Replace into a result disabled in viewports (the outliner's monitor icon) had
+    left the new one invisible, the report saying it replaced it; in a hidden collection it
+    stays hidden (the user's collection is not changed), and the report says why."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    surface.hide_viewport = net.hide_viewport = True
+    assert fit(bpy, src, replace=True, tolerance=1e-2) == {"FINISHED"}
+    bpy.context.view_layer.update()
+    assert bpy.context.view_layer.objects.active == surface
+    assert surface.visible_get() and net.visible_get()
+    layer = bpy.context.view_layer.layer_collection.children["TCB Scan"]
+    layer.hide_viewport = True
+    capfd.readouterr()
+    assert fit(bpy, src, replace=True, tolerance=2e-2) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert layer.hide_viewport and bpy.data.objects.get("Scan TCB Surface.001") is None
+    assert ("'Scan TCB Surface' stays hidden: its collection 'TCB Scan' is hidden or excluded "
+            "in the outliner") in out
+    assert "'Scan TCB Net' stays hidden" in out
+    layer.hide_viewport = False
+    capfd.readouterr()
+    assert fit(bpy, src, replace=True, tolerance=1e-2) == {"FINISHED"}
+    assert "stays hidden" not in capfd.readouterr().out
