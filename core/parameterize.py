@@ -3347,10 +3347,12 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     edge_id = edge_id.reshape(-1)
     n_nonmanifold = int(np.count_nonzero(ecount > 2))
     if n_nonmanifold:
+        one = n_nonmanifold == 1
         raise TopologyError(
-            f"the mesh has non-manifold edges ({n_nonmanifold} of them are shared by more than "
-            "two faces); a disk-like patch is needed: remove the extra faces at those edges "
-            "(Blender: Select > Select All by Trait > Non Manifold)"
+            f"the mesh has {n_nonmanifold} non-manifold edge{'' if one else 's'} (shared by more "
+            "than two faces); a disk-like patch is needed: remove the extra faces at "
+            f"{'that edge' if one else 'those edges'} (Blender: Select > Select All by Trait > "
+            "Non Manifold)"
         )
     ea, eb = ekey // n, ekey % n
 
@@ -3479,7 +3481,8 @@ def _parameterize_mesh(points: np.ndarray, faces: np.ndarray,
     elen = None
     if n_zero:
         raise InvalidInputError(
-            f"the mesh has {n_zero} zero-length edges (coincident vertices); merge vertices by "
+            f"the mesh has {n_zero} zero-length edge{'' if n_zero == 1 else 's'} (coincident "
+            "vertices); merge vertices by "
             "distance (Blender: Mesh > Clean Up > Merge by Distance) and try again"
         )
     uv = np.full((n, 2), np.nan)

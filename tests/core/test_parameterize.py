@@ -999,11 +999,13 @@ def test_non_manifold_edge_is_reported_with_its_count() -> None:
     pts, faces = grid_mesh(5)
     # a fin on the interior edge (6, 7): three faces share it
     fin = np.concatenate([pts, [[0.3, 0.3, 1.0]]])
-    with pytest.raises(TopologyError, match=r"non-manifold edges \(1 of them"):
+    # (in the singular for one: "non-manifold edges (1 of them are shared ...)"; user test)
+    with pytest.raises(TopologyError, match=r"has 1 non-manifold edge \(shared by more than two "
+                                            r"faces\); .* remove the extra faces at that edge "):
         parameterize(fin, np.concatenate([faces, [[6, 7, 25]]]))
     # two fins on two interior edges
     fins = np.concatenate([pts, [[0.3, 0.3, 1.0], [0.6, 0.6, 1.0]]])
-    with pytest.raises(TopologyError, match=r"non-manifold edges \(2 of them"):
+    with pytest.raises(TopologyError, match=r"has 2 non-manifold edges \(shared .* at those "):
         parameterize(fins, np.concatenate([faces, [[6, 7, 25], [12, 13, 26]]]))
 
 
@@ -1161,8 +1163,13 @@ def test_bad_mesh_arrays_are_invalid_input() -> None:
         parameterize(pts, faces + 0.5)
     dup = pts.copy()
     dup[1] = dup[0]
-    with pytest.raises(InvalidInputError, match="zero-length edges"):
+    # (one edge in the singular: it had said "1 zero-length edges"; user test)
+    with pytest.raises(InvalidInputError, match=r"has 1 zero-length edge \(coincident"):
         parameterize(dup, faces)
+    two = pts.copy()
+    two[[1, 3]] = two[[0, 2]]
+    with pytest.raises(InvalidInputError, match=r"has 2 zero-length edges \(coincident"):
+        parameterize(two, faces)
 
 
 def test_parameterization_is_immutable() -> None:
