@@ -880,15 +880,17 @@ def replace_mesh(obj, mesh, name: str | None = None) -> list:
     return keys
 
 
-def hiding_collections(view_layer, obj) -> list:
+def hiding_collections(view_layer, obj, excluded: bool = False) -> list:
     """The names of the collections that hide ``obj`` in ``view_layer``'s viewports (hidden
-    with the outliner's eye or monitor icon, or excluded), on every path to it through the
-    view layer's collections (one shown path shows it); [] when it is not hidden so."""
+    with the outliner's eye or monitor icon, or excluded; with ``excluded``, excluded only),
+    on every path to it through the view layer's collections (one shown path shows it); []
+    when it is not hidden so."""
     names: list = []
 
     def walk(lc, hider):
         coll = lc.collection
-        if hider is None and (lc.exclude or lc.hide_viewport or coll.hide_viewport):
+        if hider is None and (lc.exclude or not excluded and (lc.hide_viewport
+                                                              or coll.hide_viewport)):
             hider = coll.name
         found = obj.name in coll.objects
         if found and hider is None:

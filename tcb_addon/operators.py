@@ -64,7 +64,9 @@ def check_settings(op, automatic: bool = False) -> None:
     tol = getattr(op, "tolerance", None)
     if tol is not None and not (np.isfinite(tol) and 0 <= tol < 1e30):
         zero = "automatic" if automatic else "refine to Max Control Points"
-        words.append(f"Tolerance must be 0 or more (0: {zero}), got {tol:g}")
+        # (the limit said: "0 or more" had been said of 1e30; user test)
+        words.append(f"Tolerance must be at least 0 and less than 1e+30 (0: {zero}), got "
+                     f"{tol:g}")
     budget = getattr(op, "max_control_points", None)
     if budget is not None and budget < MIN_BUDGET and not (automatic and budget == 0):
         words.append(f"Max Control Points must be {'0 (automatic) or ' * automatic}at least "
@@ -75,7 +77,7 @@ def check_settings(op, automatic: bool = False) -> None:
     smoothness = getattr(op, "smoothness", None)
     if (smoothness is not None and not getattr(op, "auto_smoothness", False)
             and not (np.isfinite(smoothness) and 0 <= smoothness < 1e30)):
-        words.append(f"Smoothness must be 0 or more, got {smoothness:g}")
+        words.append(f"Smoothness must be at least 0 and less than 1e+30, got {smoothness:g}")
     resolution = getattr(op, "resolution", None)
     if resolution is not None and not 2 <= resolution <= MAX_RESOLUTION:
         words.append(f"Resolution must be between 2 and {MAX_RESOLUTION}, got {resolution}")
@@ -215,7 +217,10 @@ def _poll_object_mode(op_cls, context, surface: bool = True) -> bool:
     Blender's poll message saying which is missing (F3 search or a script got only "poll()
     failed, context is incorrect" in Edit Mode: user test)."""
     if context.mode != "OBJECT":
-        op_cls.poll_message_set("Switch to Object Mode (Tab) first")
+        # Tab leaves Edit Mode, but in Sculpt or a paint mode it goes to Edit Mode (user test)
+        op_cls.poll_message_set(
+            "Switch to Object Mode (Tab) first" if context.mode.startswith("EDIT") else
+            "Switch to Object Mode first (the mode menu in the 3D Viewport's header)")
         return False
     if surface and active_surface(context) is None:
         op_cls.poll_message_set(no_surface_words(context))
@@ -2053,7 +2058,13 @@ class TCB_OT_toggle_net(bpy.types.Operator):
                                    "Surface to make a new control net (it replaces the result)")
             return {"CANCELLED"}
         if net.name not in context.view_layer.objects:
-            self.report({"ERROR"}, f"'{net.name}' is not in the current view layer")
+            # (in an excluded collection, it had not said which, nor what to do: user test)
+            excluded = bridge.hiding_collections(context.view_layer, net, excluded=True)
+            self.report({"ERROR"}, f"'{net.name}' is not in the current view layer" + (
+                f": its collection {', '.join(repr(n) for n in excluded)} "
+                f"{'is' if len(excluded) == 1 else 'are'} excluded from it; include "
+                f"{'it' if len(excluded) == 1 else 'them'} (the checkbox beside the collection "
+                "in the outliner)" if excluded else ""))
             return {"CANCELLED"}
         if net.visible_get():
             net.hide_set(True)

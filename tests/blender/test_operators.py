@@ -1719,12 +1719,17 @@ def test_settings_out_of_range_are_refused_not_clamped(clean_scene):
         assert (prop.soft_max, prop.default) == (512, 64)
     obj = add_mesh(bpy, "Grid", *grid(12))
     before = snapshot(obj)
-    bad = [(dict(tolerance=-0.01), r"Tolerance must be 0 or more \(0: refine to Max Control "
-                                   r"Points\), got -0.01"),
-           (dict(tolerance=float("inf")), r"Tolerance must be 0 or more .*, got 3.40282e\+38"),
+    bad = [(dict(tolerance=-0.01), r"Tolerance must be at least 0 and less than 1e\+30 \(0: "
+                                   r"refine to Max Control Points\), got -0.01"),
+           (dict(tolerance=float("inf")), r"Tolerance must be .*, got 3.40282e\+38"),
+           # (the limit said: "must be 0 or more ..., got 1e+30" had been said; user test)
+           (dict(tolerance=1e30), r"Tolerance must be at least 0 and less than 1e\+30 .*, got "
+                                  r"1e\+30"),
            (dict(max_control_points=5), r"Max Control Points must be at least 10, got 5"),
            (dict(max_iterations=0), r"Max Iterations must be at least 1, got 0"),
-           (dict(smoothness=-1.0), r"Smoothness must be 0 or more, got -1"),
+           (dict(smoothness=-1.0), r"Smoothness must be at least 0 and less than 1e\+30, got -1"),
+           (dict(smoothness=1e30), r"Smoothness must be at least 0 and less than 1e\+30, got "
+                                   r"1e\+30"),
            (dict(resolution=0), r"Resolution must be between 2 and 2048, got 0"),
            (dict(resolution=100000), r"Resolution must be between 2 and 2048, got 100000"),
            (dict(tolerance=-1.0, resolution=1), r"Tolerance .*; Resolution must be")]
@@ -1740,7 +1745,8 @@ def test_settings_out_of_range_are_refused_not_clamped(clean_scene):
     control_points = surface.tcb.control_points
     with bpy.context.temp_override(**select(bpy, surface)):
         for props, words in [
-                (dict(tolerance=-1.0), r"Tolerance must be 0 or more \(0: automatic\), got -1"),
+                (dict(tolerance=-1.0), r"Tolerance must be at least 0 and less than 1e\+30 "
+                                       r"\(0: automatic\), got -1"),
                 (dict(max_control_points=5), r"Max Control Points must be 0 \(automatic\) or "
                                              r"at least 10, got 5"),
                 (dict(max_iterations=0), r"Max Iterations must be at least 1")]:

@@ -703,3 +703,33 @@ def test_fit_again_shows_a_result_disabled_in_viewports_and_warns_of_a_hidden_co
     capfd.readouterr()
     assert fit(bpy, src, replace=True, tolerance=1e-2) == {"FINISHED"}
     assert "stays hidden" not in capfd.readouterr().out
+
+
+def test_object_mode_and_an_excluded_net_are_said_in_words_that_work(clean_scene):
+    """In Sculpt Mode the poll message said "Switch to Object Mode (Tab) first", but Tab there
+    goes to Edit Mode; Show/Hide Net on a net in an excluded collection said only that it was
+    not in the view layer."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    with bpy.context.temp_override(**select(bpy, surface)):
+        bpy.ops.object.mode_set(mode="SCULPT")
+        try:
+            assert bpy.context.mode == "SCULPT"
+            with pytest.raises(RuntimeError, match=r"Switch to Object Mode first \(the mode "
+                                                   r"menu in the 3D Viewport's header\)"):
+                bpy.ops.tcb.refine()
+        finally:
+            bpy.ops.object.mode_set(mode="OBJECT")
+    net = surface.tcb.net
+    shelf = bpy.data.collections.new("Shelf")
+    bpy.context.scene.collection.children.link(shelf)
+    for coll in list(net.users_collection):
+        coll.objects.unlink(net)
+    shelf.objects.link(net)
+    bpy.context.view_layer.layer_collection.children["Shelf"].exclude = True
+    with pytest.raises(RuntimeError, match=r"'Scan TCB Net' is not in the current view layer: "
+                                           r"its collection 'Shelf' is excluded from it; "
+                                           r"include it \(the checkbox"):
+        run(bpy, bpy.ops.tcb.toggle_net, surface)
