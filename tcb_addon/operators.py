@@ -711,9 +711,50 @@ def _remember_net_rounding(net_obj) -> None:
     """Keep the spacing its coordinates were rounded to as written (:data:`NET_ROUNDING_KEY`):
     Set Origin on the net (its frame changed, no vertex moved) re-rounds them to a finer
     spacing, against which the first rounding looked like edits (user test: "41 edited
-    control points were replaced" by Refine, for moves of 6e-8)."""
+    control points were replaced" by Refine, for moves of 6e-8); and its world matrix
+    (:data:`NET_PLACED_KEY`, :func:`net_moved_note`)."""
     net_obj[NET_ROUNDING_KEY] = float(
         bridge.read_world_positions_and_rounding(net_obj)[1].max(initial=0.0))
+    net_obj[NET_PLACED_KEY] = [float(x) for row in net_obj.matrix_world for x in row]
+
+
+# the control net object's world matrix when its vertices were last written (16 floats)
+NET_PLACED_KEY = "tcb_net_placed_at"
+
+
+def net_moved_note(surface_obj, stored) -> str | None:
+    """Words for a control net moved as an object (G on the net, as "move the net to move the
+    surface" invites) since its vertices were written from ``stored`` (the stored spline), or
+    None: its vertices then all count as edits, and the Deviation Map measured the moved
+    surface (RMS 2.9 for a fit of 1e-3) and Refine replaced "41 edited control points"
+    without saying why (user test). Moved: its object's matrix changed and most of its
+    vertices are off their control points (Set Origin changes the matrix and not where the
+    vertices are; a drag in Edit Mode moves some vertices, not the matrix); by how much: the
+    median of their offsets."""
+    net = surface_obj.tcb.net
+    placed = net.get(NET_PLACED_KEY) if net is not None and net.type == "MESH" else None
+    if placed is None:
+        return None
+    now = np.array(net.matrix_world, dtype=np.float64)
+    then = np.asarray(list(placed), dtype=np.float64).reshape(4, 4)
+    if np.allclose(now, then, rtol=1e-9, atol=1e-9 * (1 + np.abs(then).max())):
+        return None
+    ctrl, rounding = bridge.read_world_positions_and_rounding(net)
+    ref = np.asarray(stored.control_points, dtype=np.float64)
+    if len(ctrl) != len(ref) or not len(ref):
+        return None
+    # (off by more than the rounding: an edit, as with_net_edits counts them)
+    rounding = rounding + float(net.get(NET_ROUNDING_KEY, 0.0))
+    off = (np.abs(ctrl - ref) > rounding + 8 * np.spacing(np.abs(ref))).any(axis=1)
+    if not off.mean() > 0.5:
+        return None
+    shift = np.median(ctrl - ref, axis=0)
+    # (the 32-bit rounding of the vertices had been said as "(1.49e-08, 0, 3)")
+    shift = np.where(np.abs(shift) > 1e-6 * np.linalg.norm(shift), shift, 0.0)
+    turned = not np.allclose(now[:3, :3], then[:3, :3], rtol=1e-9, atol=1e-9)
+    return (f"the control net '{net.name}' was moved as an object since it was written (by "
+            f"({', '.join(f'{c:.4g}' for c in shift)}), {np.linalg.norm(shift):.4g} units"
+            + (", and turned or scaled" if turned else "") + ")")
 
 
 def _summary(surf, seconds: float | None = None) -> str:
@@ -1590,6 +1631,12 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         self._warnings = [f"{edited} edited control point{' was' if edited == 1 else 's were'} "
                           "replaced (Refine fits the data again; Ctrl+Z brings the edits back)"
                           ] if edited else []
+        moved = net_moved_note(surface, stored)
+        if moved:
+            self._warnings.append(
+                f"{moved}: its vertices counted as edits, and the refined surface is at the data "
+                "again, while the net object stays where it was moved (to fit the data "
+                "elsewhere, move the source and use Fit Surface)")
         # a joined patch is joined again, to its neighbours as they are now (refined on its
         # own, its border would part from theirs again)
         join, self._joined = None, []
@@ -1792,6 +1839,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
                 f"{'; '.join(data.unmodified)}: the map measures the shape '{surface.name}' "
                 "was fitted to")
         self._surface, self._data, self._surf = surface, data, surf
+        self._net_moved = net_moved_note(surface, stored_surface(surface, use_net=False))
         cloud = data.faces is None
         # a cloud's surface colours are computed on the job's thread too, at the surface's
         # vertices as they are now (finish checks that they did not change meanwhile)
@@ -1940,7 +1988,10 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.deviation_rms:.4g}, max "
                               f"{st.deviation_data_max:.4g}{back}; color range 0 - {vmax:.4g}"
                               f"{note}")  # fmt: skip
-        for problem in (moved, changed, net_modifier_problem(surface),
+        net_moved = self._net_moved and (
+            f"{self._net_moved}: the distances are to the surface where the moved net puts it, "
+            "not where it was fitted (move the net back to measure the fit)")
+        for problem in (moved, changed, net_moved, net_modifier_problem(surface),
                         net_shape_key_problem(surface)):
             if problem:
                 self.report({"WARNING"}, f"TCB: {problem}")

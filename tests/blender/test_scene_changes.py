@@ -733,3 +733,36 @@ def test_object_mode_and_an_excluded_net_are_said_in_words_that_work(clean_scene
                                            r"its collection 'Shelf' is excluded from it; "
                                            r"include it \(the checkbox"):
         run(bpy, bpy.ops.tcb.toggle_net, surface)
+
+
+def test_a_net_moved_as_an_object_is_said_by_deviation_map_and_refine(clean_scene, capfd):
+    """The net moved 3 units as an object ("move the net to move the surface"): the Deviation
+    Map reported RMS 2.9 for a fit of 1e-3 and Refine "41 edited control points were replaced",
+    neither saying that the net had been moved. Both say it now, by how much; Set Origin (the
+    frame moved, not the vertices) is no move."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    capfd.readouterr()
+    # Set Origin: the object one unit up, its vertices one down (in place in the world)
+    net.location.z += 1.0
+    local = positions(net) - [0.0, 0.0, 1.0]
+    net.data.attributes["position"].data.foreach_set("vector", local.astype(np.float32).ravel())
+    net.data.update()
+    bpy.context.view_layer.update()
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+    assert "was moved as an object" not in capfd.readouterr().out
+    net.location.z += 3.0
+    bpy.context.view_layer.update()
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+    assert ("the control net 'Scan TCB Net' was moved as an object since it was written (by "
+            "(0, 0, 3), 3 units): the distances are to the surface where the moved net puts "
+            "it") in capfd.readouterr().out
+    assert run(bpy, bpy.ops.tcb.refine, surface) == {"FINISHED"}
+    assert ("the control net 'Scan TCB Net' was moved as an object since it was written (by "
+            "(0, 0, 3), 3 units): its vertices counted as edits") in capfd.readouterr().out
+    # written again where it is now: no longer moved
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+    assert "was moved as an object" not in capfd.readouterr().out
