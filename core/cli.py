@@ -27,7 +27,7 @@ from .refine import (SWINGS_LEFT, mostly_taken_back, replaced_default_reason,
                      returned_why)
 from .surface import (FOLDED_SHARE, MAX_RESOLUTION, SPIKES_HELD_OFF, default_swung, grid_frame,
                       finer_resolution, sag_target, tessellation_fill,
-                      noise_near_tolerance, stopped_at_noise)
+                      noise_near_tolerance, stopped_at_noise, fall_rate, STILL_FALLING)
 
 __all__ = ["main"]
 
@@ -506,10 +506,19 @@ def _fit(args) -> int:
         unit = " (a fraction of the bounding-box diagonal)" if args.relative else ""
         if near and not mostly_taken_back(r):  # the data's noise is near the tolerance
             key = "max" if args.criterion == "max" else "rms"  # the report's error, and its name
-            advice = (f"the data's noise ({r['noise']:.4g}, the row 'noise') held it off, and "
-                      f"more control points would mostly fit the noise: loosen --tolerance to "
-                      f"about the {'max' if key == 'max' else 'RMS'} reached "
-                      f"({r[key + '_rel' if args.relative else key]:.3g}), or {advice}")
+            reached = (f"about the {'max' if key == 'max' else 'RMS'} reached "
+                       f"({r[key + '_rel' if args.relative else key]:.3g})")
+            rate = fall_rate(r)
+            if rate is not None and rate >= STILL_FALLING:  # (detail of the shape, or noise)
+                advice = (f"the error was still falling (like control points^-{rate:.2f} at "
+                          f"the end), so the scatter measured as noise ({r['noise']:.4g}, the "
+                          f"row 'noise') may be fine detail of the shape: {advice}; if it is "
+                          f"noise, more control points would mostly fit it: loosen --tolerance "
+                          f"to {reached}")
+            else:
+                advice = (f"the data's noise ({r['noise']:.4g}, the row 'noise') held it off, "
+                          f"and more control points would mostly fit the noise: loosen "
+                          f"--tolerance to {reached}, or {advice}")
             print(f"note: the tolerance {args.tolerance:g}{unit} was not reached: {advice}",
                   file=sys.stderr)
         else:

@@ -881,8 +881,17 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None,
             what = "max" if str(opts.criterion).lower() == "max" else "RMS"
             level = (f"{100 * rep[what.lower() + '_rel']:.3g}% of the diagonal" if opts.relative
                      else f"{rep[what.lower()]:.4g}")
-            advice = (f"{_scatter(surf)}, and more control points would mostly fit that noise: "
-                      f"loosen the tolerance to about the {what} reached ({level}), or {advice}")
+            rate = _core().surface.fall_rate(rep)
+            if rate is not None and rate >= _core().surface.STILL_FALLING:
+                # (the error still falling: the scatter may be detail of the shape; user test)
+                advice = (f"{_scatter(surf)}, but the error was still falling (like control "
+                          f"points^-{rate:.2f} at the end), so that may be fine detail of the "
+                          f"shape: {advice}; if it is noise, more control points would mostly "
+                          f"fit it: loosen the tolerance to about the {what} reached ({level})")
+            else:
+                advice = (f"{_scatter(surf)}, and more control points would mostly fit that "
+                          f"noise: loosen the tolerance to about the {what} reached ({level}), "
+                          f"or {advice}")
             op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason}): {advice}")
         else:
             op.report({"WARNING"}, f"{text}; the tolerance was not reached ({reason})"
