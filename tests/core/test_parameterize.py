@@ -547,6 +547,23 @@ def test_a_weighted_quantile_is_the_lower_one_of_the_weights() -> None:
     assert cols.tolist() == [2.0, -4.0]  # (1.0 holds 0.1 of the 6.2, under 2%)
 
 
+@pytest.mark.parametrize("centre, seed", [((0.3, 0.6), 0), ((0.7, 0.4), 0), ((0.25, 0.25), 1)])
+def test_a_steep_peak_off_centre_is_not_projected_over_its_tilted_plane(centre, seed) -> None:
+    """A peak z = 1 / (1 + 200 r^2) (slopes to 84 degrees) off the centre of its square, 8000
+    clean points (user test): its PCA plane tilts 8-12 degrees from z, the fold check passed it
+    clearly and 13-61 points overhung it; the fit stalled at 22% of the height off. A pass over
+    which the surface stands upright in places gives way to a candidate over which it does not:
+    within 4 degrees of z, nothing overhangs. (3 of 12 such clouds still overhang: a limit.)"""
+    xy = np.random.default_rng(seed).random((8000, 2))
+    d = xy - centre
+    z = 1 / (1 + 200 * np.einsum("ij,ij->i", d, d))
+    par = parameterize_points(np.c_[xy, z])
+    n = par.axes[2] * np.sign(par.axes[2][2])
+    assert n[2] > np.cos(np.radians(4))
+    up = np.c_[400 * z[:, None] ** 2 * d, np.ones(len(xy))]  # (-grad z, 1)
+    assert np.all(up @ n > 0)
+
+
 @pytest.mark.parametrize("noise", [0.0, 0.01, 0.03])
 def test_gentle_caps_and_noisy_planes_are_accepted(noise: float) -> None:
     rng = np.random.default_rng(5)
