@@ -896,11 +896,11 @@ ITERATION_POINTS = 200_000
 # least MIN_PROBE_KNOTS (smaller starts are not probed)
 PROBE_FRACTION = 4
 MIN_PROBE_KNOTS = 8
-# ... of the start of this budget, whatever the budget given (smaller budgets: at most twice
-# their own start); the fresh starts of the sizing have at most that start's knots. With the
-# budget's own start, a larger budget that the fit did not reach gave a larger net
-# (three_peaks.off at 1e-3: 559, 647, 1313 control points at budgets 1000, 2000, 5000; user
-# test F7; benchmarks/budgets.py)
+# ... of the start of this budget for any larger budget given (smaller ones: of their own
+# start); the fresh starts of the sizing have at most that start's knots. With the budget's
+# own start, a larger budget that the fit did not reach gave a larger net (three_peaks.off at
+# 1e-3: 647 and 1313 control points at budgets 2000 and 5000; user test F7;
+# benchmarks/budgets.py)
 PROBE_BUDGET = 2000
 # a fresh start that meets the tolerance is followed by a coarser one when the error-rate
 # model predicts at most this share of its knots (and at least MIN_START_KNOTS)
@@ -1165,8 +1165,8 @@ def adaptive_fit(
     both counts (``control_points`` and ``functions``).
     With a tolerance and the automatic start, the first fits size the start: a probe with a
     quarter of its knots, then fresh starts with the count :func:`next_start` predicts; they
-    count as iterations. That start is the one of the default budget (PROBE_BUDGET), or twice
-    the budget's own when that is smaller: a budget the run does not reach does not change it. A fresh start that meets the tolerance with room to spare is followed
+    count as iterations. That start is the one of the default budget (PROBE_BUDGET) for any
+    larger budget: a budget above it that the run does not reach does not change it. A fresh start that meets the tolerance with room to spare is followed
     by a coarser fresh start, with the knots :func:`predicted_knots` gives for SHRINK_TARGET
     of the tolerance when that is at most SHRINK_FRACTION of them (at least MIN_START_KNOTS),
     as long as they meet it, and with a max error within SHRINK_MAX times the tolerance or the
@@ -1266,8 +1266,8 @@ def adaptive_fit(
     # start, the first fit is a probe with a quarter of the start's knots; the following
     # fresh starts take the knot count the measured convergence predicts for the tolerance
     # (at most the start's), so the net follows the tolerance instead of the budget. The
-    # probe and the start the sizing jumps to are those of the default budget (PROBE_BUDGET),
-    # not of the one given: a budget that is not reached does not change the run
+    # probe and the start the sizing jumps to are those of the default budget (PROBE_BUDGET)
+    # for larger budgets: a budget above it that is not reached does not change the run
     sizing = False
     if start_knots is None:
         held = max(len(uv) // 8, 6)  # what the points hold
@@ -1279,16 +1279,17 @@ def adaptive_fit(
             warnings.warn(f"initial_knots={options.initial_knots} is more than {len(uv)} "
                           f"points hold: the first fit has {n0} interior knots (one per 8 "
                           "points at most)", RuntimeWarning, stacklevel=4)
-        # the largest start of the sizing: the default budget's, at most twice the budget's
-        # own start (about half the budget) and what the points hold
-        sized_start = min(automatic_start(options.mode, PROBE_BUDGET), held,
-                          2 * automatic_start(options.mode, options.max_control_points))
+        # the largest start of the sizing: the default budget's, or a smaller budget's own
+        # (twice it, a probe at smaller budgets too, gave other nets: a noisy mesh's net,
+        # capped at its vertex count, fitted its noise to the tolerance instead of stopping
+        # as the error stopped falling), and at most what the points hold
+        sized_start = min(automatic_start(options.mode,
+                                          min(options.max_control_points, PROBE_BUDGET)), held)
         probe = sized_start // PROBE_FRACTION
         sizing = (options.initial_knots is None and tol > 0 and options.max_iterations > 1
                   and probe >= MIN_PROBE_KNOTS)
         if not sizing and options.initial_knots is None and tol > 0:
-            # (one iteration, or a probe too small to size from: the default budget's start
-            # too, within the budget's own)
+            # (one iteration, or a probe too small to size from: that start too)
             n0 = min(n0, sized_start)
         interior, ring_knots = place(probe if sizing else n0)
     else:
