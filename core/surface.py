@@ -3293,10 +3293,12 @@ def _noise_tolerance(tolerance: float, relative: bool, criterion: str, diagonal:
 # a run stopped short of its tolerance by the budget or the iteration limit whose best RMS was
 # still falling at least like knots^-this over its last 1.5x the knots: the scatter measured
 # as noise may be fine detail of the shape, and the advice says both (the Jacksboro DEM, every
-# 8th node, at 800 control points: RMS 38.1 m, "noise" 18.2 m, falling like knots^-0.44, and
-# 3000 control points halved the error at the held-out nodes; it had been told that more would
-# mostly fit the noise: user test). Noisy meshes and clouds at their budget: 0.07-0.39.
-STILL_FALLING = 0.4
+# 8th node, at 800 control points: RMS 38 m, "noise" 18 m, falling like knots^-0.39 to -0.52
+# by the start, and 3000 control points halved the error at the held-out nodes; it had been
+# told that more would mostly fit the noise: user test). Noisy meshes and clouds stopped by
+# their budget: 0.07-0.39 (/tmp/s43/noise_budget.py), so the advice is two-sided for some
+# of them too, and leads with the budget
+STILL_FALLING = 0.3
 
 
 def fall_rate(report: dict) -> float | None:

@@ -188,7 +188,7 @@ def test_terrain_detail_taken_for_noise_is_told_as_either_while_the_error_still_
     """Every 8th node of the Jacksboro DEM at 5 m with a budget of 800: local_noise scores
     the terrain's detail between the nodes as noise (18 m, the RMS reached 38 m), and the note
     said more control points would mostly fit it, where 3000 halved the error at held-out
-    nodes (user test). The error was still falling (core.surface.fall_rate 0.52, at least
+    nodes (user test). The error was still falling (core.surface.fall_rate 0.39, at least
     STILL_FALLING): the note says the scatter may be detail, to raise the budget first, and
     what to do if it is noise."""
     from core import cli
