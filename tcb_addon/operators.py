@@ -1463,6 +1463,11 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                  else [])
         coll = next((c for n in stale for c in n.users_collection), None)
         if previous is None:
+            if not stale:
+                # a result deleted with its net (X) holds its names until the file is saved:
+                # the new one had been "Scan TCB Surface.001", for good (user test)
+                live.drop_orphaned_weights()
+                live.drop_deleted_results()
             if coll is None:
                 coll = bridge.result_collection(context, f"TCB {name}")
             surface, net = _new_result(coll, name, surf, resolution)

@@ -369,6 +369,22 @@ def test_results_deleted_with_their_nets_are_not_saved(clean_scene, tmp_path):
     assert kept in bpy.data.objects and kept_net in bpy.data.objects
 
 
+def test_a_fit_after_its_result_was_deleted_takes_the_result_s_names(clean_scene):
+    """A surface and its net deleted together (X) stay in the file until it is saved, and
+    held their names: the next Fit of the source made "Scan TCB Surface.001" and "Scan TCB
+    Net.001", which kept the suffix after a save (user test). Fit drops such results first."""
+    bpy = clean_scene
+    scan = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, scan) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    assert run(bpy, bpy.ops.object.delete, surface, surface.tcb.net) == {"FINISHED"}
+    assert "Scan TCB Surface" in bpy.data.objects  # (still in the file)
+    assert fit(bpy, scan) == {"FINISHED"}
+    again = bpy.context.view_layer.objects.active
+    assert (again.name, again.tcb.net.name) == ("Scan TCB Surface", "Scan TCB Net")
+    assert sorted(o.name for o in bpy.data.objects if o.tcb.role == "SURFACE") == [again.name]
+
+
 def test_a_mirrored_source_fitted_before_its_faces_were_turned_can_be_refined(clean_scene, addon):
     """Results of mirrored sources fitted before the faces were read turned keep the digest of
     the faces as they were read then: Refine called the unchanged source changed ("other
