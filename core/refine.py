@@ -1166,7 +1166,8 @@ def adaptive_fit(
     With a tolerance and the automatic start, the first fits size the start: a probe with a
     quarter of its knots, then fresh starts with the count :func:`next_start` predicts; they
     count as iterations. That start is the one of the default budget (PROBE_BUDGET) for any
-    larger budget: a budget above it that the run does not reach does not change it. A fresh start that meets the tolerance with room to spare is followed
+    larger budget: a budget above it that the run does not reach does not change it. A fresh
+    start that meets the tolerance with room to spare is followed
     by a coarser fresh start, with the knots :func:`predicted_knots` gives for SHRINK_TARGET
     of the tolerance when that is at most SHRINK_FRACTION of them (at least MIN_START_KNOTS),
     as long as they meet it, and with a max error within SHRINK_MAX times the tolerance or the
@@ -1288,9 +1289,8 @@ def adaptive_fit(
         probe = sized_start // PROBE_FRACTION
         sizing = (options.initial_knots is None and tol > 0 and options.max_iterations > 1
                   and probe >= MIN_PROBE_KNOTS)
-        if not sizing and options.initial_knots is None and tol > 0:
-            # (one iteration, or a probe too small to size from: that start too)
-            n0 = min(n0, sized_start)
+        if options.initial_knots is None and tol > 0:  # (one iteration, or no probe)
+            n0 = sized_start
         interior, ring_knots = place(probe if sizing else n0)
     else:
         interior = np.asarray(start_knots, dtype=np.float64)
