@@ -35,7 +35,7 @@ from scipy.spatial import ConvexHull, Delaunay, cKDTree
 from .configurations import Configurations
 from .errors import CancelledError, FileFormatError, InvalidInputError, TCBError
 from .fit import (AUTO_SMOOTHNESS, DEFAULT_SMOOTHNESS, SPARSE_POINTS_PER_CONTROL,
-                  SPARSE_SMOOTHNESS, DefaultSmoothness, fit_control_points)
+                  SPARSE_SMOOTHNESS, DefaultSmoothness, check_smoothness, fit_control_points)
 from .geometry import column_bounds, coordinate_order, float32_rounding
 from .join import join_fit, join_warning, seams
 from .parallel import background
@@ -3464,8 +3464,9 @@ def far_stall_check(surf: "TCBSurface", points: np.ndarray, seed: int = 0) -> No
         # (spikes pull the surface away from the points around them too: their warning says
         # what to do; the fold's advice was wrong for 10 spikes among 3000 points: user test)
         given = surf.options.smoothness
-        stiff = (None if isinstance(given, DefaultSmoothness) or given == "auto"
-                 or not float(given) > STIFF_SMOOTHNESS * DEFAULT_SMOOTHNESS else float(given))
+        value = None if isinstance(given, DefaultSmoothness) else check_smoothness(given)
+        stiff = (value if isinstance(value, float)
+                 and value > STIFF_SMOOTHNESS * DEFAULT_SMOOTHNESS else None)
         warnings.warn(far_stall_warning(report, stiff), RuntimeWarning, stacklevel=4)
 
 
