@@ -155,6 +155,13 @@ def test_a_budget_the_fit_does_not_reach_does_not_change_it():
             for b in (300, 2000, 5000)}
     assert [once[b]["history"][0]["interior_knots"] for b in once] == [
         automatic_start("tcb", 300), start, start]
+    # ... but a start the insertions could not grow to the prediction by the iteration limit
+    # jumps past it, up to the budget's own (review: 5000 at 5 iterations had stopped at 673
+    # control points, its own start reaching 1654)
+    far = fit_surface(P, tolerance=1e-6, max_control_points=5000, max_iterations=5).report
+    assert far["history"][1]["interior_knots"] == automatic_start("tcb", 5000) > start
+    assert far["control_points"] > 2 * fit_surface(P, tolerance=1e-6, max_control_points=2000,
+                                                   max_iterations=5).report["control_points"]
 
 
 def test_a_loose_tolerance_on_a_smooth_shape_gets_a_small_net(monkeypatch):
