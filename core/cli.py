@@ -509,9 +509,10 @@ def _fit(args) -> int:
             reached = (f"about the {'max' if key == 'max' else 'RMS'} reached "
                        f"({r[key + '_rel' if args.relative else key]:.3g})")
             rate = fall_rate(r)
-            if rate is not None and rate >= STILL_FALLING:  # (detail of the shape, or noise)
-                advice = (f"the error was still falling (like control points^-{rate:.2f} at "
-                          f"the end), so the scatter measured as noise ({r['noise']:.4g}, the "
+            spiky = advice.startswith(SPIKES_HELD_OFF)  # (its own advice: review)
+            if rate is not None and rate >= STILL_FALLING and not spiky:  # (detail, or noise)
+                advice = (f"the error was still falling (like knots^-{rate:.2f} at the "
+                          f"end), so the scatter measured as noise ({r['noise']:.4g}, the "
                           f"row 'noise') may be fine detail of the shape: {advice}; if it is "
                           f"noise, more control points would mostly fit it: loosen --tolerance "
                           f"to {reached}")

@@ -3114,8 +3114,10 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
         # (above rounding: a planar mesh is fitted to 1e-16 at its vertices and its faces)
         # (criterion "max": a bound the user asked for, so over it on the faces is said too;
         # patch-01.off at 3e-3 reached it at the vertices, 1.9x it on the faces: user test)
+        # (met at the vertices: a run that missed it there says so otherwise; review)
+        asked = tol_norm * norm.scale * (1 + 1e-9)
         bound = (options.criterion == "max" and options.tolerance > 0
-                 and report["faces_max"] > tol_norm * norm.scale * (1 + 1e-9))
+                 and report["max"] <= asked < report["faces_max"])
         if bound or (report["faces_max"] > FACES_MAX_RATIO * report["max"]
                      and report["faces_max_rel"] > FACES_MIN_REL):
             warnings.warn(faces_warning(report, tol_norm * norm.scale if bound else None),

@@ -868,7 +868,9 @@ def replace_mesh(obj, mesh, name: str | None = None) -> list:
         mesh.materials.append(mat)
     groups = [(g.name, g.lock_weight) for g in obj.vertex_groups]
     active = obj.vertex_groups.active_index
-    keys = [kb.name for kb in old.shape_keys.key_blocks] if old.shape_keys is not None else []
+    # (besides the basis, the old vertices themselves: a lone basis is no loss; review)
+    keys = ([kb.name for kb in old.shape_keys.key_blocks if kb != old.shape_keys.reference_key]
+            if old.shape_keys is not None else [])
     obj.data = mesh
     for group_name, lock in groups:
         obj.vertex_groups.new(name=group_name).lock_weight = lock

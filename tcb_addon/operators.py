@@ -882,10 +882,11 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None,
             level = (f"{100 * rep[what.lower() + '_rel']:.3g}% of the diagonal" if opts.relative
                      else f"{rep[what.lower()]:.4g}")
             rate = _core().surface.fall_rate(rep)
-            if rate is not None and rate >= _core().surface.STILL_FALLING:
+            spiky = advice.startswith(_core().surface.SPIKES_HELD_OFF)  # (its own advice)
+            if rate is not None and rate >= _core().surface.STILL_FALLING and not spiky:
                 # (the error still falling: the scatter may be detail of the shape; user test)
-                advice = (f"{_scatter(surf)}, but the error was still falling (like control "
-                          f"points^-{rate:.2f} at the end), so that may be fine detail of the "
+                advice = (f"{_scatter(surf)}, but the error was still falling (like "
+                          f"knots^-{rate:.2f} at the end), so that may be fine detail of the "
                           f"shape: {advice}; if it is noise, more control points would mostly "
                           f"fit it: loosen the tolerance to about the {what} reached ({level})")
             else:
@@ -1466,8 +1467,9 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             if not stale:
                 # a result deleted with its net (X) holds its names until the file is saved:
                 # the new one had been "Scan TCB Surface.001", for good (user test)
-                live.drop_orphaned_weights()
-                live.drop_deleted_results()
+                early = live.drop_orphaned_weights() + live.drop_deleted_results()
+                if early:  # (the view layer lists a removed object as None until updated)
+                    context.view_layer.update()
             if coll is None:
                 coll = bridge.result_collection(context, f"TCB {name}")
             surface, net = _new_result(coll, name, surf, resolution)

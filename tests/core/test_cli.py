@@ -206,7 +206,7 @@ def test_terrain_detail_taken_for_noise_is_told_as_either_while_the_error_still_
     assert r["stop_reason"] == "control-point budget reached" and r["rms"] > 5
     assert fall_rate(r) >= STILL_FALLING
     assert re.search(r"note: the tolerance 5 was not reached: the error was still falling "
-                     r"\(like control points\^-0\.\d\d at the end\), so the scatter measured as "
+                     r"\(like knots\^-0\.\d\d at the end\), so the scatter measured as "
                      r"noise \(\S+, the row 'noise'\) may be fine detail of the shape: raise "
                      r"--max-control-points; if it is noise, more control points would mostly "
                      r"fit it: loosen --tolerance to about the RMS reached", err), err
