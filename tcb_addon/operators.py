@@ -687,11 +687,10 @@ def write_net_mesh(net_obj, surf, name: str | None = None) -> str | None:
     """The control net of ``surf`` into ``net_obj`` (in its own frame); the report's words on
     the old net's shape keys, which go with its mesh (:func:`net_shape_key_problem`), or
     None."""
-    keys = net_shape_keys(net_obj)
     pts, faces = surf.control_net()
     name = name or net_obj.data.name
     mesh = bridge.new_mesh(name, bridge.to_local(net_obj, pts), faces)
-    bridge.replace_mesh(net_obj, mesh, name)
+    keys = bridge.replace_mesh(net_obj, mesh, name)  # (besides the basis, as net_shape_keys)
     _remember_net_rounding(net_obj)
     if not keys:
         return None
