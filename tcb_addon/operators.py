@@ -1081,6 +1081,17 @@ class _EngineOperator:
 # Custom property of a surface object: when it was fitted (time.time()), so that Fit with
 # Replace Previous Result replaces the latest of several results of the same source
 FITTED_KEY = "tcb_fitted_at"
+# ... and the name the fit gave it: a Shift+D copy carries both properties, not the name
+FITTED_NAME_KEY = "tcb_fitted_name"
+
+
+def _fit_order(ob) -> tuple:
+    """The order in which :func:`previous_result` prefers results: the latest fitted; of a
+    result and its Shift+D copies (the same fit time), the one still named as the fit named
+    it, then the first made (``ID.session_uid``): the copy the user kept as a variant had
+    been rewritten, as the later name (user test)."""
+    return (float(ob.get(FITTED_KEY, 0.0)), ob.name == ob.get(FITTED_NAME_KEY),
+            -ob.session_uid)
 
 
 def previous_result(context, sources, kept: list | None = None, part: str = ""):
@@ -1106,7 +1117,7 @@ def previous_result(context, sources, kept: list | None = None, part: str = ""):
              and not ob.get(IMPORTED_KEY)]
     if not found:
         return None
-    return max(found, key=lambda ob: (float(ob.get(FITTED_KEY, 0.0)), ob.name))
+    return max(found, key=_fit_order)
 
 
 def neighbour_joins(context, obj, part: str, data) -> tuple[list, list, list]:
@@ -1503,7 +1514,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             live.drop_orphaned_weights()
             live.drop_deleted_results()
             surface.name, net.name = f"{name} TCB Surface", f"{name} TCB Net"
-
+        surface[FITTED_NAME_KEY] = surface.name
         self._rewrite_warnings += set_up_result(context, surface, net, surf, data.sources,
                       {k: getattr(self, k) for k in FIT_KEYS}
                       | {"resolution": resolution, "auto_resolution": auto},

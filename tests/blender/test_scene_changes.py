@@ -782,3 +782,32 @@ def test_a_net_moved_as_an_object_is_said_by_deviation_map_and_refine(clean_scen
     # written again where it is now: no longer moved
     assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
     assert "was moved as an object" not in capfd.readouterr().out
+
+
+def test_fit_again_replaces_the_fitted_result_not_a_shift_d_copy_of_it(clean_scene, capfd):
+    """A Shift+D copy of a result carries its fit time (a custom property), and Fit with
+    Replace Previous Result took the latest name of a tie: it rewrote the copy ("Scan TCB
+    Surface.001"), the one the user had kept as a variant (user test). The result the fit
+    made is rewritten, whether the surface was copied alone or with its net; the copies
+    stay as they were."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    net = surface.tcb.net
+    for objs in ((surface,), (surface, net)):
+        with bpy.context.temp_override(**select(bpy, *objs)):
+            assert bpy.ops.object.duplicate() == {"FINISHED"}
+    copies = [o for o in bpy.context.view_layer.objects
+              if o.tcb.role == "SURFACE" and o != surface]
+    assert len(copies) == 2 and all(c.name > surface.name for c in copies)
+    kept = {c.name: (positions(c), positions(c.tcb.net)) for c in copies}
+    old = positions(surface)
+    capfd.readouterr()
+    assert fit(bpy, src, replace=True, tolerance=3e-3) == {"FINISHED"}
+    assert bpy.context.view_layer.objects.active == surface
+    assert "replaced the previous result 'Scan TCB Surface'" in capfd.readouterr().out
+    assert old.shape != positions(surface).shape or not np.array_equal(old, positions(surface))
+    for c in copies:
+        np.testing.assert_array_equal(positions(c), kept[c.name][0])
+        np.testing.assert_array_equal(positions(c.tcb.net), kept[c.name][1])
