@@ -2192,6 +2192,13 @@ class TCB_OT_export_spline(bpy.types.Operator, ExportHelper):
             return {"CANCELLED"}
         problems = [p for p in (net_vertex_problem(surface) or net_modifier_problem(surface),
                                 net_shape_key_problem(surface)) if p]
+        # (the saved spline is where the moved net puts the surface, as shown; it had been
+        # saved without a word, away from the data: user test)
+        moved = net_moved_note(surface, stored_surface(surface, use_net=False))
+        if moved:
+            problems.append(f"{moved}: the spline was saved where the moved net puts it, off "
+                            "the data it was fitted to (Ctrl+Z the move, or move the net back, "
+                            "to save the fitted one)")
         self.report({"WARNING"} if problems else {"INFO"},
                     f"TCB: saved {path}" + "".join(f"; {p}" for p in problems))
         return {"FINISHED"}

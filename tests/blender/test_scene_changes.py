@@ -751,11 +751,13 @@ def test_object_mode_and_an_excluded_net_are_said_in_words_that_work(clean_scene
         run(bpy, bpy.ops.tcb.toggle_net, surface)
 
 
-def test_a_net_moved_as_an_object_is_said_by_deviation_map_and_refine(clean_scene, capfd):
+def test_a_net_moved_as_an_object_is_said_by_deviation_map_and_refine(clean_scene, capfd,
+                                                                     tmp_path):
     """The net moved 3 units as an object ("move the net to move the surface"): the Deviation
     Map reported RMS 2.9 for a fit of 1e-3 and Refine "41 edited control points were replaced",
-    neither saying that the net had been moved. Both say it now, by how much; Set Origin (the
-    frame moved, not the vertices) is no move."""
+    neither saying that the net had been moved. Both say it now, by how much, and so does
+    Export Spline, which saves the moved spline (user test); Set Origin (the frame moved, not
+    the vertices) is no move."""
     bpy = clean_scene
     src = add_mesh(bpy, "Scan", *wave())
     assert fit(bpy, src) == {"FINISHED"}
@@ -776,12 +778,18 @@ def test_a_net_moved_as_an_object_is_said_by_deviation_map_and_refine(clean_scen
     assert ("the control net 'Scan TCB Net' was moved as an object since it was written (by "
             "(0, 0, 3), 3 units): the distances are to the surface where the moved net puts "
             "it") in capfd.readouterr().out
+    path = str(tmp_path / "moved.npz")
+    assert run(bpy, bpy.ops.tcb.export_spline, surface, filepath=path) == {"FINISHED"}
+    assert ("(0, 0, 3), 3 units): the spline was saved where the moved net puts it, off the "
+            "data it was fitted to") in capfd.readouterr().out
     assert run(bpy, bpy.ops.tcb.refine, surface) == {"FINISHED"}
     assert ("the control net 'Scan TCB Net' was moved as an object since it was written (by "
             "(0, 0, 3), 3 units): its vertices counted as edits") in capfd.readouterr().out
     # written again where it is now: no longer moved
     assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
-    assert "was moved as an object" not in capfd.readouterr().out
+    assert run(bpy, bpy.ops.tcb.export_spline, surface, filepath=path) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "was moved as an object" not in out and f"TCB: saved {path}" in out
 
 
 def test_fit_again_replaces_the_fitted_result_not_a_shift_d_copy_of_it(clean_scene, capfd):
