@@ -854,6 +854,21 @@ def local_origin(points: np.ndarray) -> np.ndarray:
     return (np.round(center / step) * step).astype(np.float32).astype(np.float64)
 
 
+def has_vertex_weights(mesh) -> bool:
+    """Whether ``mesh`` holds vertex-group weights (its deform layer, made by the first weight
+    given; the weights are not in the attribute API): a surface whose groups are still the
+    empty ones a rewrite left loses nothing by the next (its note had been repeated on every
+    Refine: user test). Read through a C copy (bmesh): 25 ms at 66 000 vertices."""
+    import bmesh
+
+    bm = bmesh.new()
+    try:
+        bm.from_mesh(mesh, face_normals=False, vertex_normals=False)
+        return bm.verts.layers.deform.active is not None
+    finally:
+        bm.free()
+
+
 def replace_mesh(obj, mesh, name: str | None = None) -> list:
     """Give ``obj`` a new mesh datablock, keeping its materials and the names of its vertex
     groups (empty: the new mesh has other vertices; they live on the mesh, and modifiers that

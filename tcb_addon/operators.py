@@ -642,21 +642,24 @@ def write_surface_mesh(surface_obj, surf, resolution: int, name: str | None = No
     mesh = bridge.new_mesh(name, local, faces)
     set_texture(mesh, surf, resolution)
     mesh.shade_smooth()
+    weighted = bool(len(surface_obj.vertex_groups)) and bridge.has_vertex_weights(
+        surface_obj.data)
     keys = bridge.replace_mesh(surface_obj, mesh, name)
     # the Deviation Map's material shows colours the new mesh does not have (it rendered
     # near-black after Refine, Re-tessellate or Fit again: user test)
     bridge.drop_deviation_material(mesh)
     surface_obj.tcb.has_deviation = False
     remember_placement(surface_obj)
-    return rewrite_note(surface_obj, keys), bool(keys)
+    return rewrite_note(surface_obj, keys, weighted), bool(keys)
 
 
-def rewrite_note(obj, keys: list) -> str | None:
+def rewrite_note(obj, keys: list, weighted: bool = True) -> str | None:
     """What a new mesh of ``obj`` left of the old one's shape keys (``keys``, their names:
     dropped, as they hold positions of the old vertices) and vertex groups (their names kept,
-    so modifiers naming them still find them, with no weights on the new vertices); None
-    when it had neither (both had gone without a word: user test)."""
-    groups = [g.name for g in obj.vertex_groups]
+    so modifiers naming them still find them, with no weights on the new vertices; said when
+    the old mesh had weights, ``weighted``); None when it had neither (both had gone without
+    a word: user test)."""
+    groups = [g.name for g in obj.vertex_groups] if weighted else []
     parts = []
     if keys:
         many = len(keys) > 1
