@@ -475,10 +475,11 @@ def _fit(args) -> int:
     if advice and r.get("spikes"):  # (the warning above names them: a sharp step had been
         # blamed for 30 stray points, the run spending 20 iterations on them; user test)
         advice = f"{SPIKES_HELD_OFF}: pass --drop-outliers"
-    if sag is not None and sag > sag_target(r):  # (the mesh is what the user measures)
+    # (the mesh is what the user measures)
+    if sag is not None and sag > sag_target(r, surf.options):
         # (at half: kept, or measured whole now if Auto Resolution passed over it on a sample,
         # a quarter of the finest's evaluations)
-        finer = finer_resolution(resolution, sag, sag_target(r),
+        finer = finer_resolution(resolution, sag, sag_target(r, surf.options),
                                  surf.tessellation_sag(resolution // 2)
                                  if resolution >= 4 else None)
         print(f"note: the surface mesh (resolution {resolution}, the finest chosen "

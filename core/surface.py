@@ -115,14 +115,19 @@ AUTO_RESOLUTION_FLOOR = 1e-6  # ... and a mesh within this share of the diagonal
 SAG_SAMPLE_STRIDE = 24
 
 
-def sag_target(report) -> float:
+def sag_target(report, options=None) -> float:
     """How close to the spline :meth:`TCBSurface.auto_resolution` holds its mesh, model units:
     the fit's max error at its data (``report["max"]``), at least AUTO_RESOLUTION_FLOOR of the
-    data's diagonal (a plane's max error is rounding, which no mesh is within); NaN without a
-    max."""
+    data's diagonal (a plane's max error is rounding, which no mesh is within) and the
+    tolerance asked for in ``options`` (the fit's RefineOptions; an exact quadratic fitted
+    to 2.8e-7 of its diagonal for a tolerance of 4.4e-6 had been told to Re-tessellate at 512
+    for a mesh 1.6e-6 from the spline: user test); NaN without a max."""
     rep = report or {}
-    return max(float(rep.get("max", np.nan)),
-               AUTO_RESOLUTION_FLOOR * float(rep.get("diagonal", 0.0)))
+    diagonal = float(rep.get("diagonal", 0.0))
+    tol = getattr(options, "tolerance", 0.0)
+    tol = (float(tol) * (diagonal if getattr(options, "relative", True) else 1.0)
+           if isinstance(tol, (int, float)) and np.isfinite(tol) else 0.0)
+    return max(float(rep.get("max", np.nan)), AUTO_RESOLUTION_FLOOR * diagonal, tol)
 
 # the edge-split rounds look a mesh's compression up on a grid of at most this many cells along
 # the longer side (4x finer than the tessellation's grid up to resolution 128)
@@ -633,7 +638,7 @@ class TCBSurface:
         evaluated on three_peaks fitted to 3e-4 (256, straying): 415 000 against 523 000, and
         none more for its tessellate (100 000 before); seconds in docs/benchmarks.md."""
         if target is None:
-            target = sag_target(self._report)
+            target = sag_target(self._report, self._options)
         candidates = AUTO_RESOLUTIONS if least is None else (
             [int(least)] + [r for r in AUTO_RESOLUTIONS if r > least])
         points = None

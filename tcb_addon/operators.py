@@ -465,7 +465,7 @@ def resolution_note(surf) -> str | None:
     if chosen is None:
         return None
     resolution, sag = chosen
-    target = _core().surface.sag_target(surf.report)
+    target = _core().surface.sag_target(surf.report, surf.options)
     if not sag > target:
         return None
     # (the sag at half: kept by Auto Resolution, or measured whole now if it passed over it

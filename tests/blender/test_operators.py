@@ -2509,8 +2509,8 @@ def test_auto_resolution_warns_when_its_finest_mesh_still_strays(clean_scene, ad
     surf = spline_of(surface)
     assert surface.tcb.resolution == core.surface.AUTO_RESOLUTIONS[-1] == 256
     sag, worst = surf.tessellation_sag(256), surf.report["max"]
-    finer = core.surface.finer_resolution(256, sag, core.surface.sag_target(surf.report),
-                                          surf.tessellation_sag(128))
+    finer = core.surface.finer_resolution(
+        256, sag, core.surface.sag_target(surf.report, surf.options), surf.tessellation_sag(128))
     assert sag > worst and finer > 256
     assert (f"the surface mesh (Resolution 256, the finest Auto Resolution takes) strays up to "
             f"{sag:.4g} from the spline, more than the fit's max error {worst:.4g}: "

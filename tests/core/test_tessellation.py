@@ -345,3 +345,21 @@ def test_the_reach_of_a_cloud_s_mesh_ignores_the_order_and_doubles_of_its_points
     _, count = np.unique(edges, axis=0, return_counts=True)
     border = np.count_nonzero(count == 1)  # one loop around the square: about 4 x 128 edges
     assert border < 4 * 128 * 1.5, border
+
+
+def test_the_sag_target_is_at_least_the_tolerance_asked_for():
+    """Auto Resolution's target (core.surface.sag_target) was the fit's max error only: an
+    exact quadratic fitted 20x below its tolerance was given the finest mesh and told to
+    Re-tessellate finer for a mesh well within what was asked (user test). The tolerance
+    (relative: of the diagonal) counts too; without one, or without options, as before."""
+    from core.refine import RefineOptions
+    from core.surface import AUTO_RESOLUTION_FLOOR, sag_target
+
+    report = {"max": 1e-3, "diagonal": 4.0}
+    assert sag_target(report) == 1e-3
+    assert sag_target(report, RefineOptions(tolerance=1e-3)) == 4e-3
+    assert sag_target(report, RefineOptions(tolerance=2e-3, relative=False)) == 2e-3
+    assert sag_target(report, RefineOptions(tolerance=1e-4, relative=False)) == 1e-3
+    assert sag_target(report, RefineOptions(tolerance=0.0)) == 1e-3
+    assert sag_target({"max": 0.0, "diagonal": 4.0}) == 4 * AUTO_RESOLUTION_FLOOR
+    assert np.isnan(sag_target({}))
