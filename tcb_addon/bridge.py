@@ -854,6 +854,33 @@ def local_origin(points: np.ndarray) -> np.ndarray:
     return (np.round(center / step) * step).astype(np.float32).astype(np.float64)
 
 
+# the scene's length units (Unit Settings > Length): metres per unit, and the symbol
+_LENGTH_UNITS = {"KILOMETERS": (1e3, "km"), "METERS": (1.0, "m"), "CENTIMETERS": (1e-2, "cm"),
+                 "MILLIMETERS": (1e-3, "mm"), "MICROMETERS": (1e-6, "\u00b5m"),
+                 "MILES": (1609.344, "mi"), "FEET": (0.3048, "ft"), "INCHES": (0.0254, "in"),
+                 "THOU": (2.54e-5, "thou")}
+
+
+def length_text(value: float, scene=None, digits: int = 4) -> str:
+    """A length given in Blender units, written as the scene shows lengths (its Unit System,
+    Unit Scale and Length unit): "0.1191 mm" where the scene shows millimetres (the reports had
+    said "max 0.0001191" of a part the scene showed as 100 mm, or 0.1191 at a Unit Scale of
+    0.001, with no unit: user test). A plain number in a scene of no units and in one of
+    metres at Unit Scale 1 (a Blender unit is a metre there: Blender's default scene); the
+    Adaptive length in Blender's own words (``bpy.utils.units.to_string``)."""
+    value = float(value)
+    units = getattr(scene if scene is not None else bpy.context.scene, "unit_settings", None)
+    if units is None or units.system == "NONE" or not np.isfinite(value) or (
+            units.system == "METRIC" and units.length_unit == "METERS"
+            and units.scale_length == 1.0):
+        return f"{value:.{digits}g}"
+    metres = value * units.scale_length
+    factor, symbol = _LENGTH_UNITS.get(units.length_unit, (None, ""))
+    if factor is None:  # Adaptive
+        return bpy.utils.units.to_string(units.system, "LENGTH", metres, precision=digits)
+    return f"{metres / factor:.{digits}g} {symbol}"
+
+
 def has_vertex_weights(mesh) -> bool:
     """Whether ``mesh`` holds vertex-group weights (its deform layer, made by the first weight
     given; the weights are not in the attribute API): a surface whose groups are still the

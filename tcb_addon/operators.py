@@ -474,8 +474,8 @@ def resolution_note(surf) -> str | None:
         resolution, sag, target, surf.tessellation_sag(resolution // 2) if resolution >= 4
         else None)
     return (f"the surface mesh (Resolution {resolution}, the finest Auto Resolution takes) "
-            f"strays up to {sag:.4g} from the spline, more than the fit's max error "
-            f"{float(surf.report['max']):.4g}: Re-tessellate finer (e.g. {finer}) to see the fit "
+            f"strays up to {bridge.length_text(sag)} from the spline, more than the fit's max "
+            f"error {bridge.length_text(surf.report['max'])}: Re-tessellate finer (e.g. {finer}) to see the fit "
             "as it is")
 
 
@@ -771,11 +771,11 @@ def _summary(surf, seconds: float | None = None) -> str:
            else f" (with the default {sel['chosen']:.3g} the surface swung away from the data)"
            if _core().surface.default_swung(sel) else " (auto)" if sel else "")
     return (
-        f"TCB: {n} control points, RMS {rep.get('rms', float('nan')):.4g}, "
-        f"max {rep.get('max', float('nan')):.4g} ({100 * rep.get('max_rel', float('nan')):.3g}% "
-        f"of the diagonal)"
+        f"TCB: {n} control points, RMS {bridge.length_text(rep.get('rms', np.nan))}, "
+        f"max {bridge.length_text(rep.get('max', np.nan))} "
+        f"({100 * rep.get('max_rel', float('nan')):.3g}% of the diagonal)"
         # a cloud of uneven density: its error over the area, when it tells more than the RMS
-        + (f", RMS over area {rep['rms_area']:.4g}"
+        + (f", RMS over area {bridge.length_text(rep['rms_area'])}"
            if uneven_density(rep.get("rms", np.inf), rep.get("rms_area", 0.0)) else "")
         + f", smoothness {rep.get('smoothness', float('nan')):.3g}{how}, "
         f"{rep.get('seconds', 0.0) if seconds is None else seconds:.2f} s"
@@ -791,7 +791,7 @@ def _scatter(surf) -> str:
     """Words for the data's noise in the report of ``surf`` (core.parameterize.local_noise)."""
     rep = surf.report
     mesh = getattr(surf.parameterization, "faces", None) is not None
-    return (f"the {'vertices' if mesh else 'points'} scatter {rep['noise']:.4g} "
+    return (f"the {'vertices' if mesh else 'points'} scatter {bridge.length_text(rep['noise'])} "
             f"({100 * rep['noise_rel']:.3g}% of the diagonal) across a smooth surface")
 
 
@@ -844,7 +844,7 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None,
         opts = surf.options  # the settings of this fit
         what = "max" if str(opts.criterion).lower() == "max" else "RMS"
         level = (f"{100 * rep.get(what.lower() + '_rel', 0):.3g}% of the diagonal"
-                 if opts.relative else f"{rep.get(what.lower(), 0):.4g}")
+                 if opts.relative else bridge.length_text(rep.get(what.lower(), 0)))
         chosen = bool(rep.get("smoothness_selection"))  # by the engine, or Auto Smoothness
         # the data's noise (core.parameterize.local_noise), when the error stopped at it;
         # else the cause is open
@@ -882,7 +882,7 @@ def report_result(op, surf, notes=(), warnings=(), seconds: float | None = None,
             # control points would mostly fit it
             what = "max" if str(opts.criterion).lower() == "max" else "RMS"
             level = (f"{100 * rep[what.lower() + '_rel']:.3g}% of the diagonal" if opts.relative
-                     else f"{rep[what.lower()]:.4g}")
+                     else bridge.length_text(rep[what.lower()]))
             rate = _core().surface.fall_rate(rep)
             spiky = advice.startswith(_core().surface.SPIKES_HELD_OFF)  # (its own advice)
             if rate is not None and rate >= _core().surface.STILL_FALLING and not spiky:
@@ -1186,14 +1186,15 @@ def join_words(surf, names: list) -> list:
         return []
     who = ", ".join(f"'{n}'" for n in names)
     if j.get("kept_unjoined"):  # (the warning says why; it had said "joined": user test)
-        return [f"not joined to {who}: fitted on its own, the borders {j['gap_max']:.4g} apart "
+        return [f"not joined to {who}: fitted on its own, the borders "
+                f"{bridge.length_text(j['gap_max'])} apart "
                 f"at most ({j['gap_max_rel']:.2g} of the diagonal)"]
     # (the joined net's size, against the patch's own: up to 4x on a coarse one; user test)
     added = (f"; {j['knots_added']} knots added along it: {j['control_points']} control "
              f"points, {j['control_points_unjoined']} fitted alone" if j.get("knots_added")
              else "")
     return [f"joined to {who} along {j['shared_edges']} shared border edges: the borders "
-            f"{j['gap_max']:.4g} apart at most ({j['gap_max_rel']:.2g} of the diagonal; "
+            f"{bridge.length_text(j['gap_max'])} apart at most ({j['gap_max_rel']:.2g} of the diagonal; "
             f"{j['gap_max_unjoined_rel']:.2g} unjoined{added})"]
 
 
@@ -1729,14 +1730,17 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
         elif (len(surf.control_points) == self._before[1]
                 and str(rep.get("stop_reason", "")).startswith("tolerance reached")):
             what = "max" if is_max(st) else "RMS"
-            unit = " of the diagonal" if self._settings["relative"] else ""
+            relative = self._settings["relative"]
+
+            def size(x):  # (an absolute one in the scene's length unit)
+                return f"{x:.4g} of the diagonal" if relative else bridge.length_text(x)
             if self._at_rounding:
                 warnings.append(f"nothing was refined: the surface already fits its data to "
-                                f"rounding ({what} {self._before[0]:.4g}{unit})")
+                                f"rounding ({what} {size(self._before[0])})")
             else:
                 warnings.append(f"nothing was refined: the surface already meets the "
-                                f"tolerance {self._settings['tolerance']:.4g}{unit} ({what} "
-                                f"{self._before[0]:.4g}{unit}); set a smaller Tolerance")
+                                f"tolerance {size(self._settings['tolerance'])} ({what} "
+                                f"{size(self._before[0])}); set a smaller Tolerance")
         report_result(self, surf, notes + join_words(surf, getattr(self, "_joined", [])),
                       warnings, auto=st.auto_resolution,
                       seconds=time.perf_counter() - self._started)
@@ -2010,12 +2014,15 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
         if "rms" in rep and not (changed or rep.get("edited")):
             # (two RMS of one surface and its data, 2x apart, and nothing said why: user test)
             note += (f"; these are distances to the closest surface points, the fit's RMS "
-                     f"{rep['rms']:.4g} and max {rep.get('max', float('nan')):.4g} errors at "
+                     f"{bridge.length_text(rep['rms'])} and max "
+                     f"{bridge.length_text(rep.get('max', np.nan))} errors at "
                      "each point's own parameters (never smaller)")
-        back = (f"; surface to mesh max {st.deviation_surface_max:.4g}"
+        back = (f"; surface to mesh max {bridge.length_text(st.deviation_surface_max)}"
                 if data.faces is not None else "")
-        self.report({"INFO"}, f"TCB deviation: data to surface RMS {st.deviation_rms:.4g}, max "
-                              f"{st.deviation_data_max:.4g}{back}; color range 0 - {vmax:.4g}"
+        self.report({"INFO"}, f"TCB deviation: data to surface RMS "
+                              f"{bridge.length_text(st.deviation_rms)}, max "
+                              f"{bridge.length_text(st.deviation_data_max)}{back}; color range "
+                              f"0 - {bridge.length_text(vmax)}"
                               f"{note}")  # fmt: skip
         net_moved = self._net_moved and (
             f"{self._net_moved}: the distances are to the surface where the moved net puts it, "
@@ -2352,8 +2359,8 @@ class TCB_OT_import_spline(bpy.types.Operator, ImportHelper):
         stray = resolution_note(surf) if auto else None
         rep = surf.report
         text = (f"TCB: imported '{label}' as '{surface.name}': {len(surf.control_points)} "
-                f"control points, RMS {rep.get('rms', float('nan')):.4g}, max "
-                f"{rep.get('max', float('nan')):.4g} of its fit, mesh Resolution {resolution}, "
+                f"control points, RMS {bridge.length_text(rep.get('rms', np.nan))}, max "
+                f"{bridge.length_text(rep.get('max', np.nan))} of its fit, mesh Resolution {resolution}, "
                 f"{time.perf_counter() - started:.2f} s")
         warn = bool(stray) or not sources
         self.report({"WARNING"} if warn else {"INFO"},

@@ -331,6 +331,12 @@ def draw_fit_settings(layout, owner, short_labels: bool = False) -> None:
     row = col.row(align=True)
     row.prop(owner, "tolerance")
     row.prop(owner, "relative", text="", icon="DRIVER_DISTANCE")
+    if not owner.relative:  # a distance in Blender units: said as the scene shows lengths
+        from .bridge import length_text  # (user test: a mm scene read it as millimetres)
+
+        shown = length_text(owner.tolerance)
+        if shown != f"{owner.tolerance:.4g}":
+            col.label(text=f"Tolerance {shown} in the scene's units", icon="INFO")
     for key in ("criterion", "max_control_points", "max_iterations", "degree", "mode",
                 "smoothness", "drop_outliers", "fill_holes", "projection", "resolution",
                 *RESULT_KEYS):

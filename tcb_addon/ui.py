@@ -61,6 +61,9 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
         layout = self.layout
         surface, net = result_objects(context.active_object)
         st = surface.tcb
+
+        def length(x):  # (as the scene shows lengths: user test)
+            return bridge.length_text(x, context.scene)
         col = layout.column(align=True)
         col.label(text=surface.name, icon="SURFACE_NSURFACE")
         source = source_words(surface)
@@ -71,14 +74,14 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
             ("Knots", f"{st.knots}"),
             ("Control Points", f"{st.control_points}"),
             ("Iterations", f"{st.iterations}"),
-            ("RMS", f"{st.rms:.4g}"),
-            *((("RMS over Area", f"{st.rms_area:.4g}"),) if uneven_density(st.rms, st.rms_area)
+            ("RMS", length(st.rms)),
+            *((("RMS over Area", length(st.rms_area)),) if uneven_density(st.rms, st.rms_area)
               else ()),
-            ("Max", f"{st.max:.4g}"),
+            ("Max", length(st.max)),
             ("RMS (of diagonal)", f"{100 * st.rms_rel:.3g} %"),
             ("Max (of diagonal)", f"{100 * st.max_rel:.3g} %"),
             ("Tolerance (" + ("max" if is_max(st) else "RMS") + ")",
-             f"{100 * st.tolerance:.3g} %" if st.relative else f"{st.tolerance:.4g}"),
+             f"{100 * st.tolerance:.3g} %" if st.relative else length(st.tolerance)),
             ("Smoothness" + (" (auto)" if st.auto_smoothness else
                              " (cross-validated)" if st.smoothness_cross_validated else
                              " (default swung)" if st.smoothness_smoother else ""),
@@ -127,16 +130,16 @@ class TCB_PT_result(_TCBPanel, bpy.types.Panel):
             box = layout.box()
             # a map made before these statistics had their own properties: the color range
             top = st.deviation_data_max or st.deviation_max
-            box.label(text=f"Data to surface: RMS {st.deviation_rms:.4g}, max {top:.4g}")
+            box.label(text=f"Data to surface: RMS {length(st.deviation_rms)}, max {length(top)}")
             if st.deviation_data_max_rel > 0:
                 box.label(text=f"({100 * st.deviation_rms_rel:.3g} %, "
                                f"{100 * st.deviation_data_max_rel:.3g} % of the diagonal)")
             if st.deviation_surface_max > 0:  # (a mesh: the colours' top is the larger)
-                box.label(text=f"Surface to mesh: max {st.deviation_surface_max:.4g}")
+                box.label(text=f"Surface to mesh: max {length(st.deviation_surface_max)}")
             n = len(bridge.RAMP_STOPS)
             for i in reversed(range(n)):
                 lo = st.deviation_max * bridge.RAMP_STOPS[i]
-                box.label(text=f"{lo:.4g}" + (" (max)" if i == n - 1 else ""),
+                box.label(text=length(lo) + (" (max)" if i == n - 1 else ""),
                           icon=legend_icon(bridge.LEGEND_ICONS[i]))  # fmt: skip
             # a cloud's surface vertices far from all data, a mesh's over its filled holes
             if surface.get(NO_DATA_KEY, 0):

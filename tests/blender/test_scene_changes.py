@@ -825,3 +825,48 @@ def test_fit_again_replaces_the_fitted_result_not_a_shift_d_copy_of_it(clean_sce
     for c in copies:
         np.testing.assert_array_equal(positions(c), kept[c.name][0])
         np.testing.assert_array_equal(positions(c.tcb.net), kept[c.name][1])
+
+
+@pytest.mark.parametrize("scale, unit, factor, symbol", [
+    (1.0, "MILLIMETERS", 1e3, "mm"), (0.001, "METERS", 1, "m"), (0.001, "MILLIMETERS", 1e3, "mm"),
+])
+def test_errors_are_said_in_the_length_unit_the_scene_shows(clean_scene, capfd, scale, unit,
+                                                           factor, symbol):
+    """A part the scene showed as 100 mm: its max error 0.1191 mm was reported "max 0.0001191"
+    at Unit Scale 1 with millimetres shown, and "0.1191" at Unit Scale 0.001, with no unit
+    anywhere (user test). The summary, the Result panel and the Deviation Map say the errors
+    in the scene's length unit, and the Fit panel an absolute Tolerance; the default scene
+    (metres at Unit Scale 1) as plain numbers."""
+    bpy = clean_scene
+    units, settings = bpy.context.scene.unit_settings, bpy.context.scene.tcb_settings
+    before = (units.system, units.scale_length, units.length_unit)
+    asked = (settings.relative, settings.tolerance)
+    try:
+        units.system, units.scale_length, units.length_unit = "METRIC", scale, unit
+        src = add_mesh(bpy, "Part", *grid(12, f=lambda x, y: 0.3 * np.sin(2 * x) * np.cos(y)))
+        src.scale = (0.05, 0.05, 0.05) if scale == 1.0 else (50, 50, 50)  # 100 mm wide
+        capfd.readouterr()
+        assert fit(bpy, src) == {"FINISHED"}
+        out = capfd.readouterr().out
+        surface = bpy.context.view_layer.objects.active
+        rep = spline_of(surface).report
+        shown = lambda x: f"{x * scale * factor:.4g} {symbol}"  # noqa: E731
+        assert f"RMS {shown(rep['rms'])}, max {shown(rep['max'])} (" in out, out
+        labels = panel_labels(bpy, surface)
+        assert shown(rep["rms"]) in labels and shown(rep["max"]) in labels
+        assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+        st = surface.tcb
+        assert (f"data to surface RMS {shown(st.deviation_rms)}, max "
+                f"{shown(st.deviation_data_max)}") in capfd.readouterr().out
+        assert f"Data to surface: RMS {shown(st.deviation_rms)}, max " in "".join(
+            panel_labels(bpy, surface))
+        settings.relative, settings.tolerance = False, 5e-4  # an absolute Tolerance, as shown
+        assert f"Tolerance {shown(5e-4)} in the scene's units" in panel_labels(bpy, src)
+        settings.relative, settings.tolerance = asked
+        units.system, units.scale_length, units.length_unit = "METRIC", 1.0, "METERS"
+        labels = panel_labels(bpy, surface)
+        assert f"{rep['max']:.4g}" in labels and not any(
+            lab.endswith((" mm", " m")) for lab in labels)
+    finally:
+        units.system, units.scale_length, units.length_unit = before
+        settings.relative, settings.tolerance = asked
