@@ -27,7 +27,8 @@ from .refine import (SWINGS_LEFT, mostly_taken_back, replaced_default_reason,
                      returned_why)
 from .surface import (FOLDED_SHARE, MAX_RESOLUTION, SPIKES_HELD_OFF, default_swung, grid_frame,
                       finer_resolution, sag_target, tessellation_fill,
-                      noise_near_tolerance, stopped_at_noise, fall_rate, STILL_FALLING)
+                      noise_near_tolerance, stopped_at_noise, fall_rate, STILL_FALLING,
+                      flat_height_field)
 
 __all__ = ["main"]
 
@@ -492,7 +493,7 @@ def _fit(args) -> int:
         print(f"note: the surface mesh leaves {gaps} gap{'s' if gaps > 1 else ''} inside the "
               f"point cloud open (no points there); pass --fill-holes to cover "
               f"{'them' if gaps > 1 else 'it'} with the surface", file=sys.stderr)
-    flat = _flat_height_field(surf, points) if faces is None else None
+    flat = flat_height_field(surf, points) if faces is None else None
     if flat is not None and args.relative and args.tolerance > 0:
         # (terrain "tolerance reached" at RMS 42.7 m on 840 m of relief: 1e-3 of a 44 km
         # diagonal; the README says terrain wants --absolute, the CLI said nothing: user test)
@@ -529,11 +530,6 @@ def _fit(args) -> int:
     return 0
 
 
-# a cloud whose bounding-box diagonal is over this many times its height range along its
-# projection is told that a relative tolerance is of the diagonal, not of the heights
-FLAT_HEIGHT_FIELD = 10.0
-
-
 def _neighbours(args, points: np.ndarray, faces) -> list | None:
     """``fit_surface``'s ``join`` from ``--join MESH SPLINE`` (each neighbour's mesh and the
     spline fitted to it), or None; a one-line error for a point cloud, a file that is not a
@@ -563,23 +559,6 @@ def _neighbours(args, points: np.ndarray, faces) -> list | None:
                            "mesh")
         join.append((surf, pairs))
     return join
-
-
-def _flat_height_field(surf, points: np.ndarray):
-    """``(diagonal, height range)`` of a point cloud fitted as a height field (projected on
-    a plane: a DEM raster or a cloud) whose bounding-box diagonal is over FLAT_HEIGHT_FIELD
-    times its range of heights along the projection, else None. Such data (terrain: km
-    across, tens or hundreds of m high) has a relative tolerance of the diagonal that is a
-    large share of its relief."""
-    param = surf.parameterization
-    if param.kind != "plane" or not len(points):
-        return None
-    heights = np.asarray(points, dtype=np.float64) @ np.asarray(param.axes[2], dtype=np.float64)
-    height = float(np.ptp(heights))
-    diagonal = float(surf.report["diagonal"])
-    if height > 0 and diagonal > FLAT_HEIGHT_FIELD * height:
-        return diagonal, height
-    return None
 
 
 def _warning_line(message, category, filename, lineno, line=None) -> str:

@@ -1536,6 +1536,17 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             spanned.append(f"{gaps} gap{'s' if gaps > 1 else ''} inside the point cloud "
                            f"{'are' if gaps > 1 else 'is'} left open (no points there): turn "
                            f"on Fill Holes to cover {'them' if gaps > 1 else 'it'}")
+        flat = (_core().surface.flat_height_field(surf, data.points)
+                if data.faces is None and self.relative and self.tolerance > 0 else None)
+        if flat is not None:  # (terrain: the command line said it, Blender not; user test)
+            across, height = flat
+            tol = self.tolerance * across
+            spanned.append(
+                f"the input is a height field {bridge.length_text(across)} across and "
+                f"{bridge.length_text(height)} high, and the Tolerance is relative to the "
+                f"bounding-box diagonal: {self.tolerance:g} of it is {bridge.length_text(tol)} "
+                f"({tol / height:.2g} of the height range); turn off Relative for a Tolerance "
+                "in the scene's units")
         if reused:
             seconds = getattr(self, "_reused_seconds", None)
         else:
