@@ -1285,6 +1285,22 @@ class TCBSurface:
         far = np.linalg.norm(A @ self._fitted_c - points[used], axis=1)
         return bool(tol > 0 and np.all(np.abs(far - self._errors[used]) <= tol))
 
+    def moved_points(self, points, rounding: float = 0.0) -> np.ndarray | None:
+        """Per point of ``points`` (as many as the fit's data, in its order), whether it is off
+        the data the fit was made from by more than :meth:`fitted_to` allows (a point the fit
+        left out: False), or None for another count. Which of several sources fitted together
+        changed (user test: Refine named both of two when one was moved)."""
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3 or len(points) != len(self._param.uv):
+            return None
+        moved = ~np.isfinite(points).all(axis=1)
+        used = np.asarray(self._param.used, dtype=bool) & ~moved
+        tol = max(ROUNDING_RTOL * float(self._report.get("diagonal", 0.0)), float(rounding))
+        A = self._space.evaluate(np.asarray(self._param.uv)[used])
+        far = np.linalg.norm(A @ self._fitted_c - points[used], axis=1)
+        moved[used] = ~(np.abs(far - self._errors[used]) <= tol)
+        return moved
+
     def same_data_set(self, points) -> bool:
         """Whether ``points`` are the values this surface was fitted to in any order, exactly
         (``report["data_set_digest"]``, :func:`data_set_digest`; False for files saved before

@@ -561,6 +561,20 @@ def source_mismatch(surf, data: bridge.InputData):
                    else "other faces")
 
 
+def changed_names(surf, data: bridge.InputData) -> str:
+    """The sources of ``data`` that changed since ``surf`` was fitted, as "'A', 'B'": of
+    several fitted together, those whose points moved (user test: Refine named 'Right' and
+    'Left' when only 'Left' was moved); all when that cannot be told (another count)."""
+    moved = surf.moved_points(data.points, data.rounding) if len(data.counts) > 1 else None
+    names, start = [], 0
+    if moved is not None and moved.any():
+        for name, n in data.counts.items():
+            if moved[start:start + n].any():
+                names.append(name)
+            start += n
+    return ", ".join(repr(n) for n in names or [o.name for o in data.sources])
+
+
 def store_stats(tcb, surf, settings: dict) -> None:
     rep = dict(getattr(surf, "report", {}) or {})
     tcb.knots = int(rep.get("knots", 0))
@@ -1655,7 +1669,7 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                 f"{'; '.join(data.unmodified)}: Refine needs the shape '{surface.name}' was "
                 "fitted to")
         if what is not None:
-            names = ", ".join(repr(o.name) for o in data.sources)
+            names = changed_names(surf, data)  # (only those that changed: user test)
             hidden = "".join(f"; {n}" for n in data.notes)
             # (one turned off since the fit: user test)
             mods = data.modifier_note(applied_only=False)
@@ -1909,7 +1923,7 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
             # (a source hidden since the fit, read without its modifiers, is refused in
             # prepare: nothing was edited, and fitting it again would fit the other shape)
             changed = (
-                f"{', '.join(repr(o.name) for o in data.sources)} changed since "
+                f"{changed_names(surf, data)} changed since "  # (those that did: user test)
                 f"'{surface.name}' was fitted (moved, transformed or edited): the distances "
                 "are those of the data as it is now; select the source and use Fit Surface to "
                 "fit it again")

@@ -898,3 +898,22 @@ def test_terrain_fitted_to_a_relative_tolerance_is_told_what_it_is_in_units(clea
     steep = add_mesh(bpy, "Steep", np.c_[xy, 200 * np.sin(xy[:, 0] / 300)])
     assert fit(bpy, steep, tolerance=1e-3, max_iterations=2) == {"FINISHED"}
     assert "height field" not in capfd.readouterr().out
+
+
+def test_a_joint_result_names_only_the_source_that_changed(clean_scene, capfd):
+    """Two objects fitted together, one of them moved since: Refine and the Deviation Map
+    named both ("'Right', 'Left' changed since ..."; user test), only the moved one now."""
+    bpy = clean_scene
+    v, _ = grid(13)
+    left = add_mesh(bpy, "Left", v[v[:, 0] <= 0])
+    right = add_mesh(bpy, "Right", v[v[:, 0] > 0])
+    assert fit(bpy, left, right, tolerance=2e-3) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    left.location.z = 0.05
+    bpy.context.view_layer.update()
+    with pytest.raises(RuntimeError, match=r"Error: 'Left' changed since 'Left \+1 TCB Surface'"):
+        run(bpy, bpy.ops.tcb.refine, surface)
+    capfd.readouterr()
+    assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "Warning: TCB: 'Left' changed since 'Left +1 TCB Surface'" in out
