@@ -575,6 +575,36 @@ def changed_names(surf, data: bridge.InputData) -> str:
     return ", ".join(repr(n) for n in names or [o.name for o in data.sources])
 
 
+def _animated(obj) -> bool:
+    """Whether ``obj`` or an object it is parented to (or their data) has an action or
+    drivers: its data may be elsewhere at another frame."""
+    while obj is not None:
+        for idb in (obj, obj.data):
+            ad = getattr(idb, "animation_data", None)
+            if ad is not None and (ad.action is not None or len(ad.drivers)):
+                return True
+        obj = obj.parent
+    return False
+
+
+def animated_problem(context, surface_obj, data: bridge.InputData) -> str | None:
+    """Why the sources of ``surface_obj`` read other data than its fit's, when it is the
+    frame: an animated source and a frame other than the fit's (user test: Refine at frame
+    10 of a fit at frame 1 said "changed ... (other coordinates: moved, ...)"), else None.
+    None also for a result that keeps no fit frame (fitted before it was kept)."""
+    then = surface_obj.get(FITTED_FRAME_KEY)
+    now = context.scene.frame_current
+    if then is None or int(then) == now:
+        return None
+    names = [o.name for o in data.sources if _animated(o)]
+    if not names:
+        return None
+    return (f"{', '.join(repr(n) for n in names)} {'is' if len(names) == 1 else 'are'} "
+            f"animated and the frame is now {now}, not {int(then)} as when "
+            f"'{surface_obj.name}' was fitted: go back to frame {int(then)}, or select the "
+            "source and use Fit Surface to fit it again at this frame")
+
+
 def store_stats(tcb, surf, settings: dict) -> None:
     rep = dict(getattr(surf, "report", {}) or {})
     tcb.knots = int(rep.get("knots", 0))
@@ -1100,6 +1130,9 @@ class _EngineOperator:
 FITTED_KEY = "tcb_fitted_at"
 # ... and the name the fit gave it: a Shift+D copy carries both properties, not the name
 FITTED_NAME_KEY = "tcb_fitted_name"
+# ... and the scene frame it was fitted at: an animated source is elsewhere at other frames
+# (user test: Refine at another frame said "changed ... (other coordinates: moved, ...)")
+FITTED_FRAME_KEY = "tcb_fitted_frame"
 
 
 def _fit_order(ob) -> tuple:
@@ -1521,6 +1554,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             if drop_deviation_points(surface):
                 replaced.append("its Deviation Points were removed (run Deviation Map again)")
         surface[FITTED_KEY] = time.time()  # (the latest of several results is replaced)
+        surface[FITTED_FRAME_KEY] = context.scene.frame_current
         # the stale nets go once the new result exists (an error before would have left
         # neither: review); their deleted surfaces, used by nothing then, go with them, and
         # the new objects take the names
@@ -1668,6 +1702,9 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             raise bridge.SelectionError(
                 f"{'; '.join(data.unmodified)}: Refine needs the shape '{surface.name}' was "
                 "fitted to")
+        animated = animated_problem(context, surface, data) if what is not None else None
+        if animated:  # (the frame, not an edit: user test)
+            raise bridge.SelectionError(animated)
         if what is not None:
             names = changed_names(surf, data)  # (only those that changed: user test)
             hidden = "".join(f"; {n}" for n in data.notes)
@@ -1927,6 +1964,9 @@ class TCB_OT_deviation_map(_EngineOperator, bpy.types.Operator):
                 f"'{surface.name}' was fitted (moved, transformed or edited): the distances "
                 "are those of the data as it is now; select the source and use Fit Surface to "
                 "fit it again")
+            animated = animated_problem(context, surface, data)  # (the frame: user test)
+            if animated:
+                changed = f"{animated} (the distances are those of the data at this frame)"
         # a live net whose weights were deleted is linked again, so the colors show the net
         live.relink(surface, surf, surface.tcb.resolution, rewrite=False)
 

@@ -917,3 +917,32 @@ def test_a_joint_result_names_only_the_source_that_changed(clean_scene, capfd):
     assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
     out = capfd.readouterr().out
     assert "Warning: TCB: 'Left' changed since 'Left +1 TCB Surface'" in out
+
+
+def test_an_animated_source_at_another_frame_is_said_to_be_the_frame(clean_scene, capfd):
+    """A source whose location is keyframed, fitted at frame 1: at frame 10 Refine said
+    "changed ... (other coordinates: moved, transformed or edited)" (user test); it says the
+    source is animated and which frame the fit was at, and at frame 1 it refines."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    scene = bpy.context.scene
+    scene.frame_set(1)
+    src.keyframe_insert("location", frame=1)
+    src.location = (0.0, 0.0, 2.0)
+    src.keyframe_insert("location", frame=10)
+    scene.frame_set(1)
+    try:
+        assert fit(bpy, src) == {"FINISHED"}
+        surface = bpy.context.view_layer.objects.active
+        scene.frame_set(10)
+        words = ("'Scan' is animated and the frame is now 10, not 1 as when 'Scan TCB Surface' "
+                 "was fitted: go back to frame 1, or select the source and use Fit Surface")
+        with pytest.raises(RuntimeError, match=re.escape(words)):
+            run(bpy, bpy.ops.tcb.refine, surface)
+        capfd.readouterr()
+        assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+        assert words in capfd.readouterr().out
+        scene.frame_set(1)
+        assert run(bpy, bpy.ops.tcb.refine, surface) == {"FINISHED"}
+    finally:
+        scene.frame_set(1)
