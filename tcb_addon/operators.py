@@ -494,10 +494,23 @@ def source_data(context, surface_obj) -> bridge.InputData:
     sources = [s.object for s in surface_obj.tcb.sources]
     # deleted (X): in no collection, kept alive by the pointer (user test: the deleted scan
     # was measured, and called hidden)
-    if not sources or any(live.deleted(s) for s in sources):
+    if not sources or any(s is None for s in sources):
         raise bridge.SelectionError(
             f"The source object of '{surface_obj.name}' was deleted: refining and the deviation "
             "map need the input data"
+        )
+    gone = [s for s in sources if live.deleted(s)]
+    if gone:
+        # one in no collection may also come with its result appended from another file
+        # (bpy.data.libraries.load of the result's collection; user test: "was deleted"),
+        # the same state as one deleted: both are said, and how to link it
+        name = gone[0].name
+        raise bridge.SelectionError(
+            f"The source object of '{surface_obj.name}' was deleted, or '{name}' is in no "
+            "collection of this file (appended without one): refining and the deviation map "
+            "need the input data; if it was appended, link it to the scene (Python console: "
+            f"C.scene.collection.objects.link(D.objects[{name!r}])) or append it with its "
+            "collection, and try again"
         )
     part = surface_obj.get(PART_KEY)
     if part and len(sources) == 1 and sources[0].type == "MESH":

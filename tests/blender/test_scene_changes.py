@@ -946,3 +946,41 @@ def test_an_animated_source_at_another_frame_is_said_to_be_the_frame(clean_scene
         assert run(bpy, bpy.ops.tcb.refine, surface) == {"FINISHED"}
     finally:
         scene.frame_set(1)
+
+
+def test_a_source_appended_without_a_collection_is_not_only_called_deleted(clean_scene,
+                                                                            tmp_path):
+    """A result's collection appended from another file (bpy.data.libraries.load) and linked
+    to the scene brings its source object along, in no collection: Refine and the Deviation
+    Map said it "was deleted" (user test). In no collection it is as one deleted with X (kept
+    by the pointer until the file is saved): both are said, with how to link it."""
+    bpy = clean_scene
+    src = add_mesh(bpy, "Scan", *wave())
+    assert fit(bpy, src) == {"FINISHED"}
+    coll = bpy.context.view_layer.objects.active.users_collection[0].name
+    path = tmp_path / "fitted.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path), copy=True)
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj)
+    for c in list(bpy.data.collections):
+        bpy.data.collections.remove(c)
+    try:
+        with bpy.data.libraries.load(str(path), link=False) as (_, into):
+            into.collections = [coll]
+        bpy.context.scene.collection.children.link(into.collections[0])
+        bpy.context.view_layer.update()
+        surface = bpy.data.objects["Scan TCB Surface"]
+        assert not bpy.data.objects["Scan"].users_collection
+        for op in (bpy.ops.tcb.refine, bpy.ops.tcb.deviation_map):
+            with pytest.raises(RuntimeError, match=re.escape(
+                    "The source object of 'Scan TCB Surface' was deleted, or 'Scan' is in no "
+                    "collection of this file (appended without one)") + ".*link it to the scene"):
+                run(bpy, op, surface)
+        # linked as said, it is read
+        bpy.context.scene.collection.objects.link(bpy.data.objects["Scan"])
+        assert run(bpy, bpy.ops.tcb.deviation_map, surface) == {"FINISHED"}
+    finally:
+        for obj in list(bpy.data.objects):
+            bpy.data.objects.remove(obj)
+        for lib in list(bpy.data.libraries):
+            bpy.data.libraries.remove(lib)
