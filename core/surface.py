@@ -1279,11 +1279,9 @@ class TCBSurface:
             return True
         if points.shape[1] != 3 or not np.isfinite(points).all():
             return False
-        used = np.asarray(self._param.used, dtype=bool)
-        tol = max(ROUNDING_RTOL * float(self._report.get("diagonal", 0.0)), float(rounding))
-        A = self._space.evaluate(np.asarray(self._param.uv)[used])
-        far = np.linalg.norm(A @ self._fitted_c - points[used], axis=1)
-        return bool(tol > 0 and np.all(np.abs(far - self._errors[used]) <= tol))
+        if not max(ROUNDING_RTOL * float(self._report.get("diagonal", 0.0)), float(rounding)) > 0:
+            return False
+        return not self.moved_points(points, rounding).any()
 
     def moved_points(self, points, rounding: float = 0.0) -> np.ndarray | None:
         """Per point of ``points`` (as many as the fit's data, in its order), whether it is off

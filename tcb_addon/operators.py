@@ -475,7 +475,8 @@ def resolution_note(surf) -> str | None:
         else None)
     return (f"the surface mesh (Resolution {resolution}, the finest Auto Resolution takes) "
             f"strays up to {bridge.length_text(sag)} from the spline, more than the fit's max "
-            f"error {bridge.length_text(surf.report['max'])}: Re-tessellate finer (e.g. {finer}) to see the fit "
+            f"error {bridge.length_text(surf.report['max'])}: Re-tessellate finer (e.g. "
+            f"{finer}) to see the fit "
             "as it is")
 
 
@@ -1254,7 +1255,8 @@ def join_words(surf, names: list) -> list:
              f"points, {j['control_points_unjoined']} fitted alone" if j.get("knots_added")
              else "")
     return [f"joined to {who} along {j['shared_edges']} shared border edges: the borders "
-            f"{bridge.length_text(j['gap_max'])} apart at most ({j['gap_max_rel']:.2g} of the diagonal; "
+            f"{bridge.length_text(j['gap_max'])} apart at most ({j['gap_max_rel']:.2g} of the "
+            "diagonal; "
             f"{j['gap_max_unjoined_rel']:.2g} unjoined{added})"]
 
 
@@ -2438,7 +2440,8 @@ class TCB_OT_import_spline(bpy.types.Operator, ImportHelper):
         rep = surf.report
         text = (f"TCB: imported '{label}' as '{surface.name}': {len(surf.control_points)} "
                 f"control points, RMS {bridge.length_text(rep.get('rms', np.nan))}, max "
-                f"{bridge.length_text(rep.get('max', np.nan))} of its fit, mesh Resolution {resolution}, "
+                f"{bridge.length_text(rep.get('max', np.nan))} of its fit, mesh Resolution "
+                f"{resolution}, "
                 f"{time.perf_counter() - started:.2f} s")
         warn = bool(stray) or not sources
         self.report({"WARNING"} if warn else {"INFO"},
