@@ -1262,7 +1262,8 @@ class TCBSurface:
 
         Rounding: each point's distance to the fitted surface (before any
         :meth:`with_control_points` edit) at its own parameters is its fitted error within
-        :data:`ROUNDING_RTOL` of the diagonal or ``rounding`` (in the data's units: what the
+        :data:`ROUNDING_RTOL` of the diagonal or ``rounding`` of each coordinate (so
+        ``sqrt(3) rounding`` of a point; in the data's units: what the
         caller knows its values were rounded by since the fit; Blender passes 4 float32 steps
         of the largest coordinate, for its float32 coordinates rounded again by Apply Rotation
         & Scale, which had been refused: user test). The allowance is not guessed from the
@@ -1293,7 +1294,10 @@ class TCBSurface:
             return None
         moved = ~np.isfinite(points).all(axis=1)
         used = np.asarray(self._param.used, dtype=bool) & ~moved
-        tol = max(ROUNDING_RTOL * float(self._report.get("diagonal", 0.0)), float(rounding))
+        # (``rounding`` of each coordinate: a point moves by up to sqrt(3) times it; data
+        # rounded to the millimetre had needed rounding=0.001, not its 0.0005: user test)
+        tol = max(ROUNDING_RTOL * float(self._report.get("diagonal", 0.0)),
+                  np.sqrt(3.0) * float(rounding))
         A = self._space.evaluate(np.asarray(self._param.uv)[used])
         far = np.linalg.norm(A @ self._fitted_c - points[used], axis=1)
         moved[used] = ~(np.abs(far - self._errors[used]) <= tol)
@@ -1465,11 +1469,10 @@ class TCBSurface:
             raise InvalidInputError(
                 "refine() was given faces, but this surface was fitted to a point cloud: "
                 "give its points only (faces=None)")
-        stored = self._report.get("data_digest")
-        if stored is not None and data_digest(points) != stored and self.same_data_set(points):
-            same_points = False  # (another order: no rounding to check, at every point)
-        else:
-            same_points = self.fitted_to(points, rounding)
+        # (the same values as a set, in another order, or the fit's order rounded to 32-bit
+        # floats as a set digest also takes: fitted_to within rounding tells; refused as
+        # "reordered and rounded" when fitted_to took them: user test)
+        same_points = self.fitted_to(points, rounding)
         # (None: the fit's faces; no digest kept: a file saved before it)
         same_faces = faces is None or self.same_faces(faces)
         param = self._param
@@ -1490,7 +1493,9 @@ class TCBSurface:
                 raise InvalidInputError(
                     f"refine() needs the {len(points)} points this surface was fitted to, in "
                     f"the same order; these differ from them (other values, by more than "
-                    f"rounding, or {old}). To fit other data, call fit_surface()"
+                    f"rounding, or {old}). Values rounded since the fit pass with rounding= "
+                    "the largest change of a coordinate (e.g. 0.0005 for millimetres); to fit "
+                    "other data, call fit_surface()"
                 )
             if param is None:
                 raise InvalidInputError(

@@ -506,3 +506,24 @@ def test_the_surface_is_defined_where_its_basis_covers_not_only_on_the_domain(su
         words = " ".join(method.__doc__.split())
         assert "covers" in words and "domain" in words, method.__name__
     assert "finite" in " ".join(TCBSurface.domain_contains.__doc__.split())
+
+
+def test_refine_takes_the_fit_s_points_rounded_to_32_bits_in_their_order():
+    """A georeferenced cloud (5e5, 4.2e6) rounded to 32-bit floats in the same order: the
+    32-bit set digest matched, so refine() took it for reordered data, re-mapped it and
+    refused it ("values both reordered and rounded") though fitted_to(rounding=0.5) took it
+    (user test). It is refined in its order; rounding is of each coordinate (millimetres:
+    0.0005, which had been refused; 1e-5 is still)."""
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 100, (3000, 2))
+    P = np.c_[xy + [5e5, 4.2e6], 5 * np.sin(xy[:, 0] / 15) * np.cos(xy[:, 1] / 20) + 300]
+    surf = fit_surface(P, tolerance=0.05, relative=False, max_control_points=150)
+    rounded = P.astype(np.float32).astype(np.float64)
+    assert surf.same_data_set(rounded) and surf.fitted_to(rounded, rounding=0.25)
+    refined = surf.refine(rounded, rounding=0.25, max_iterations=1, max_control_points=400)
+    assert refined.fitted_to(rounded) and refined.report["iterations"] == surf.report[
+        "iterations"] + 1
+    mm = np.round(P, 3)
+    assert surf.fitted_to(mm, rounding=0.0005) and not surf.fitted_to(mm, rounding=1e-5)
+    with pytest.raises(InvalidInputError, match="pass with rounding="):
+        surf.refine(mm)
