@@ -527,3 +527,44 @@ def test_refine_takes_the_fit_s_points_rounded_to_32_bits_in_their_order():
     assert surf.fitted_to(mm, rounding=0.0005) and not surf.fitted_to(mm, rounding=1e-5)
     with pytest.raises(InvalidInputError, match="pass with rounding="):
         surf.refine(mm)
+
+
+def test_heights_are_the_surface_s_z_over_new_ground_points():
+    """A DEM user had no way to the surface's z at new (x, y): surf(xy) is NaN, and
+    surf(parameterization.project(...)) of points at some height is off in x and y where the
+    projection plane is tilted (the DEM's: a median 72 m; user test). heights() solves for the
+    surface point over each (x, y): on a cloud projected along a tilted direction it is on the
+    surface and over the point, and as close to the shape as the fit; NaN outside the fitted
+    part and for NaN input; a mesh's surface and 3D points are refused with words."""
+    rng = np.random.default_rng(4)
+    xy = rng.random((6000, 2))
+
+    def shape(x, y):
+        return 0.3 * np.sin(3 * x) * np.cos(2 * y) + 0.4 * x
+
+    surf = fit_surface(np.c_[xy, shape(*xy.T)], projection=(0.35, 0.0, 1.0), tolerance=2e-4)
+    assert abs(surf.parameterization.axes[2][0]) > 0.3  # (tilted)
+    ground = np.r_[rng.uniform(0.05, 0.95, (3000, 2)), [[1.5, 0.5], [np.nan, 0.5]]]
+    z = surf.heights(ground)
+    assert np.isfinite(z[:-2]).all() and np.isnan(z[-2:]).all()
+    rms = surf.report["rms"]
+    assert np.sqrt(np.mean((z[:-2] - shape(*ground[:-2].T)) ** 2)) < 3 * rms
+    on = np.c_[ground[:-2], z[:-2]]
+    assert surf.distances(on).max() < 1e-8 * surf.report["diagonal"]  # on the surface ...
+    foot = surf(surf.closest_parameters(on))
+    np.testing.assert_allclose(foot[:, :2], ground[:-2], atol=1e-8)  # ... over the point
+    naive = surf(surf.parameterization.project(np.c_[ground[:-2], np.zeros(3000)]))
+    assert np.median(np.linalg.norm(naive[:, :2] - ground[:-2], axis=1)) > 100 * rms
+    assert surf.heights([0.5, 0.5]).shape == (1,)
+    with pytest.raises(InvalidInputError, match=r"points\[:, :2\]"):
+        surf.heights(on)
+    v, f = np.meshgrid(np.linspace(0, 1, 12), np.linspace(0, 1, 12))
+    grid = np.c_[v.ravel(), f.ravel(), shape(v.ravel(), f.ravel())]
+    idx = np.arange(144).reshape(12, 12)
+    faces = np.r_[np.c_[idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()],
+                  np.c_[idx[:-1, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # (its faces: not the point here)
+        mesh = fit_surface(grid, faces, max_iterations=1)
+    with pytest.raises(InvalidInputError, match="closest_points"):
+        mesh.heights([[0.5, 0.5]])
