@@ -40,7 +40,8 @@ from .geometry import column_bounds, coordinate_order, float32_rounding
 from .join import join_fit, join_warning, seams
 from .parallel import background
 from .parameterize import (
-    Parameterization, _as_points, _check_finite, _edge_pairs, _local_planes, box_normalization,
+    Parameterization, _as_points, _check_finite, _degrees_note, _edge_pairs, _local_planes,
+    box_normalization,
     _parameterize_mesh, corner_angles, fill_value_rows, fill_value_words, huge_rows, huge_words,
     local_noise, local_scatter, normalize, open_holes, parameterize, spike_points,
     trim_distance, gaps_beyond,
@@ -2986,9 +2987,12 @@ def _run(points, param, options, callback, start=None, rings=None, history=(), c
     across = np.sqrt(used.sum() * extent.min() / max(extent.max(), 1e-300))
     if extent.min() < MIN_ASPECT * extent.max() and (
             across < MIN_ACROSS or _on_lines(np.asarray(param.uv)[kept])):
+        # (longitude and latitude in degrees and heights in metres: a thin upright strip,
+        # said only with --projection z before: user test)
         raise InvalidInputError(
-            f"the points lie almost on a curve: their parameter domain is {extent.min() / extent.max():.1e} "
-            "times as wide as it is long; a surface needs points spread in two directions"
+            f"the points lie almost on a curve: their parameter domain is "
+            f"{extent.min() / extent.max():.1e} times as wide as it is long; a surface needs "
+            "points spread in two directions" + _degrees_note(np.asarray(points)[kept])
         )
     if checked and param.faces is None:
         cloud = points[kept]

@@ -803,3 +803,17 @@ def test_join_fits_a_patch_to_its_neighbour_s_spline(tmp_path, capsys, monkeypat
     np.save(tmp_path / "cloud.npy", pb)
     r = run("fit", tmp_path / "cloud.npy", "-o", tmp_path / "x.obj", "--join", a_mesh, a_spline)
     assert r.returncode != 0 and "is a point cloud" in r.stderr
+
+
+def test_longitude_latitude_and_metres_are_told_to_be_projected(tmp_path):
+    """A GIS export with longitude and latitude in degrees and heights in metres, 1 km
+    across: the points stand as a thin upright strip, refused as "almost on a curve" with no
+    word of the units (said only with --projection z; user test). The refusal says them."""
+    rng = np.random.default_rng(0)
+    lon, lat = -84.2 + rng.random(3000) * 0.011, 36.5 + rng.random(3000) * 0.009
+    path = tmp_path / "lon_lat_elev.csv"
+    np.savetxt(path, np.c_[lon, lat, 300 + 20 * np.sin(lon * 600)], delimiter=",",
+               header="lon,lat,elev", comments="", fmt="%.8f")
+    r = run("fit", path, "-o", tmp_path / "s.obj", "--quiet")
+    assert r.returncode != 0
+    assert "almost on a curve" in r.stderr and "longitude and latitude in degrees" in r.stderr
