@@ -530,6 +530,7 @@ def test_a_stalled_run_on_clean_data_cross_validates_its_default_smoothness():
 @pytest.mark.parametrize("n, error, previous, expected", [
     (40, 8e-3, None, 166),  # far: the automatic start itself (1.1 * 40 * 8^(2/3) = 176)
     (40, 2e-3, None, 70),  # 1.1 * 40 * 2^(2/3) = 69.8, with the smooth rate 3/2
+    (40, 5e-3, None, 129),  # 128.7: not rounded up to the start (user test: 1.5x the net)
     (40, 1.05e-3, None, None),  # at most 15% more: go on by insertion
     (40, 2e-3, (20, 4e-3), 88),  # measured rate 1: 1.1 * 40 * 2
     (40, 2e-3, (20, 2.1e-3), 166),  # noise-like rate 0.07, clipped to 0.5: 176
