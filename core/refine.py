@@ -1776,8 +1776,10 @@ def adaptive_fit(
                 fit = (fit_control_points(best.space, fu, fp, fw, loop_smoothness) if sampled
                        else best.fit)
                 selection["kept"] = f"{loop_smoothness:g} (the choice misses the tolerance)"
+            # (``value`` is the choice's: not where the thin-data rule put the loop's fit back,
+            # which missed the tolerance: review)
             if reason in (STALLED, "iteration limit", "control-point budget reached") and (
-                    value <= tol):
+                    selection is not None and "kept" not in selection and value <= tol):
                 # the cross-validated smoothness meets the tolerance the loop's fits at the
                 # default missed: reached (an exact quadratic on 169 points, RMS 2.8e-7 of the
                 # diagonal for a tolerance of 1e-6, had stopped as "the error stopped falling",

@@ -293,6 +293,26 @@ def test_a_tolerance_the_cross_validated_choice_meets_is_reached(tol):
     assert tight["rms_rel"] > 1e-8 and tight["stop_reason"] == "the error stopped falling"
 
 
+def test_a_choice_put_back_for_the_default_does_not_reach_the_tolerance_for_it(monkeypatch):
+    """Thin data (under 4 points per control point) whose cross-validated choice is put back
+    for the default (its error within THIN_MARGIN of the choice's; forced here): the choice
+    met the tolerance the default misses, and the run had been stamped "tolerance reached" by
+    the choice's error with the default's fit kept, RMS 2.9e-6 for a tolerance of 1e-6
+    (review). The stop reason is the loop's."""
+    from core import refine
+
+    x = np.linspace(-0.5, 0.5, 20)
+    X, Y = (a.ravel() for a in np.meshgrid(x, x))
+    P = np.c_[X, Y, 0.3 * (X**2 - 0.5 * Y**2)]
+    chosen = fit_surface(P, tolerance=1e-6, max_control_points=160).report
+    assert chosen["smoothness_selection"]["why"].startswith("sparse data: 400 points")
+    assert chosen["rms_rel"] <= 1e-6 and chosen["stop_reason"] == "tolerance reached"
+    monkeypatch.setattr(refine, "_default_excess", lambda *a: 1.0)
+    kept = fit_surface(P, tolerance=1e-6, max_control_points=160).report
+    assert kept["smoothness"] == 1e-4 and "smoothness_selection" not in kept
+    assert kept["rms_rel"] > 1e-6 and kept["stop_reason"] != "tolerance reached"
+
+
 def test_sampled_iterations_choose_on_all_points_and_keep_a_reached_tolerance(monkeypatch):
     """Above ITERATION_POINTS the iterations fit a subset and the final fit uses every point:
     the choice is made there, and the reached tolerance is kept there too."""
