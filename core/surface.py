@@ -359,12 +359,16 @@ class TCBSurface:
     def heights(self, xy, iterations: int = 20) -> np.ndarray:
         """The surface's z over ground points ``xy`` (m, 2): for each, the z of the surface
         point whose x and y are that point's (a terrain's elevation at new places: a raster's
-        nodes, survey points), NaN where no point of the fitted part of the surface
-        (:meth:`domain_contains`) lies over it. For surfaces fitted to point clouds (a plane
+        nodes, survey points), NaN where no point of the fitted part of the surface (below)
+        lies over it. For surfaces fitted to point clouds (a plane
         parameterization, method.md section 4), also when their projection plane is tilted,
         as a DEM's usually is: ``surf(parameterization.project(...))`` of points at some
         height is then off where the surface is not on the plane (user test: a median 72 m
         in x and y on the Jacksboro DEM).
+
+        The fitted part is where :meth:`tessellate` puts the mesh: the domain, less the
+        gaps inside a cloud farther from its points than the trim distance
+        (:func:`core.parameterize.trim_distance`), which ``fill_holes`` spans.
 
         Solved per point by damped Newton steps on ``S(u, v)[:2] = (x, y)`` (2x2 systems of
         ``S_u`` and ``S_v``, vectorized), from the projection of the point on the fitted
@@ -428,6 +432,13 @@ class TCBSurface:
             scale[todo[~better]] *= 0.5
             todo = todo[(miss[todo] > close) & (scale[todo] > 2.0**-20)]
         done = (miss <= close) & self._param.contains(uv)
+        if param.holes is None and done.any():
+            # a gap in the data (inside its hull) is no fitted part, as the tessellation
+            # leaves it open (review: a C-shaped cloud's notch had heights)
+            data = self._data_parameters()[0]
+            tree = cKDTree(data)
+            near = tree.query(uv[done], workers=-1)[0] <= trim_distance(param, data, tree)
+            done[np.flatnonzero(done)[~near]] = False
         out[np.flatnonzero(finite)[done]] = at[done, 2]
         return out
 

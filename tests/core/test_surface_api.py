@@ -556,6 +556,12 @@ def test_heights_are_the_surface_s_z_over_new_ground_points():
     naive = surf(surf.parameterization.project(np.c_[ground[:-2], np.zeros(3000)]))
     assert np.median(np.linalg.norm(naive[:, :2] - ground[:-2], axis=1)) > 100 * rms
     assert surf.heights([0.5, 0.5]).shape == (1,)
+    # a notch in the data is no fitted part (its tessellation leaves it open), unless spanned
+    notch = xy[~((xy[:, 0] > 0.5) & (np.abs(xy[:, 1] - 0.5) < 0.15))]
+    for fill in (False, True):
+        c = fit_surface(np.c_[notch, shape(*notch.T)], fill_holes=fill, max_iterations=2)
+        assert np.isnan(c.heights([[0.8, 0.5]])[0]) != fill
+        assert np.isfinite(c.heights([[0.25, 0.5]])[0])
     with pytest.raises(InvalidInputError, match=r"points\[:, :2\]"):
         surf.heights(on)
     v, f = np.meshgrid(np.linspace(0, 1, 12), np.linspace(0, 1, 12))
