@@ -28,7 +28,7 @@ from .refine import (SWINGS_LEFT, mostly_taken_back, replaced_default_reason,
 from .surface import (FOLDED_SHARE, MAX_RESOLUTION, SPIKES_HELD_OFF, default_swung, grid_frame,
                       finer_resolution, sag_target, tessellation_fill,
                       noise_near_tolerance, stopped_at_noise, fall_rate, STILL_FALLING,
-                      flat_height_field)
+                      flat_height_field, sag_target_words)
 
 __all__ = ["main"]
 
@@ -484,8 +484,8 @@ def _fit(args) -> int:
                                  surf.tessellation_sag(resolution // 2)
                                  if resolution >= 4 else None)
         print(f"note: the surface mesh (resolution {resolution}, the finest chosen "
-              f"automatically) strays up to {sag:.4g} from the spline, more than the fit's max "
-              f"error {r['max']:.4g}: pass --resolution {finer} "
+              f"automatically) strays up to {sag:.4g} from the spline, more than "
+              f"{sag_target_words(r, surf.options)}: pass --resolution {finer} "
               + ("(the finest)" if finer >= MAX_RESOLUTION else "(or more)")
               + " to write the fit as it is", file=sys.stderr)
     gaps = surf.open_holes(resolution) if faces is None else 0

@@ -151,6 +151,20 @@ _PARAM_FIELDS = ("uv", "domain_polygon", "used", "boundary", "faces", "origin", 
                  "holes", "outliers")
 
 
+def sag_target_words(report, options=None, length=lambda x: f"{x:.4g}") -> str:
+    """What :func:`sag_target` is, for the notes of a straying mesh: "the fit's max error
+    0.0013", or "the tolerance asked for, 0.002" where that is the larger (a mesh within the
+    tolerance was said to stray "more than the fit's max error": review), or "1e-06 of the
+    diagonal"; ``length`` writes a length (Blender: in the scene's unit)."""
+    target = sag_target(report, options)
+    worst = float((report or {}).get("max", np.nan))
+    if not target > worst:
+        return f"the fit's max error {length(worst)}"
+    if target > AUTO_RESOLUTION_FLOOR * float((report or {}).get("diagonal", 0.0)):
+        return f"the tolerance asked for, {length(target)}"
+    return f"{AUTO_RESOLUTION_FLOOR:g} of the diagonal"
+
+
 def finer_resolution(resolution: int, sag: float, target: float,
                      coarser: float | None = None) -> int:
     """The resolution at which a mesh of ``sag`` at ``resolution`` would come within ``target``

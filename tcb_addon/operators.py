@@ -474,10 +474,9 @@ def resolution_note(surf) -> str | None:
         resolution, sag, target, surf.tessellation_sag(resolution // 2) if resolution >= 4
         else None)
     return (f"the surface mesh (Resolution {resolution}, the finest Auto Resolution takes) "
-            f"strays up to {bridge.length_text(sag)} from the spline, more than the fit's max "
-            f"error {bridge.length_text(surf.report['max'])}: Re-tessellate finer (e.g. "
-            f"{finer}) to see the fit "
-            "as it is")
+            f"strays up to {bridge.length_text(sag)} from the spline, more than "
+            f"{_core().surface.sag_target_words(surf.report, surf.options, bridge.length_text)}"
+            f": Re-tessellate finer (e.g. {finer}) to see the fit as it is")
 
 
 def folded_over(tcb) -> bool:

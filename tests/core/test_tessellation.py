@@ -353,7 +353,7 @@ def test_the_sag_target_is_at_least_the_tolerance_asked_for():
     Re-tessellate finer for a mesh well within what was asked (user test). The tolerance
     (relative: of the diagonal) counts too; without one, or without options, as before."""
     from core.refine import RefineOptions
-    from core.surface import AUTO_RESOLUTION_FLOOR, sag_target
+    from core.surface import AUTO_RESOLUTION_FLOOR, sag_target, sag_target_words
 
     report = {"max": 1e-3, "diagonal": 4.0}
     assert sag_target(report) == 1e-3
@@ -363,3 +363,9 @@ def test_the_sag_target_is_at_least_the_tolerance_asked_for():
     assert sag_target(report, RefineOptions(tolerance=0.0)) == 1e-3
     assert sag_target({"max": 0.0, "diagonal": 4.0}) == 4 * AUTO_RESOLUTION_FLOOR
     assert np.isnan(sag_target({}))
+    # the notes name what the target is (review: "more than the fit's max error" for a mesh
+    # held to the tolerance)
+    assert sag_target_words(report) == "the fit's max error 0.001"
+    assert sag_target_words(report, RefineOptions(tolerance=1e-3)) == (
+        "the tolerance asked for, 0.004")
+    assert sag_target_words({"max": 0.0, "diagonal": 4.0}) == "1e-06 of the diagonal"
