@@ -1393,8 +1393,9 @@ class TCBSurface:
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3 or len(points) != len(self._param.uv):
             return None
-        moved = ~np.isfinite(points).all(axis=1)
-        used = np.asarray(self._param.used, dtype=bool) & ~moved
+        fitted = np.asarray(self._param.used, dtype=bool)
+        moved = fitted & ~np.isfinite(points).all(axis=1)  # (a left-out point: False; review)
+        used = fitted & ~moved
         # (``rounding`` of each coordinate: a point moves by up to sqrt(3) times it; data
         # rounded to the millimetre had needed rounding=0.001, not its 0.0005: user test)
         tol = max(ROUNDING_RTOL * float(self._report.get("diagonal", 0.0)),

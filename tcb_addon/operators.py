@@ -589,12 +589,15 @@ def changed_names(surf, data: bridge.InputData) -> str:
 
 
 def _animated(obj) -> bool:
-    """Whether ``obj`` or an object it is parented to (or their data) has an action or
-    drivers: its data may be elsewhere at another frame."""
+    """Whether ``obj`` or an object it is parented to (or their data, or their shape keys)
+    has an action, NLA strips or drivers: its data may be elsewhere at another frame (an
+    action pushed down to the NLA, and shape keys, had not counted: review)."""
     while obj is not None:
-        for idb in (obj, obj.data):
+        keys = getattr(getattr(obj, "data", None), "shape_keys", None)
+        for idb in (obj, obj.data, keys):
             ad = getattr(idb, "animation_data", None)
-            if ad is not None and (ad.action is not None or len(ad.drivers)):
+            if ad is not None and (ad.action is not None or len(ad.drivers)
+                                   or any(len(t.strips) for t in ad.nla_tracks)):
                 return True
         obj = obj.parent
     return False
@@ -1151,10 +1154,13 @@ FITTED_FRAME_KEY = "tcb_fitted_frame"
 def _fit_order(ob) -> tuple:
     """The order in which :func:`previous_result` prefers results: the latest fitted; of a
     result and its Shift+D copies (the same fit time), the one still named as the fit named
-    it, then the first made (``ID.session_uid``): the copy the user kept as a variant had
-    been rewritten, as the later name (user test)."""
+    it, then the one its net belongs to (a surface copied alone shares the original's net,
+    whose surface is the original), then the first made in this session
+    (``ID.session_uid``; after a reload, the first by name): the copy the user kept as a
+    variant had been rewritten, as the later name (user test)."""
+    net = ob.tcb.net
     return (float(ob.get(FITTED_KEY, 0.0)), ob.name == ob.get(FITTED_NAME_KEY),
-            -ob.session_uid)
+            net is not None and net.tcb.surface == ob, -ob.session_uid)
 
 
 def previous_result(context, sources, kept: list | None = None, part: str = ""):
@@ -1608,7 +1614,7 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
                 f"{bridge.length_text(height)} high, and the Tolerance is relative to the "
                 f"bounding-box diagonal: {self.tolerance:g} of it is {bridge.length_text(tol)} "
                 f"({tol / height:.2g} of the height range); turn off Relative for a Tolerance "
-                "in the scene's units")
+                "in Blender units (the Fit panel says what it is in the scene's units)")
         if reused:
             seconds = getattr(self, "_reused_seconds", None)
         else:

@@ -944,6 +944,14 @@ def test_an_animated_source_at_another_frame_is_said_to_be_the_frame(clean_scene
         assert words in capfd.readouterr().out
         scene.frame_set(1)
         assert run(bpy, bpy.ops.tcb.refine, surface) == {"FINISHED"}
+        # the action pushed down to the NLA (no active action left): still animated (review)
+        ad = src.animation_data
+        action = ad.action
+        ad.nla_tracks.new().strips.new("Move", 1, action)
+        ad.action = None
+        scene.frame_set(10)
+        with pytest.raises(RuntimeError, match=re.escape(words.split(" as when")[0])):
+            run(bpy, bpy.ops.tcb.refine, surface)
     finally:
         scene.frame_set(1)
 
