@@ -270,3 +270,20 @@ def test_coordinate_order_is_the_lexicographic_order_and_takes_nan_rows_alike():
         order = coordinate_order(x)
         assert order is not None
         np.testing.assert_array_equal(x[order][:2], [[0.0, 0, 0], [1.0, 0, 0]])
+
+
+def test_coordinate_order_does_not_hang_on_the_last_bits_of_tied_coordinates():
+    """A lattice's exact ties (a CAD mesh's vertices along grid lines) had been broken by the
+    next column's last bits, so the same points translated by 64, scaled by 1e-3 or given
+    noise of 1e-12 of their extent came in another order, and the fit drew other knots
+    (patch-01.off: 636 to 731 control points; user test). On ORDER_QUANTUM's grid the order
+    is the same; points farther apart than a cell keep their lexicographic order."""
+    rng = np.random.default_rng(1)
+    g = np.stack(np.meshgrid(np.arange(12.0), np.arange(9.0)), -1).reshape(-1, 2)
+    p = np.c_[g * 0.37, np.sin(g[:, 0] * g[:, 1])][rng.permutation(len(g))]
+    base = coordinate_order(p)
+    moved = [p + [64.0, 0.0, 0.0], p * 1e-3, p + rng.normal(size=p.shape) * 1e-12 * 4.4]
+    for q in moved:
+        np.testing.assert_array_equal(coordinate_order(q), base)
+    # (the tie in x, then y: the lexicographic order of the lattice)
+    np.testing.assert_array_equal(p[base], p[np.lexsort(p.T[::-1])])
