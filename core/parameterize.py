@@ -127,9 +127,12 @@ def _as_points(points: np.ndarray, *, what: str = "points") -> np.ndarray:
             f"{what} must be numbers (an (N, 3) array of x, y, z coordinates): {exc}"
         ) from None
     if arr.ndim != 2 or arr.shape[1] != 3:
+        # (x, y, z and intensity or colour, as the command line reads them: user test)
+        more = (f"; for x, y, z followed by other columns (intensity, colour) give "
+                f"{what}[:, :3]" if arr.ndim == 2 and arr.shape[1] > 3 else "")
         raise InvalidInputError(
             f"{what} must be an (N, 3) array of x, y, z coordinates; got shape {arr.shape}"
-        )
+            + more)
     return np.ascontiguousarray(arr)
 
 

@@ -124,6 +124,9 @@ def test_normalize_rejects_bad_input_with_specific_messages() -> None:
     rng = np.random.default_rng(0)
     with pytest.raises(InvalidInputError, match=r"\(N, 3\)"):
         normalize(rng.random((20, 2)))
+    # x, y, z and an intensity (as the command line reads them): what to give (user test)
+    with pytest.raises(InvalidInputError, match=r"followed by other columns .* points\[:, :3\]"):
+        normalize(rng.random((20, 4)))
     bad = rng.random((20, 3))
     bad[[2, 5], 1] = np.nan
     bad[7, 0] = np.inf
