@@ -24,6 +24,15 @@ def grid(n=24, size=1.0, f=lambda x, y: 0.3 * (x * x - 0.5 * y * y), triangles=F
     return verts, np.c_[a, b, c, d]
 
 
+def halves(bpy, n):
+    """Two vertex-only objects 'Left' and 'Right', the halves (x <= 0, x > 0) of an ``n`` x
+    ``n`` :func:`grid`, and the grid's vertices: data fitted as one cloud of two sources."""
+    verts, _ = grid(n)
+    left = add_mesh(bpy, "Left", verts[verts[:, 0] <= 0])
+    right = add_mesh(bpy, "Right", verts[verts[:, 0] > 0])
+    return left, right, verts
+
+
 def add_mesh(bpy, name, verts, faces=None, location=(0.0, 0.0, 0.0)):
     """A new mesh object (vertices only when ``faces`` is None) linked to the scene."""
     mesh = bpy.data.meshes.new(name)

@@ -17,8 +17,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from scenes import (  # noqa: E402
-    ADDON, add_mesh, core_module, delete_first, failing_fit, fit, grid, move_net_vertex,
-    positions, select, spline_of,
+    ADDON, add_mesh, core_module, delete_first, failing_fit, fit, grid, halves,
+    move_net_vertex, positions, select, spline_of,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -1097,9 +1097,7 @@ def test_fit_mesh_with_modifier_uses_evaluated_geometry(clean_scene, addon):
 
 def test_fit_merges_several_objects(clean_scene, addon):
     bpy = clean_scene
-    verts, _ = grid(20)
-    left = add_mesh(bpy, "Left", verts[verts[:, 0] <= 0])
-    right = add_mesh(bpy, "Right", verts[verts[:, 0] > 0])
+    left, right, verts = halves(bpy, 20)
     assert fit(bpy, left, right, tolerance=2e-3) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
     assert {s.object.name for s in surface.tcb.sources} == {"Left", "Right"}

@@ -15,7 +15,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import scenes  # noqa: E402
 from scenes import (  # noqa: E402
-    ADDON, add_mesh, grid, move_net_vertex, positions, select, spline_of,
+    ADDON, add_mesh, grid, halves, move_net_vertex, positions, select, spline_of,
 )
 
 
@@ -904,9 +904,7 @@ def test_a_joint_result_names_only_the_source_that_changed(clean_scene, capfd):
     """Two objects fitted together, one of them moved since: Refine and the Deviation Map
     named both ("'Right', 'Left' changed since ..."; user test), only the moved one now."""
     bpy = clean_scene
-    v, _ = grid(13)
-    left = add_mesh(bpy, "Left", v[v[:, 0] <= 0])
-    right = add_mesh(bpy, "Right", v[v[:, 0] > 0])
+    left, right, _ = halves(bpy, 13)
     assert fit(bpy, left, right, tolerance=2e-3) == {"FINISHED"}
     surface = bpy.context.view_layer.objects.active
     left.location.z = 0.05
