@@ -103,6 +103,16 @@ def _parser() -> argparse.ArgumentParser:
                         "patch's mesh file, SPLINE the .npz its fit wrote with --spline; "
                         "repeat for more neighbours (core.join)")
     f.add_argument("--quiet", action="store_true", help="no progress output")
+    h = sub.add_parser("heights", help="the z of a fitted point cloud's surface over the x "
+                       "and y of points (resampling a terrain, checking survey points)")
+    h.add_argument("spline", help="the spline: the .npz that fit wrote with --spline")
+    h.add_argument("points", help="points whose x and y are taken (their z is compared): any "
+                   "input fit reads (.xyz .csv .txt .ply .obj .off .npy .npz; a DEM .npz: its "
+                   "nodes)")
+    h.add_argument("-o", "--output", required=True,
+                   help="a text file (.xyz, .txt: spaces; .csv: commas) of x, y, the "
+                   "surface's z there (TCBSurface.heights) and dz, the point's z minus it; "
+                   "nan where no fitted part of the surface is over the point")
     return p
 
 
@@ -561,6 +571,36 @@ def _neighbours(args, points: np.ndarray, faces) -> list | None:
     return join
 
 
+def _heights(args) -> int:
+    """``heights``: the surface of ``args.spline`` over the x and y of ``args.points``
+    (:meth:`TCBSurface.heights`), written with the points' own z minus it, and a line on how
+    many are over the surface and how far their z is from it."""
+    from .surface import TCBSurface
+
+    out = Path(args.output)
+    if out.suffix.lower() not in (".xyz", ".txt", ".csv"):
+        raise TCBError(f"-o {args.output}: heights are written as text: give a .xyz, .txt or "
+                       ".csv file")
+    surf = TCBSurface.load(args.spline)
+    points, _ = read_geometry(args.points)
+    z = surf.heights(points[:, :2])
+    dz = points[:, 2] - z
+    sep = "," if out.suffix.lower() == ".csv" else " "
+    # (12 digits: a millimetre of a UTM northing, 4.2e6 m, and 1e-5 of it)
+    np.savetxt(out, np.c_[points[:, :2], z, dz], fmt="%.12g", delimiter=sep,
+               header=sep.join(("x", "y", "z", "dz")), comments="")
+    over = np.isfinite(z)
+    line = f"wrote {out}: {int(over.sum())} of {len(z)} points are over the surface"
+    if not over.all():
+        line += " (the others: nan, beyond the fitted part)"
+    if over.any():
+        line += (f"; the points' z minus the surface's: RMS "
+                 f"{float(np.sqrt(np.mean(dz[over] ** 2))):.4g}, largest "
+                 f"{float(np.abs(dz[over]).max()):.4g}")
+    print(line, file=sys.stderr)
+    return 0
+
+
 def _warning_line(message, category, filename, lineno, line=None) -> str:
     """A warning of the engine as one line, ``warning: ...`` (not Python's file:line form)."""
     return f"warning: {message}\n"
@@ -573,6 +613,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "fit":
             return _fit(args)
+        if args.command == "heights":
+            return _heights(args)
     except TCBError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

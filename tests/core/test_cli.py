@@ -817,3 +817,41 @@ def test_longitude_latitude_and_metres_are_told_to_be_projected(tmp_path):
     r = run("fit", path, "-o", tmp_path / "s.obj", "--quiet")
     assert r.returncode != 0
     assert "almost on a curve" in r.stderr and "longitude and latitude in degrees" in r.stderr
+
+
+def test_heights_writes_the_surface_s_z_over_points_and_their_difference(tmp_path):
+    """A GIS user had no command for the fitted terrain's z at new places (resampling, check
+    points; user test): `heights SPLINE POINTS -o OUT` writes x, y, the surface's z there
+    (TCBSurface.heights) and the points' z minus it, nan beyond the fitted part, and says how
+    many are over the surface and how far they are; a mesh's spline and a non-text output
+    are refused in one line."""
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 100, (3000, 2))
+
+    def shape(p):
+        return 5 * np.sin(p[:, 0] / 15) * np.cos(p[:, 1] / 20) + 300
+
+    np.savetxt(tmp_path / "c.xyz", np.c_[xy + [5e5, 4.2e6], shape(xy)])
+    spline = tmp_path / "s.npz"
+    r = run("fit", tmp_path / "c.xyz", "-o", tmp_path / "s.obj", "--spline", spline, "--quiet")
+    assert r.returncode == 0, r.stderr
+    q = np.r_[rng.uniform(5, 95, (40, 2)), [[150.0, 50.0]]]
+    np.savetxt(tmp_path / "q.csv", np.c_[q + [5e5, 4.2e6], shape(q)], delimiter=",",
+               header="x,y,z", comments="")
+    r = run("heights", spline, tmp_path / "q.csv", "-o", tmp_path / "h.csv")
+    assert r.returncode == 0, r.stderr
+    assert "40 of 41 points are over the surface (the others: nan" in r.stderr
+    out = np.loadtxt(tmp_path / "h.csv", delimiter=",", skiprows=1)
+    want = TCBSurface.load(spline).heights(q + [5e5, 4.2e6])
+    np.testing.assert_allclose(out[:, :2], q + [5e5, 4.2e6], rtol=0, atol=1e-5)
+    np.testing.assert_allclose(out[:-1, 2], want[:-1], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(out[:-1, 3], shape(q)[:-1] - want[:-1], rtol=0, atol=1e-6)
+    assert np.isnan(out[-1, 2:]).all() and np.abs(out[:-1, 3]).max() < 0.5
+    r = run("heights", spline, tmp_path / "q.csv", "-o", tmp_path / "h.obj")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and ".csv file" in r.stderr
+    mesh = tmp_path / "m.npz"
+    r = run("fit", ROOT / "data" / "patch-01.off", "-o", tmp_path / "m.obj", "--spline", mesh,
+            "--quiet", "--max-iterations", "1")
+    assert r.returncode == 0, r.stderr
+    r = run("heights", mesh, tmp_path / "q.csv", "-o", tmp_path / "h.xyz")
+    assert r.returncode == 2 and "fitted to a point cloud" in r.stderr
