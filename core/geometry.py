@@ -55,10 +55,10 @@ def coordinate_order(points: np.ndarray) -> np.ndarray | None:
     8.8e-3 of the diagonal (user test); in cells 1e-9 apart such moves keep the order but
     where a value lies within them of a cell's edge.
 
-    A stable sort of the first column's cells when no two rows share one (1e6 points: 0.05 s
-    against 0.48 s for the full lexsort; the same order); rows that share one are sorted
-    among themselves (a lexsort of those rows only, their places kept); a check in one pass
-    when the rows are sorted. NaN rows go last."""
+    A stable sort of the first column's cells; rows that share one are sorted among
+    themselves (a lexsort of those rows only, their places kept); a check in one pass when the
+    rows are sorted. NaN rows go last. 1e6 random points: 0.28-0.33 s (0.21 s without the
+    cells); on a 1000 x 1000 lattice, whose rows all share cells, 1.0-1.25 s (0.71-0.88 s)."""
     exact = np.asarray(points)
     n = len(exact)
     if n < 2:
