@@ -43,7 +43,7 @@ from .parameterize import (
     Parameterization, _as_points, _check_finite, _degrees_note, _edge_pairs, _local_planes,
     box_normalization,
     _parameterize_mesh, corner_angles, fill_value_rows, fill_value_words, huge_rows, huge_words,
-    local_noise, local_scatter, normalize, open_holes, parameterize, spike_points,
+    in_voids, local_noise, local_scatter, normalize, open_holes, parameterize, spike_points,
     trim_distance, gaps_beyond,
 )
 from .refine import (ITERATION_POINTS, STALLED, RefineOptions, _cancel_requested, adaptive_fit,
@@ -452,6 +452,7 @@ class TCBSurface:
             data = self._data_parameters()[0]
             tree = cKDTree(data)
             near = tree.query(uv[done], workers=-1)[0] <= trim_distance(param, data, tree)
+            near[~near] = in_voids(param, uv[done][~near])  # (between random points: covered)
             done[np.flatnonzero(done)[~near]] = False
         out[np.flatnonzero(finite)[done]] = at[done, 2]
         return out
@@ -672,6 +673,8 @@ class TCBSurface:
             near = tree.query(cen, distance_upper_bound=trim * (1 + 1e-9))[0] <= trim
             if self._param.holes is not None:  # (fill_holes: a cloud's holes are covered)
                 near[~near] = self._param.in_holes(cen[~near])
+            else:  # (the voids between random points are no gaps: in_voids)
+                near[~near] = in_voids(self._param, cen[~near], trim)
             tri = tri[near]
         return tri
 
@@ -2633,6 +2636,7 @@ STRAY_NEIGHBOURS = 6
 STRAY_FLOOR = 1e-5
 STRAY_SEED = 0x5EED  # the pool's draws are seeded with the fit's seed plus this (and a count)
 FACE_CHECK = True  # (off: benchmarks/fins.py's peer, the loop before the check)
+BORDER_SAMPLES = True  # (off: fins.py's peer, the check on the faces only, as before)
 
 
 class FaceCheck:
@@ -2689,7 +2693,8 @@ class FaceCheck:
         # and on the border edges, as far apart along them as the samples on the faces
         area, length = self.area_table[2].sum(), self.border[3].sum()
         along = int(np.ceil(length * np.sqrt(count / area))) if area > 0 else 0
-        fb, bary = _border_samples(self.border, along, seed=self.seed + self.draws)
+        fb, bary = _border_samples(self.border, along if BORDER_SAMPLES else 0,
+                                   seed=self.seed + self.draws)
         pb, xb = _face_points(points, uv, faces, fb, bary, self.curved, self.smooth,
                               self.vertex_normals, self.prepared)
         p, x, f = np.vstack([p, pb]), np.vstack([x, xb]), np.concatenate([f, fb])
