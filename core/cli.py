@@ -1,6 +1,7 @@
 """Command line: ``python -m core fit INPUT -o OUTPUT [options]``.
 
-Reads a point cloud or a disk-like mesh (.ply .obj .off .xyz .pts .txt .csv .npy .npz), fits a
+Reads a point cloud or a disk-like mesh (.ply .obj .off .xyz .pts .txt .csv .npy .npz; a DEM
+as .npz or an ESRI ASCII grid .asc), fits a
 TCB surface (method.md sections 4-6), writes the tessellated surface (.obj or .ply), optionally
 the control net and the spline itself, shows a progress line per iteration and a final report.
 Bad input ends with a one-line message and exit status 2; no traceback.
@@ -51,7 +52,8 @@ def _parser() -> argparse.ArgumentParser:
     f = sub.add_parser("fit", help="fit a surface to a point cloud or a disk-like mesh")
     f.add_argument("input", help="points or mesh: .ply .obj .off .xyz .pts .txt .csv .npy .npz "
                    "(a DEM .npz: 'elevation' with xmin/xmax/ymin/ymax, row 0 at ymin; a "
-                   "north-up raster needs dy < 0 or its 'transform' / 'geotransform')")
+                   "north-up raster needs dy < 0 or its 'transform' / 'geotransform'), or a "
+                   "DEM as an ESRI ASCII grid .asc")
     f.add_argument("-o", "--output", required=True, help="tessellated surface: .obj or .ply")
     f.add_argument("--tolerance", type=float, default=1e-3,
                    help="stop when the error (RMS, or max with --criterion max) is at most "
@@ -107,8 +109,8 @@ def _parser() -> argparse.ArgumentParser:
                        "and y of points (resampling a terrain, checking survey points)")
     h.add_argument("spline", help="the spline: the .npz that fit wrote with --spline")
     h.add_argument("points", help="points whose x and y are taken (their z is compared): any "
-                   "input fit reads (.xyz .csv .txt .ply .obj .off .npy .npz; a DEM .npz: its "
-                   "nodes)")
+                   "input fit reads (.xyz .csv .txt .ply .obj .off .npy .npz .asc; a DEM: "
+                   "its nodes)")
     h.add_argument("-o", "--output", required=True,
                    help="a text file (.xyz, .txt: spaces; .csv: commas) of x, y, the "
                    "surface's z there (TCBSurface.heights) and dz, the point's z minus it; "

@@ -20,6 +20,8 @@ or ``faces = None`` for a point cloud. Supported:
                            (rows, cols) with ``xmin, xmax, ymin, ymax`` (row 0 at ``ymin``;
                            ``dy < 0``: at the larger y) or the raster's ``transform``
                            (rasterio) or ``geotransform`` (GDAL)
+``.asc``                   a DEM as an ESRI ASCII grid (GDAL's AAIGrid; ``ncols, nrows,
+                           xllcorner, yllcorner, cellsize, NODATA_value``): its cells' centres
 =========================  =====================================================================
 
 Writers: :func:`write_mesh` for ``.obj`` (ASCII) and ``.ply`` (binary little endian).
@@ -52,7 +54,8 @@ from .parameterize import fill_value_rows
 
 __all__ = ["READ_EXTENSIONS", "WRITE_EXTENSIONS", "read_geometry", "write_mesh"]
 
-READ_EXTENSIONS = (".off", ".obj", ".ply", ".xyz", ".txt", ".csv", ".pts", ".npy", ".npz")
+READ_EXTENSIONS = (".off", ".obj", ".ply", ".xyz", ".txt", ".csv", ".pts", ".npy", ".npz",
+                   ".asc")
 WRITE_EXTENSIONS = (".obj", ".ply")
 
 PathLike = str | os.PathLike
@@ -106,7 +109,7 @@ def read_geometry(path: PathLike, *, keep_fill_values: bool = False
         # (a reader may add which columns the file stored in 32 bits: PLY can mix them)
         reader = _READERS[ext]
         points, faces, *single = (reader(p, keep_fill_values=keep_fill_values)
-                                  if reader is _read_npz else reader(p))
+                                  if reader in (_read_npz, _read_asc) else reader(p))
     except _MalformedError as exc:
         raise FileFormatError(f"cannot read {p.name!r}: {exc}") from None
     except OSError as exc:
@@ -1041,6 +1044,73 @@ def _read_npz(path: Path, keep_fill_values: bool = False
     )
 
 
+# the header keys of an ESRI ASCII grid (lower case) and how many a grid needs
+_ASC_KEYS = ("ncols", "nrows", "xllcorner", "yllcorner", "xllcenter", "yllcenter", "cellsize",
+             "dx", "dy", "nodata_value")
+
+
+def _read_asc(path: Path, keep_fill_values: bool = False
+              ) -> tuple[np.ndarray, np.ndarray | None]:
+    """An ESRI ASCII grid (``.asc``, GDAL's AAIGrid: what GIS tools export a DEM as): a header
+    of ``ncols``, ``nrows``, ``xllcorner``/``yllcorner`` (the lower-left corner of the
+    lower-left cell) or ``xllcenter``/``yllcenter`` (its centre), ``cellsize`` (or GDAL's
+    ``dx`` and ``dy``) and an optional ``NODATA_value``, one ``key value`` per line in any
+    case, then ``nrows`` rows of ``ncols`` heights, the first row the northern edge. The
+    nodes are the cells' centres, as the DEM ``.npz`` with a ``geotransform`` reads them
+    (:func:`_dem_points`: units, no-data cells and fill values alike)."""
+    lines = _read_text(path).splitlines()
+    header: dict[str, float] = {}
+    start = 0
+    for start, line in enumerate(lines):
+        parts = line.split()
+        if not parts:
+            continue
+        key = parts[0].lower()
+        if key not in _ASC_KEYS:
+            break
+        if len(parts) != 2:
+            raise _MalformedError(f"line {start + 1}: expected '{parts[0]} <number>'")
+        try:
+            header[key] = float(parts[1])
+        except ValueError:
+            raise _MalformedError(f"line {start + 1}: {parts[0]} must be a number, got "
+                                  f"{parts[1]!r}") from None
+    else:
+        start = len(lines)
+    missing = [k for k in ("ncols", "nrows") if k not in header]
+    if "cellsize" not in header and not {"dx", "dy"} <= header.keys():
+        missing.append("cellsize")
+    for axis in "xy":
+        if f"{axis}llcorner" not in header and f"{axis}llcenter" not in header:
+            missing.append(f"{axis}llcorner")
+    if missing:
+        raise _MalformedError(f"not an ESRI ASCII grid: its header has no {', '.join(missing)} "
+                              "(ncols, nrows, xllcorner, yllcorner, cellsize, NODATA_value)")
+    cols, rows = header["ncols"], header["nrows"]
+    if not (cols == int(cols) and rows == int(rows) and cols >= 2 and rows >= 2):
+        raise _MalformedError(f"ncols and nrows must be whole numbers of at least 2; got "
+                              f"{cols:g} and {rows:g}")
+    cols, rows = int(cols), int(rows)
+    dx = header.get("dx", header.get("cellsize"))
+    dy = header.get("dy", header.get("cellsize"))
+    if not (dx > 0 and dy > 0 and np.isfinite([dx, dy]).all()):
+        raise _MalformedError(f"the cell size must be positive; got {dx:g} x {dy:g}")
+    x0 = header["xllcorner"] if "xllcorner" in header else header["xllcenter"] - dx / 2
+    y0 = header["yllcorner"] if "yllcorner" in header else header["yllcenter"] - dy / 2
+    try:
+        values = np.array(" ".join(lines[start:]).split(), dtype=np.float64)
+    except ValueError as exc:
+        raise _MalformedError(f"the heights after the header must be numbers ({exc})") from None
+    if values.size != rows * cols:
+        raise _MalformedError(f"the header says {rows} rows of {cols} heights ({rows * cols}), "
+                              f"but {values.size} follow it (truncated?)")
+    grid = {"elevation": values.reshape(rows, cols),
+            "geotransform": np.array([x0, dx, 0.0, y0 + rows * dy, 0.0, -dy])}
+    if "nodata_value" in header:
+        grid["nodata"] = np.array(header["nodata_value"])
+    return _dem_points(grid, keep_fill_values), None
+
+
 def _dem_points(z: dict[str, np.ndarray], keep_fill_values: bool = False) -> np.ndarray:
     """Grid points of a DEM: ``elevation`` (rows, cols), bounds ``xmin, xmax, ymin, ymax``.
 
@@ -1218,4 +1288,5 @@ _READERS = {
     ".pts": _read_xyz,
     ".npy": _read_npy,
     ".npz": _read_npz,
+    ".asc": _read_asc,
 }

@@ -532,6 +532,28 @@ def test_a_dem_no_data_fill_is_refused_or_left_out_with_drop_invalid(tmp_path):
     assert verts[:, 2].min() > 85 and verts[:, 2].max() < 115
 
 
+def test_an_esri_ascii_grid_dem_is_fitted(tmp_path):
+    """A DEM exported by a GIS as an ESRI ASCII grid (.asc) is read and fitted end to end,
+    its NODATA cells left out (a gap the surface does not span)."""
+    ys, xs = np.mgrid[0:30, 0:40]
+    elev = 100 + 5 * np.sin(xs / 6.0) + 3 * np.cos(ys / 5.0)
+    elev[8:20, 14:26] = -9999.0
+    src = tmp_path / "dem.asc"
+    with open(src, "w") as fh:
+        fh.write("ncols 40\nnrows 30\nxllcorner 350000\nyllcorner 4100000\ncellsize 10\n"
+                 "NODATA_value -9999\n")
+        np.savetxt(fh, elev, fmt="%.3f")
+    r = run("fit", src, "-o", tmp_path / "s.obj", "--max-control-points", "200",
+            "--max-iterations", "2")
+    assert r.returncode == 0, r.stderr
+    assert "1056 points" in r.stderr  # (1200 less the 144 no-data cells)
+    verts, _ = read_geometry(tmp_path / "s.obj")
+    assert verts[:, 2].min() > 90 and verts[:, 2].max() < 110
+    assert verts[:, 0].min() >= 350_000 and verts[:, 1].max() <= 4_100_300
+    hole = (np.abs(verts[:, 0] - 350_200) < 20) & (np.abs(verts[:, 1] - 4_100_160) < 20)
+    assert not hole.any()  # (the middle of the no-data block: 60 m from the nearest node)
+
+
 def test_a_mesh_with_a_nan_vertex_gets_command_line_advice(tmp_path):
     """A mesh's NaN vertex was refused with the engine's advice, Python code
     ("points[np.isfinite(points).all(axis=1)]"); --drop-invalid does not apply to a mesh."""

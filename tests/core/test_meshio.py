@@ -765,6 +765,54 @@ def test_a_north_up_dem_is_read_the_right_way_round(tmp_path: Path) -> None:
             read_geometry(tmp_path / "bad.npz")
 
 
+def test_an_esri_ascii_grid_is_read_as_its_cells_centres(tmp_path: Path) -> None:
+    """A DEM as GIS tools export it, an ESRI ASCII grid (.asc: a header of ncols, nrows, the
+    lower-left corner or centre, the cell size and NODATA_value, then the rows from the
+    north), is read as the same raster with its geotransform in a .npz: the cells' centres,
+    the hill where it is, no-data cells left out; GDAL's dx / dy for oblong cells; a header
+    or body that is not a grid is refused with words."""
+    rows, cols, d, x0, y0 = 5, 6, 10.0, 500_000.0, 4_200_000.0
+    elev = np.arange(rows * cols, dtype=float).reshape(rows, cols) % 7
+    elev[1, 4] = 100.0  # row 1 from the north, column 4 from the west
+    north = y0 + rows * d
+    np.savez(tmp_path / "dem.npz", elevation=elev,
+             geotransform=np.array([x0, d, 0.0, north, 0.0, -d]))
+    want, _ = read_geometry(tmp_path / "dem.npz")
+    body = "\n".join(" ".join(f"{v:g}" for v in row) for row in elev)
+
+    def write(name, head, text=body):
+        (tmp_path / name).write_text(head + "\n" + text + "\n")
+        return tmp_path / name
+
+    corner = f"ncols {cols}\nnrows {rows}\nxllcorner {x0}\nyllcorner {y0}\ncellsize {d}"
+    centre = (f"NCOLS {cols}\nNROWS {rows}\nXLLCENTER {x0 + d / 2}\nYLLCENTER {y0 + d / 2}\n"
+              f"CELLSIZE {d}")
+    for path in (write("a.asc", corner), write("b.asc", centre)):
+        pts, faces = read_geometry(path)
+        assert faces is None
+        np.testing.assert_allclose(pts, want, err_msg=path.name)
+    np.testing.assert_allclose(want[np.argmax(want[:, 2]), :2],
+                               (x0 + 4.5 * d, y0 + (rows - 1.5) * d))
+    holed = elev.copy()
+    holed[2, 1] = -9999.0
+    text = "\n".join(" ".join(f"{v:g}" for v in row) for row in holed)
+    pts, _ = read_geometry(write("c.asc", corner + "\nNODATA_value -9999", text))
+    assert len(pts) == rows * cols - 1 and pts[:, 2].min() >= 0
+    with pytest.raises(FileFormatError, match="far below all others"):  # (no NODATA_value)
+        read_geometry(write("d.asc", corner, text))
+    oblong = f"ncols {cols}\nnrows {rows}\nxllcorner {x0}\nyllcorner {y0}\ndx {d}\ndy {2 * d}"
+    pts, _ = read_geometry(write("e.asc", oblong))
+    np.testing.assert_allclose(np.unique(pts[:, 1]), y0 + 2 * d * (np.arange(rows) + 0.5))
+    for head, text, words in (
+            (corner.replace("cellsize", "# cellsize"), body, "its header has no cellsize"),
+            (corner, body.rsplit(" ", 1)[0], "5 rows of 6 heights \\(30\\), but 29 follow"),
+            (corner.replace("nrows 5", "nrows 5.5"), body, "whole numbers of at least 2"),
+            (corner.replace(f"cellsize {d}", "cellsize -1"), body, "must be positive"),
+            (corner, body.replace("100", "1OO"), "must be numbers")):
+        with pytest.raises(FileFormatError, match=words):
+            read_geometry(write("bad.asc", head, text))
+
+
 def test_a_dem_fill_value_without_a_nodata_key_is_refused(tmp_path: Path) -> None:
     """-9999 cells of a DEM saved without its 'nodata' key were fitted as terrain 10 km deep
     ("tolerance reached" on a garbage surface); a real low elevation is kept."""
