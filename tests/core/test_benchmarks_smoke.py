@@ -3,6 +3,8 @@ row (issue 5). The numbers themselves are not checked here."""
 
 import subprocess
 import sys
+
+import numpy as np
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -198,3 +200,24 @@ def test_join_quick():
             alone, joined = (float(x) for x in row[column].split("->"))
             assert gain * joined < alone, row
         assert float(row[8]) == 0.0 and row[9].startswith("0 of "), row
+
+
+def test_noisy_peers_quick():
+    """``benchmarks/noisy_peers.py --quick`` (2000 noisy points, noise 1% of the z-range) prints
+    a row for each method and test function with finite errors against the noise-free function:
+    every method's true RMS is below the noise (measured 0.2-0.5 sigma), and our fits' heights
+    are NaN at no more than 1% of the 120 x 120 grid."""
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "noisy_peers.py"),
+                          "--quick"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = [[c.strip() for c in line.split("|")[1:-1]] for line in res.stdout.splitlines()
+            if line.startswith("| ") and len(line.split("|")) == 14][1:]
+    methods = ["ours-d2", "ours-d3", "smooth-oracle", "smooth-est", "lsq-best"]
+    assert [(r[0], r[4]) for r in rows] == [
+        (f, m) for f in ("F1-franke", "crease", "F2-cliff") for m in methods]
+    for r in rows:
+        sigma, rms, worst, nan = float(r[2].split()[0]), float(r[7]), float(r[8]), int(r[9])
+        assert np.isfinite(rms) and np.isfinite(worst), r
+        assert rms < sigma, r
+        assert nan <= 0.01 * 120 * 120, r
+    assert "| smooth | 1 |" in res.stdout and "| feature | 2 |" in res.stdout
