@@ -7,7 +7,7 @@ deviation ``sigma = frac * (max f - min f)`` (``frac`` = 0.01 and 0.003; the z-r
 401 x 401 grid of the unit square), for three test functions of ``benchmarks/datasets.py``:
 ``F1-franke`` (smooth), ``crease`` (a C^0 ridge along a curve) and ``F2-cliff`` (a steep tanh step
 along the diagonal). ``N`` = 5000 and 15000, seeds 0 and 1 (the seed draws the points, the noise
-and our fit's random choices). ``--quick``: N = 2000, seed 0, frac 0.01 (about 25 s of CPU).
+and our fit's random choices). ``--quick``: N = 2000, seed 0, frac 0.01 (about 30 s of CPU).
 
 Methods, on the same points in the same process:
 
