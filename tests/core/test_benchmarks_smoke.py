@@ -3,9 +3,9 @@ row (issue 5). The numbers themselves are not checked here."""
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
-from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 METHODS = ["TCB", "TCB-delaunay", "DCB", "Park-tensor", "FITPACK-LSQ", "FITPACK-smooth"]
