@@ -6,7 +6,7 @@ extension's own subpackage). Modules:
 - ``bridge``: read the selection into numpy arrays, write meshes and attributes;
 - ``properties``: fit settings (scene) and result data (``object.tcb``);
 - ``operators``: ``bpy.ops.tcb.*`` (fit, refine, re-tessellate, deviation map, net, export,
-  import; File > Import > TCB Spline);
+  import; File > Import > TCB Spline and TCB Points);
 - ``ui``: the View3D > Sidebar > TCB panels.
 """
 

@@ -2454,9 +2454,148 @@ class TCB_OT_import_spline(bpy.types.Operator, ImportHelper):
         return {"FINISHED"}
 
 
+# the formats of core.meshio.READ_EXTENSIONS (core is imported lazily: tests check they match)
+POINT_EXTENSIONS = (".xyz", ".txt", ".csv", ".pts", ".npy", ".npz", ".asc", ".ply", ".obj",
+                    ".off")
+
+
+def _count(n: int, word: str) -> str:
+    return f"{n} {word}{'s' * (n != 1)}"
+
+
+class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
+    """Make a mesh object of a scan or DEM file that Blender cannot import (text columns .xyz
+    .txt .csv .pts, NumPy .npy .npz, DEM rasters: .npz with 'elevation', ESRI ASCII grid
+    .asc), ready for Fit Surface. Points far from the world origin (map coordinates: UTM,
+    national grids) keep the file's precision: the object's Location is put near them and the
+    vertices are stored relative to it, as Fit Surface places its results"""
+
+    # .obj, .ply and .off are read too (as meshes of their triangles; a PLY without faces as
+    # points), though Blender imports .obj and .ply itself: its importers store the file's
+    # coordinates as they are in 32-bit floats around the world origin (0.5 apart at 4.2e6,
+    # UTM northings) and its OBJ importer turns the axes by default (Forward -Z, Up Y), while
+    # this one keeps the file's axes and, far from the origin, its precision; .off Blender
+    # does not read at all. (Blender's importers keep quads, UVs and normals: the reader gives
+    # triangles.)
+    bl_idname = "tcb.import_points"
+    bl_label = "Import Points"
+    bl_options = {"REGISTER", "UNDO"}
+    filter_glob: StringProperty(default=";".join(f"*{e}" for e in POINT_EXTENSIONS),
+                                options={"HIDDEN"})  # fmt: skip
+    filepath: StringProperty(name="File Path", description="Filepath used for importing the "
+                             "file", maxlen=1024, subtype="FILE_PATH",
+                             options={"SKIP_PRESET", "HIDDEN", "PATH_SUPPORTS_BLEND_RELATIVE"})  # fmt: skip
+    drop_invalid: BoolProperty(
+        name="Leave Out Invalid Points", default=True,
+        description="Leave out points with NaN or infinite coordinates and a DEM's or point "
+        "file's no-data fill values (-9999 ...) far below all others, with a warning (off: "
+        "such a file is refused)",
+    )  # fmt: skip
+
+    @classmethod
+    def poll(cls, context):
+        return _poll_object_mode(cls, context, surface=False)
+
+    def execute(self, context):
+        core = _core()
+        from ..core.meshio import read_geometry
+        from ..core.parameterize import fill_value_rows, fill_value_words
+
+        notes = []
+        # everything that reads the file is done before anything is made (as Import Spline)
+        try:
+            if not self.filepath or self.filepath.endswith(("/", "\\")):
+                raise bridge.SelectionError("No file chosen: choose a point file ("
+                                            f"{' '.join(POINT_EXTENSIONS)})")
+            path = _file_path(self.filepath)
+            label = os.path.basename(path)
+            with _warnings.catch_warnings(record=True) as caught:
+                _warnings.simplefilter("always")
+                # (a DEM's fill values come back as points: left out below, or refused)
+                try:
+                    points, faces = read_geometry(path, keep_fill_values=True)
+                except core.FileFormatError as ex:
+                    if "'control_points'" in str(ex) and "'knots'" in str(ex):
+                        ex.args = (f"{ex}: it is a TCB spline; import it with File > Import > "
+                                   "TCB Spline (.npz)",)
+                    raise
+            notes += [str(w.message) for w in caught
+                      if issubclass(w.category, (RuntimeWarning, UserWarning))]
+            bad = ~np.isfinite(points).all(axis=1)
+            if faces is not None:
+                if bad.any():  # (the faces hold them: they cannot be left out)
+                    raise core.FileFormatError(
+                        f"{int(bad.sum())} of the {len(points)} vertices of {label} have NaN or "
+                        "infinite coordinates; repair them in a mesh editor and import again")
+            else:
+                fill = fill_value_rows(points)
+                what = fill_value_words(fill, len(points)) if fill is not None else None
+                if fill is not None:
+                    bad |= fill[0]
+                if bad.any() and not self.drop_invalid:
+                    words = what or (f"{int(bad.sum())} of the {len(points)} points have NaN or "
+                                     "infinite coordinates")
+                    raise core.FileFormatError(f"{label}: {words}; turn on Leave Out Invalid "
+                                               "Points to leave them out")
+                if bad.any():
+                    nonfinite = int((~np.isfinite(points).all(axis=1)).sum())
+                    if nonfinite:
+                        notes.append(f"left out {_count(nonfinite, 'point')} with NaN or "
+                                     "infinite coordinates")
+                    if fill is not None:
+                        notes.append(f"left out {_count(int(fill[0].sum()), 'point')} with "
+                                     f"{'xyz'[fill[1]]} = {fill[2]:g} (a no-data fill value)")
+                    points = points[~bad]
+            if not len(points):
+                raise core.FileFormatError(f"{label} holds no points" + (
+                    " with finite coordinates" if bad.any() else ""))
+            origin = bridge.local_origin(points)  # (0, 0, 0) unless far from the world origin
+            local = points - origin
+            with np.errstate(over="ignore"):
+                if not np.isfinite(local.astype(np.float32)).all():
+                    raise core.FileFormatError(
+                        f"{label}: coordinates too large for Blender's 32-bit floats (largest "
+                        f"{np.abs(points).max():.3g})")
+        except _user_errors() as ex:
+            self.report({"ERROR"}, str(ex))
+            return {"CANCELLED"}
+        except OSError as ex:
+            self.report({"ERROR"}, f"Could not read {self.filepath}: {ex.strerror or ex}")
+            return {"CANCELLED"}
+        name = os.path.splitext(label)[0] or "Points"
+        layer = context.view_layer.active_layer_collection
+        coll = (layer.collection if layer is not None and not layer.exclude
+                else context.scene.collection)
+        mesh = bridge.new_mesh(name, local, faces)
+        obj = bridge.link_new_object(coll, name, mesh, origin)
+        for other in context.selected_objects:
+            other.select_set(False)
+        try:
+            obj.select_set(True)
+            context.view_layer.objects.active = obj
+        except RuntimeError:  # (not in the view layer: cannot be)
+            pass
+        hidden = bridge.hiding_collections(context.view_layer, obj)
+        if hidden:
+            notes.append(f"'{obj.name}' is hidden: its collection {hidden[0]!r} is hidden in the "
+                         "outliner (show it to see the points)")
+        text = f"Imported {len(points)} points from {label}"
+        if faces is not None:
+            text += f" ({len(faces)} triangles)"
+        if np.any(origin != 0):
+            text += (f"; far from the world origin: '{obj.name}' is at "
+                     f"({', '.join(f'{c:.10g}' for c in origin)}), its vertices relative to it "
+                     "(32-bit floats keep the file's precision)")
+        self.report({"INFO"}, text)
+        for note in notes:  # (after the summary: the status bar shows the last report)
+            self.report({"WARNING"}, f"{label}: {note}" if not note.startswith(label) else note)
+        return {"FINISHED"}
+
+
 def menu_import(self, context):
-    """File > Import > TCB Spline (.npz)."""
+    """File > Import > TCB Spline (.npz) and TCB Points (.xyz .csv .asc ...)."""
     self.layout.operator(TCB_OT_import_spline.bl_idname, text="TCB Spline (.npz)")
+    self.layout.operator(TCB_OT_import_points.bl_idname, text="TCB Points (.xyz .csv .asc ...)")
 
 
 classes = (
@@ -2467,4 +2606,5 @@ classes = (
     TCB_OT_toggle_net,
     TCB_OT_export_spline,
     TCB_OT_import_spline,
+    TCB_OT_import_points,
 )

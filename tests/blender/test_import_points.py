@@ -1,0 +1,235 @@
+"""Import Points (File > Import > TCB Points): point files Blender cannot import (.xyz text
+columns, an ESRI ASCII grid DEM, NumPy arrays) read by the engine's reader and made a vertex
+mesh that Fit Surface takes as it is; map coordinates far from the world origin keep the file's
+precision (the object at an offset, the vertices relative to it)."""
+
+from __future__ import annotations
+
+import importlib
+import re
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from scenes import ADDON, core_module, fit, grid, positions, select  # noqa: E402
+
+UTM = np.array([350000.0, 4100000.0, 0.0])
+CORNER = UTM + [0.37, 0.21, 0.0]  # (not on float32's lattice there: 1/32 and 1/2 apart)
+
+
+def meshio():
+    """The installed engine's reader module."""
+    return importlib.import_module(ADDON + ".core.meshio")
+
+
+def import_points(bpy, path, *selected, **props):
+    with bpy.context.temp_override(**select(bpy, *selected)):
+        return bpy.ops.tcb.import_points(filepath=str(path), **props)
+
+
+def world(obj) -> np.ndarray:
+    """The object's vertices in world space, in float64 (its matrix applied in numpy)."""
+    m = np.array(obj.matrix_world, dtype=np.float64)
+    return positions(obj) @ m[:3, :3].T + m[:3, 3]
+
+
+def read(path):
+    """The installed engine's reading of ``path`` (points, faces)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return meshio().read_geometry(path)
+
+
+def heights(x, y):
+    return 3.0 * np.sin(x / 40.0) * np.cos(y / 55.0) + 0.01 * x
+
+
+def write_asc(path, rows=14, cols=17, x0=CORNER[0], y0=CORNER[1], cell=10.0, fill=None):
+    """An ESRI ASCII grid of :func:`heights` (row 0 the northern edge); ``fill``: a cell at
+    -9999 (no NODATA_value in the header when ``fill == "bare"``)."""
+    j, i = np.meshgrid(np.arange(cols), np.arange(rows))
+    z = heights((j + 0.5) * cell, (rows - i - 0.5) * cell) + 100.0
+    if fill is not None:
+        z[3, 4] = -9999.0
+    head = (f"ncols {cols}\nnrows {rows}\nxllcorner {x0:.3f}\nyllcorner {y0:.3f}\n"
+            f"cellsize {cell:g}\n" + ("" if fill == "bare" else "NODATA_value -9999\n"))
+    path.write_text(head + "\n".join(" ".join(f"{v:.6f}" for v in r) for r in z) + "\n")
+    return path
+
+
+def assert_georeferenced_exactly(obj, expected):
+    """World coordinates equal the file's within 1e-6 relative, and within 1e-6 of the data's
+    extent (32-bit floats at 4.1e6 are 0.5 apart: only vertices relative to an origin near the
+    data pass this)."""
+    got = world(obj)
+    assert got.shape == expected.shape
+    assert np.allclose(got, expected, rtol=1e-6, atol=0)
+    extent = float(np.ptp(expected, axis=0).max())
+    assert np.abs(got - expected).max() <= 1e-6 * extent
+
+
+def test_menu_entry_and_file_filter_cover_the_reader(installed, addon):
+    bpy = installed
+    ops = sys.modules[ADDON + ".tcb_addon.operators"]
+    assert set(ops.POINT_EXTENSIONS) == set(meshio().READ_EXTENSIONS)
+    glob = bpy.ops.tcb.import_points.get_rna_type().properties["filter_glob"].default
+    assert set(glob.split(";")) == {f"*{e}" for e in ops.POINT_EXTENSIONS}
+    assert "TCB_OT_import_points" in ops.menu_import.__code__.co_names
+    assert bpy.ops.tcb.import_points.get_rna_type().name == "Import Points"
+
+
+def test_an_xyz_file_becomes_a_vertex_mesh_that_fit_surface_fits(clean_scene, tmp_path, capfd):
+    bpy = clean_scene
+    rng = np.random.default_rng(1)
+    xy = rng.random((600, 2)) * 100.0
+    pts = np.c_[xy, heights(xy[:, 0], xy[:, 1])]
+    path = tmp_path / "scan.xyz"
+    path.write_text("X Y Z\n" + "\n".join(f"{x:.9f} {y:.9f} {z:.9f}" for x, y, z in pts) + "\n")
+    other = bpy.data.objects.new("Other", None)
+    bpy.context.scene.collection.objects.link(other)
+    capfd.readouterr()
+    assert import_points(bpy, path, other) == {"FINISHED"}
+    assert "Imported 600 points from scan.xyz" in capfd.readouterr().out
+
+    obj = bpy.context.view_layer.objects.active
+    assert obj.name == "scan" and obj.type == "MESH" and obj.tcb.role == "NONE"
+    assert obj.select_get() and not other.select_get()
+    assert obj.name in bpy.context.scene.collection.objects  # (the active collection)
+    assert len(obj.data.vertices) == 600 and len(obj.data.polygons) == 0
+    assert np.array_equal(np.array(obj.matrix_world), np.eye(4))  # near the origin: no offset
+    assert_georeferenced_exactly(obj, read(path)[0])
+    assert np.allclose(world(obj), pts, rtol=1e-6, atol=1e-6)
+
+    # Fit Surface takes it as it is (a point cloud)
+    assert fit(bpy, obj) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    assert surface.tcb.role == "SURFACE"
+    assert [s.object for s in surface.tcb.sources] == [obj]
+
+
+def test_a_utm_dem_keeps_the_file_s_precision_and_fits(clean_scene, tmp_path, capfd):
+    bpy = clean_scene
+    path = write_asc(tmp_path / "dem.asc", fill="nodata")
+    expected = read(path)[0]
+    assert len(expected) == 14 * 17 - 1  # (the NODATA cell is no point)
+    # the grid's first node (the north-west cell's centre), independently of the reader
+    assert np.allclose(expected[0], [CORNER[0] + 5.0, CORNER[1] + 13.5 * 10.0,
+                                     heights(5.0, 135.0) + 100.0])
+    # a layer collection made active: the object goes there
+    coll = bpy.data.collections.new("Survey")
+    bpy.context.scene.collection.children.link(coll)
+    bpy.context.view_layer.active_layer_collection = (
+        bpy.context.view_layer.layer_collection.children["Survey"])
+    capfd.readouterr()
+    try:
+        assert import_points(bpy, path) == {"FINISHED"}
+    finally:
+        bpy.context.view_layer.active_layer_collection = bpy.context.view_layer.layer_collection
+    out = capfd.readouterr().out
+    assert f"Imported {len(expected)} points from dem.asc" in out and "far from the world" in out
+
+    obj = bpy.context.view_layer.objects.active
+    assert obj.name == "dem" and obj.users_collection[0] == coll and obj.select_get()
+    assert len(obj.data.vertices) == len(expected)
+    origin = np.array(obj.matrix_world.translation)
+    assert np.abs(origin - expected.mean(axis=0)).max() < 100.0  # the object is at the data
+    assert np.abs(positions(obj)).max() < 200.0  # its vertices relative to it
+    assert_georeferenced_exactly(obj, expected)
+    # (stored as they are, in 32-bit floats 0.5 apart at 4.1e6, the vertices would miss that
+    # bound a hundredfold: 0.04 here)
+    assert np.abs(expected.astype(np.float32) - expected).max() > 100 * 1e-6 * 170.0
+
+    assert fit(bpy, obj) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    assert surface.tcb.role == "SURFACE" and surface.tcb.rms < 0.05
+
+
+def test_reader_warnings_become_warning_reports(clean_scene, tmp_path, capfd):
+    """A float32 array of map coordinates (the reader says it is rounded) and a DEM whose
+    no-data cells have no NODATA_value (left out, with a warning; refused when asked)."""
+    bpy = clean_scene
+    rng = np.random.default_rng(2)
+    xy = rng.random((300, 2)) * 50.0
+    pts = (np.c_[xy, heights(xy[:, 0], xy[:, 1])] + UTM).astype(np.float32)
+    npy = tmp_path / "coarse.npy"
+    np.save(npy, pts)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        meshio().read_geometry(npy)
+    said = str(caught[0].message)
+    assert "32-bit floats" in said
+    capfd.readouterr()
+    assert import_points(bpy, npy) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "Imported 300 points from coarse.npy" in out
+    assert f"Warning: {said}" in out
+    obj = bpy.context.view_layer.objects.active
+    assert_georeferenced_exactly(obj, pts.astype(np.float64))
+
+    bare = write_asc(tmp_path / "bare.asc", rows=8, cols=9, fill="bare")
+    capfd.readouterr()
+    assert import_points(bpy, bare) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "Imported 71 points from bare.asc" in out
+    assert "Warning: bare.asc: left out 1 point with z = -9999" in out
+    obj = bpy.context.view_layer.objects.active
+    assert obj.name == "bare" and len(obj.data.vertices) == 71
+    assert world(obj)[:, 2].min() > 90.0
+    before = len(bpy.data.objects), len(bpy.data.meshes)
+    with pytest.raises(RuntimeError, match="-9999.*turn on Leave Out Invalid Points"):
+        import_points(bpy, bare, drop_invalid=False)
+    assert (len(bpy.data.objects), len(bpy.data.meshes)) == before
+
+
+def test_a_mesh_file_far_from_the_origin_keeps_its_triangles_and_precision(clean_scene,
+                                                                          tmp_path):
+    """An OBJ (which Blender's importer would store in 32-bit floats around the world origin,
+    its axes turned) is read as the engine reads it: triangles, the file's axes, an offset."""
+    bpy = clean_scene
+    verts, quads = grid(10, size=40.0, f=lambda x, y: 0.01 * x * y)
+    verts = verts + CORNER
+    path = tmp_path / "tile.obj"
+    path.write_text("".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in verts)
+                    + "".join("f " + " ".join(str(i + 1) for i in q) + "\n" for q in quads))
+    assert import_points(bpy, path) == {"FINISHED"}
+    obj = bpy.context.view_layer.objects.active
+    assert obj.name == "tile" and len(obj.data.vertices) == 100
+    assert len(obj.data.polygons) == 2 * len(quads)
+    assert_georeferenced_exactly(obj, verts)
+    assert fit(bpy, obj) == {"FINISHED"}
+
+
+def test_a_malformed_file_is_refused_with_the_reader_s_words_and_nothing_is_made(
+        clean_scene, tmp_path):
+    bpy = clean_scene
+    core = core_module()
+    short = write_asc(tmp_path / "short.asc", rows=6, cols=6)
+    short.write_text(short.read_text().rsplit("\n", 3)[0] + "\n")  # two rows cut off
+    letters = tmp_path / "letters.xyz"
+    letters.write_text("1 2 3\n4 5 6\n7 eight 9\n")
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    unknown = tmp_path / "scan.las"
+    unknown.write_bytes(b"LASF")
+    before = (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.collections))
+    for path in (short, letters, empty, unknown, tmp_path / "missing.xyz", tmp_path):
+        with pytest.raises(core.FileFormatError) as said:
+            meshio().read_geometry(path)
+        with pytest.raises(RuntimeError, match=re.escape(str(said.value))):
+            import_points(bpy, path)
+        assert (len(bpy.data.objects), len(bpy.data.meshes),
+                len(bpy.data.collections)) == before
+    # a spline saved by Export Spline: the other importer is named
+    surf = core.fit_surface(grid(8)[0], tolerance=1e-2, max_control_points=100)
+    spline = tmp_path / "spline.npz"
+    surf.save(spline)
+    with pytest.raises(RuntimeError, match="it is a TCB spline; import it with File > Import > "
+                       "TCB Spline"):
+        import_points(bpy, spline)
+    with pytest.raises(RuntimeError, match="No file chosen"):
+        import_points(bpy, "")
+    assert (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.collections)) == before
