@@ -2533,8 +2533,10 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
                 if fill is not None:
                     bad |= fill[0]
                 if bad.any() and not self.drop_invalid:
-                    words = what or (f"{int(bad.sum())} of the {len(points)} points have NaN or "
-                                     "infinite coordinates")
+                    k = int(bad.sum())
+                    words = what or (f"{k} of the {len(points)} points "
+                                     f"{'has' if k == 1 else 'have'} NaN or infinite "
+                                     "coordinates")
                     raise core.FileFormatError(f"{label}: {words}; turn on Leave Out Invalid "
                                                "Points to leave them out")
                 if bad.any():
@@ -2585,7 +2587,8 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
         if np.any(origin != 0):
             text += (f"; far from the world origin: '{obj.name}' is at "
                      f"({', '.join(f'{c:.10g}' for c in origin)}), its vertices relative to it "
-                     "(32-bit floats keep the file's precision)")
+                     "(32-bit floats keep the file's precision; View > Frame Selected shows "
+                     "it)")
         self.report({"INFO"}, text)
         for note in notes:  # (after the summary: the status bar shows the last report)
             self.report({"WARNING"}, f"{label}: {note}" if not note.startswith(label) else note)

@@ -149,8 +149,9 @@ def test_a_utm_dem_keeps_the_file_s_precision_and_fits(clean_scene, tmp_path, ca
 
 
 def test_reader_warnings_become_warning_reports(clean_scene, tmp_path, capfd):
-    """A float32 array of map coordinates (the reader says it is rounded) and a DEM whose
-    no-data cells have no NODATA_value (left out, with a warning; refused when asked)."""
+    """A float32 array of map coordinates (the reader says it is rounded), a DEM whose
+    no-data cells have no NODATA_value and a text file with a NaN row (left out, with a
+    warning; refused with Leave Out Invalid Points off)."""
     bpy = clean_scene
     rng = np.random.default_rng(2)
     xy = rng.random((300, 2)) * 50.0
@@ -182,6 +183,31 @@ def test_reader_warnings_become_warning_reports(clean_scene, tmp_path, capfd):
     before = len(bpy.data.objects), len(bpy.data.meshes)
     with pytest.raises(RuntimeError, match="-9999.*turn on Leave Out Invalid Points"):
         import_points(bpy, bare, drop_invalid=False)
+    assert (len(bpy.data.objects), len(bpy.data.meshes)) == before
+
+    # a NaN row of a text file; the active collection excluded: the scene's takes the object
+    gaps = tmp_path / "gaps.csv"
+    gaps.write_text("x,y,z\n0,0,1\n1,0,2\nnan,1,2\n0,1,3\n1,1,4\n")
+    coll = bpy.data.collections.new("Excluded")
+    bpy.context.scene.collection.children.link(coll)
+    layer = bpy.context.view_layer.layer_collection.children["Excluded"]
+    bpy.context.view_layer.active_layer_collection = layer
+    layer.exclude = True
+    capfd.readouterr()
+    try:
+        assert import_points(bpy, gaps) == {"FINISHED"}
+    finally:
+        bpy.context.view_layer.active_layer_collection = bpy.context.view_layer.layer_collection
+    out = capfd.readouterr().out
+    assert "Imported 4 points from gaps.csv" in out
+    assert "Warning: gaps.csv: left out 1 point with NaN or infinite coordinates" in out
+    obj = bpy.context.view_layer.objects.active
+    assert obj.name == "gaps" and obj.users_collection[0] == bpy.context.scene.collection
+    assert np.array_equal(world(obj), [[0, 0, 1], [1, 0, 2], [0, 1, 3], [1, 1, 4]])
+    before = len(bpy.data.objects), len(bpy.data.meshes)
+    with pytest.raises(RuntimeError, match="gaps.csv: 1 of the 5 points has NaN or infinite "
+                       "coordinates; turn on Leave Out Invalid Points"):
+        import_points(bpy, gaps, drop_invalid=False)
     assert (len(bpy.data.objects), len(bpy.data.meshes)) == before
 
 
