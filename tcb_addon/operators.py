@@ -55,6 +55,16 @@ def _user_errors():
     return (bridge.SelectionError, core.TCBError, ValueError)
 
 
+def _refused_file(op, ex: Exception) -> set:
+    """An import operator's ERROR report of ``ex`` (a message for the user, or an OSError
+    reading ``op.filepath``) and ``{'CANCELLED'}``."""
+    if isinstance(ex, _user_errors()):
+        op.report({"ERROR"}, str(ex))
+    else:
+        op.report({"ERROR"}, f"Could not read {op.filepath}: {ex.strerror or ex}")
+    return {"CANCELLED"}
+
+
 def check_settings(op, automatic: bool = False) -> None:
     """A :class:`bridge.SelectionError` naming each numeric setting of ``op`` (those it has of
     Tolerance, Max Control Points, Max Iterations, Smoothness and Resolution) out of its range;
@@ -2426,12 +2436,8 @@ class TCB_OT_import_spline(bpy.types.Operator, ImportHelper):
             )  # fmt: skip
             edited = int(surf.report.get("edited", 0))
             sources, notes = _import_sources(context, surf, label)
-        except _user_errors() as ex:
-            self.report({"ERROR"}, str(ex))
-            return {"CANCELLED"}
-        except OSError as ex:
-            self.report({"ERROR"}, f"Could not read {self.filepath}: {ex.strerror or ex}")
-            return {"CANCELLED"}
+        except (*_user_errors(), OSError) as ex:
+            return _refused_file(self, ex)
         name = os.path.splitext(label)[0] or "Spline"
         coll = bridge.result_collection(context, f"TCB {name}")
         surface, net = _new_result(coll, name, surf, resolution, tessellation=mesh)
@@ -2558,12 +2564,8 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
                     raise core.FileFormatError(
                         f"{label}: coordinates too large for Blender's 32-bit floats (largest "
                         f"{np.abs(points).max():.3g})")
-        except _user_errors() as ex:
-            self.report({"ERROR"}, str(ex))
-            return {"CANCELLED"}
-        except OSError as ex:
-            self.report({"ERROR"}, f"Could not read {self.filepath}: {ex.strerror or ex}")
-            return {"CANCELLED"}
+        except (*_user_errors(), OSError) as ex:
+            return _refused_file(self, ex)
         name = os.path.splitext(label)[0] or "Points"
         layer = context.view_layer.active_layer_collection
         coll = (layer.collection if layer is not None and not layer.exclude

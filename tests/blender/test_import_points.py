@@ -31,6 +31,19 @@ def import_points(bpy, path, *selected, **props):
         return bpy.ops.tcb.import_points(filepath=str(path), **props)
 
 
+def import_into(bpy, name, path, exclude=False):
+    """import_points with a new collection ``name`` the active one (excluded from the view
+    layer with ``exclude``), the scene's collection active again after."""
+    bpy.context.scene.collection.children.link(bpy.data.collections.new(name))
+    layer = bpy.context.view_layer.layer_collection.children[name]
+    bpy.context.view_layer.active_layer_collection = layer
+    layer.exclude = exclude
+    try:
+        return import_points(bpy, path)
+    finally:
+        bpy.context.view_layer.active_layer_collection = bpy.context.view_layer.layer_collection
+
+
 def world(obj) -> np.ndarray:
     """The object's vertices in world space, in float64 (its matrix applied in numpy)."""
     m = np.array(obj.matrix_world, dtype=np.float64)
@@ -120,20 +133,13 @@ def test_a_utm_dem_keeps_the_file_s_precision_and_fits(clean_scene, tmp_path, ca
     assert np.allclose(expected[0], [CORNER[0] + 5.0, CORNER[1] + 13.5 * 10.0,
                                      heights(5.0, 135.0) + 100.0])
     # a layer collection made active: the object goes there
-    coll = bpy.data.collections.new("Survey")
-    bpy.context.scene.collection.children.link(coll)
-    bpy.context.view_layer.active_layer_collection = (
-        bpy.context.view_layer.layer_collection.children["Survey"])
     capfd.readouterr()
-    try:
-        assert import_points(bpy, path) == {"FINISHED"}
-    finally:
-        bpy.context.view_layer.active_layer_collection = bpy.context.view_layer.layer_collection
+    assert import_into(bpy, "Survey", path) == {"FINISHED"}
     out = capfd.readouterr().out
     assert f"Imported {len(expected)} points from dem.asc" in out and "far from the world" in out
 
     obj = bpy.context.view_layer.objects.active
-    assert obj.name == "dem" and obj.users_collection[0] == coll and obj.select_get()
+    assert obj.name == "dem" and obj.users_collection[0] == bpy.data.collections["Survey"] and obj.select_get()
     assert len(obj.data.vertices) == len(expected)
     origin = np.array(obj.matrix_world.translation)
     assert np.abs(origin - expected.mean(axis=0)).max() < 100.0  # the object is at the data
@@ -188,16 +194,8 @@ def test_reader_warnings_become_warning_reports(clean_scene, tmp_path, capfd):
     # a NaN row of a text file; the active collection excluded: the scene's takes the object
     gaps = tmp_path / "gaps.csv"
     gaps.write_text("x,y,z\n0,0,1\n1,0,2\nnan,1,2\n0,1,3\n1,1,4\n")
-    coll = bpy.data.collections.new("Excluded")
-    bpy.context.scene.collection.children.link(coll)
-    layer = bpy.context.view_layer.layer_collection.children["Excluded"]
-    bpy.context.view_layer.active_layer_collection = layer
-    layer.exclude = True
     capfd.readouterr()
-    try:
-        assert import_points(bpy, gaps) == {"FINISHED"}
-    finally:
-        bpy.context.view_layer.active_layer_collection = bpy.context.view_layer.layer_collection
+    assert import_into(bpy, "Excluded", gaps, exclude=True) == {"FINISHED"}
     out = capfd.readouterr().out
     assert "Imported 4 points from gaps.csv" in out
     assert "Warning: gaps.csv: left out 1 point with NaN or infinite coordinates" in out
