@@ -68,8 +68,8 @@ BIG_BUDGET = 100_000
 
 def settings(quick: bool) -> dict:
     if quick:
-        return dict(n=2000, budget=250, initial=20, initial_dcb=8, per_iteration=8,
-                    iterations=25, same_iters=4, dem_step=8)
+        return dict(n=1000, budget=150, initial=12, initial_dcb=5, per_iteration=8,
+                    iterations=25, same_iters=4, dem_step=12)
     return dict(n=3000, budget=400, initial=33, initial_dcb=13, per_iteration=12, iterations=40,
                 same_iters=5, dem_step=4)
 

@@ -11,9 +11,9 @@ its longest axis. Tolerance 1e-3 (the 32 x 16 sphere: 3e-3), other settings defa
 Columns: the shared border edges; the gap between the two surfaces' borders (``report["join"]``:
 the largest and RMS distance from the second's border to the first's along the shared edges,
 over the diagonal), alone -> joined; *mesh gap*: the same seen on the tessellations at
-resolution 256 (the largest distance from the second mesh's border vertices near the seam to
-the first mesh), measured without ``core.join``; the second patch's RMS at its vertices over
-the diagonal, its control points and seconds, alone -> joined; the share of its mesh's
+resolution 256 (``--quick``: 128; the largest distance from the second mesh's border vertices
+near the seam to the first mesh), measured without ``core.join``; the second patch's RMS at its
+vertices over the diagonal, its control points and seconds, alone -> joined; the share of its mesh's
 area where the joined surface folds over (``report["folded"]``); and at how many of the points
 on its triangles along the seam it turns over (``report["join"]["seam_folds"]`` of
 ``"seam_samples"``, ``core.join.seam_folds``).
@@ -68,13 +68,13 @@ def cases(quick: bool):
     yield "nefertiti, halves", 1e-3, split_mesh(pts, faces, c[:, axis] < np.median(pts[:, axis]))
 
 
-def mesh_gap(first, second, seam_points, reach, ends) -> float:
-    """The largest distance from ``second``'s tessellation's border vertices within ``reach``
-    of the seam (``seam_points``, dense along the shared edges), and not within 4 ``reach``
-    of its ``ends`` (an open seam's: the border goes on there along the second patch alone),
-    to ``first``'s tessellation."""
-    va, fa = first.tessellate(256)
-    vb, fb = second.tessellate(256)
+def mesh_gap(first, second, seam_points, reach, ends, resolution: int = 256) -> float:
+    """The largest distance from ``second``'s tessellation's (at ``resolution``) border
+    vertices within ``reach`` of the seam (``seam_points``, dense along the shared edges), and
+    not within 4 ``reach`` of its ``ends`` (an open seam's: the border goes on there along the
+    second patch alone), to ``first``'s tessellation."""
+    va, fa = first.tessellate(resolution)
+    vb, fb = second.tessellate(resolution)
     edge = np.unique(border_edges(fb))
     near = cKDTree(seam_points).query(vb[edge])[0] <= reach
     if len(ends):
@@ -84,8 +84,10 @@ def mesh_gap(first, second, seam_points, reach, ends) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="the two spheres only")
+    ap.add_argument("--quick", action="store_true",
+                    help="the two spheres only, mesh gap at resolution 128")
     args = ap.parse_args()
+    resolution = 128 if args.quick else 256
     warnings.simplefilter("ignore")
     print("| case | shared edges | gap max alone -> joined | gap RMS | mesh gap | second's RMS "
           "| control points | seconds | folded | seam turned |")
@@ -106,7 +108,7 @@ def main() -> None:
         reach = 0.5 * float(np.median(np.linalg.norm(pb[mine[:, 0]] - pb[mine[:, 1]], axis=1)))
         at, count = np.unique(mine, return_counts=True)
         ends = pb[at[count == 1]]
-        gaps = [mesh_gap(first, s_, seam, reach, ends) / d for s_ in (alone, joined)]
+        gaps = [mesh_gap(first, s_, seam, reach, ends, resolution) / d for s_ in (alone, joined)]
         print(f"| {name} | {j['shared_edges']} | {j['gap_max_unjoined_rel']:.2e} -> "
               f"{j['gap_max_rel']:.2e} | {j['gap_rms_unjoined_rel']:.2e} -> {j['gap_rms_rel']:.2e} "
               f"| {gaps[0]:.2e} -> {gaps[1]:.2e} | {alone.report['rms_rel']:.2e} -> "

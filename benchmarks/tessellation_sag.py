@@ -1,6 +1,6 @@
 """How far the surface mesh strays from the spline, per resolution, and what Auto Resolution takes.
 
-    .venv/bin/python benchmarks/tessellation_sag.py [--quick]
+    .venv/bin/python benchmarks/tessellation_sag.py [--quick]    # (--quick: the saddle at 3e-4)
 
 Blender users measure the mesh, not the spline: at the fixed default of 64 grid steps a tight
 fit's mesh strayed several times the fit's own max error from it (user test of the
@@ -37,9 +37,10 @@ def cases(quick: bool):
     saddle = np.c_[x.ravel(), y.ravel(), 0.5 * (x * x - y * y).ravel()]
     i = np.arange(25).reshape(5, 5)
     quads = np.c_[i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()]
-    yield "saddle, 5 x 5 quads", saddle, quads, 1e-4
-    if quick:
+    if quick:  # (at 1e-4 its fit alone takes 20-30 s: stalled at 1022 control points)
+        yield "saddle, 5 x 5 quads", saddle, quads, 3e-4
         return
+    yield "saddle, 5 x 5 quads", saddle, quads, 1e-4
     for name in ("nefertiti", "three_peaks"):
         d = D.mesh(name)
         for tol in (1e-3, 1e-4):
