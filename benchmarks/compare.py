@@ -1,7 +1,7 @@
 """TCB against its baselines on the same points, in the same process (issue 5).
 
     .venv/bin/python benchmarks/compare.py            # full run, 3 seeds, writes docs/compare.md
-    .venv/bin/python benchmarks/compare.py --quick    # < 2 minutes, writes docs/compare_quick.md
+    .venv/bin/python benchmarks/compare.py --quick    # < 1 minute, writes docs/compare_quick.md
 
 Every dataset runs once per seed (``--seeds``; 3 for the full run, 1 with ``--quick``): the seed
 draws the scattered samples, the hold-out split and TCB's/DCB's random choices (initial knots,
@@ -334,7 +334,7 @@ def to_markdown(lines) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="small data, few datasets (< 2 min)")
+    ap.add_argument("--quick", action="store_true", help="small data, few datasets (< 1 min)")
     ap.add_argument("--out", type=Path, default=None, help="Markdown output file")
     ap.add_argument("--only", default=None, help="run only datasets whose name contains this")
     ap.add_argument("--seeds", type=int, default=None,

@@ -101,13 +101,13 @@ def test_holes_quick():
 
 
 def test_noisy_meshes_quick():
-    """``benchmarks/noisy_meshes.py --quick`` (budget 1000 control points): for each noisy grid
-    mesh at a tolerance below its noise, the default (the vertices counted) takes under a fifth
-    of the control points of the faces' samples counted, and ends at least 1.5x closer to the
-    mesh without noise; its faces, which hardly sag, stay flat. The noisy cap of a 32 x 16 UV
-    sphere, whose facets sag by more than its noise, is sampled curved and ends at least 2x
-    closer to the sphere than as through the thirty-seventh session (flat samples), with fewer
-    control points than it has vertices."""
+    """``benchmarks/noisy_meshes.py --quick``: for each noisy grid mesh at a tolerance below its
+    noise, the default (the vertices counted) takes under a fifth of the control points of the
+    faces' samples counted, and ends at least 1.5x closer to the mesh without noise; its faces,
+    which hardly sag, stay flat. The noisy cap of a 32 x 16 UV sphere, whose facets sag by more
+    than its noise, is sampled curved and ends at least 2x closer to the sphere than as through
+    the thirty-seventh session (flat samples), with fewer control points than it has
+    vertices."""
     res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "noisy_meshes.py"),
                           "--quick"], capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert res.returncode == 0, res.stderr[-3000:]
