@@ -149,10 +149,11 @@ def test_coarse_meshes_quick():
 
 def test_tessellation_sag_quick():
     """``benchmarks/tessellation_sag.py --quick`` prints its row: the sag falls from 64 to 512
-    grid steps (at each step, and 2.5x in all: 6.4x with the net of 1022 control points the
-    25 vertices had got, 3.1x with the 1755 they get since the face check samples the border
-    edges too, a wigglier spline: forty-fifth session), and Auto Resolution's pick is the
-    coarsest of 64-256 within the fit's max error (else 256)."""
+    grid steps (at each step, and 4x in all: 14.6x at the quick run's tolerance 3e-4, 502
+    control points; at 1e-4 the 25 vertices' net is 1022 or, since the face check samples
+    the border edges too, 1755 control points, a wigglier spline whose sag fell 3.1x:
+    forty-fifth session), and Auto Resolution's pick is the coarsest of 64-256 within the
+    fit's max error (else 256)."""
     res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "tessellation_sag.py"),
                           "--quick"], capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert res.returncode == 0, res.stderr[-3000:]
@@ -160,7 +161,7 @@ def test_tessellation_sag_quick():
             if r.startswith("| ") and not r.startswith("| data")]
     assert [r[0].strip() for r in rows] == ["saddle, 5 x 5 quads"]
     worst, sags, auto = float(rows[0][3]), [float(x) for x in rows[0][4:8]], int(rows[0][8])
-    assert sags[0] > 2.5 * sags[-1] and all(a > b for a, b in zip(sags, sags[1:])), sags
+    assert sags[0] > 4 * sags[-1] and all(a > b for a, b in zip(sags, sags[1:])), sags
     within = [r for r, s in zip((64, 128, 256), sags) if s <= worst]
     assert auto == (within[0] if within else 256)
 

