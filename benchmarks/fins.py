@@ -9,15 +9,16 @@ each there, and between them the surface swung off the mesh as a fin that no err
 check evaluates each fit of the loop at samples drawn apart from the fitted ones; where it
 strays, it fits the samples of those faces as well.
 
-Rows: each case (and seed, ``--seeds``) with the check ``off`` (``FACE_CHECK = False``: the
-loop before it), ``faces`` (``BORDER_SAMPLES = False``: samples inside the faces only, the
-check before the forty-fifth session) and ``on`` (as shipped: the border edges sampled too). Columns: control points; the reported max error at the vertices and on the faces
-(``faces_max``: the fitted samples, and with the check its samples not fitted too); the
-distance from the surface tessellated at 256 steps to the mesh's faces (``off mesh``: max and
-99th percentile; the truth a user sees); the check's samples the surface was fitted to
-(``report["stray_samples"]``); seconds. Over the bounding box's diagonal where it says so.
-The grids are benchmarks/coarse_meshes.py's: the folded one ``z = |y|``, the smooth ones
-``0.3 sin 2x cos y``, over [-1, 1]^2.
+Rows: each case (and seed, ``--seeds``) with the check ``off`` (``FACE_CHECK = False``: the loop
+before it), ``faces`` (``BORDER_SAMPLES = False``: samples inside the faces only, the check
+before the forty-fifth session) and ``on`` (as shipped: the border edges sampled too). Columns:
+control points; the reported max error at the vertices and on the faces (``faces_max``: the
+fitted samples, and with the check its samples not fitted too); the distance from the surface
+tessellated at 256 steps to the mesh's faces (``off mesh``: max and 99th percentile; the truth a
+user sees); the check's samples the surface was fitted to (``report["stray_samples"]``);
+seconds. Over the bounding box's diagonal where it says so. The grids are
+benchmarks/coarse_meshes.py's: the folded one ``z = |y|``, the smooth ones ``0.3 sin 2x cos y``,
+over [-1, 1]^2.
 
     .venv/bin/python benchmarks/fins.py [--quick] [--seeds N]
 """

@@ -178,7 +178,7 @@ def parse(text: str) -> list:
         case = cases.setdefault((c[0], c[1], c[2], c[3]), {"class": dict(FUNCS)[c[0]],
                                                          "frac": frac})
         case[c[4]] = {"cp": int(c[5]), "rms": float(c[7]), "max": float(c[8]), "nan": int(c[9])}
-    return [r for r in cases.values() if all(p in r for p in PEERS) and "ours-d2" in r]
+    return [r for r in cases.values() if all(p in r for p in PEERS) and any(m in r for m in OURS)]
 
 
 def main() -> None:

@@ -21,7 +21,8 @@ or ``faces = None`` for a point cloud. Supported:
                            ``dy < 0``: at the larger y) or the raster's ``transform``
                            (rasterio) or ``geotransform`` (GDAL)
 ``.asc``                   a DEM as an ESRI ASCII grid (GDAL's AAIGrid; ``ncols, nrows,
-                           xllcorner, yllcorner, cellsize, NODATA_value``): its cells' centres
+                           xllcorner, yllcorner, cellsize, NODATA_value``): its cells' centres;
+                           without that header, x y z text columns (as ``.xyz``)
 =========================  =====================================================================
 
 Writers: :func:`write_mesh` for ``.obj`` (ASCII) and ``.ply`` (binary little endian).
@@ -1044,7 +1045,15 @@ def _read_npz(path: Path, keep_fill_values: bool = False
     )
 
 
-# the header keys of an ESRI ASCII grid (lower case) and how many a grid needs
+def _is_number(word: str) -> bool:
+    try:
+        float(word)
+    except ValueError:
+        return False
+    return True
+
+
+# the header keys of an ESRI ASCII grid (lower case)
 _ASC_KEYS = ("ncols", "nrows", "xllcorner", "yllcorner", "xllcenter", "yllcenter", "cellsize",
              "dx", "dy", "nodata_value")
 
@@ -1059,6 +1068,10 @@ def _read_asc(path: Path, keep_fill_values: bool = False
     nodes are the cells' centres, as the DEM ``.npz`` with a ``geotransform`` reads them
     (:func:`_dem_points`: units, no-data cells and fill values alike)."""
     lines = _read_text(path).splitlines()
+    first = next((ln.split() for ln in lines if ln.split()), [""])
+    if first[0].lower() not in _ASC_KEYS:
+        # (.asc is also what CloudCompare, Geomagic and Leica call x y z text: read as such)
+        return _read_xyz(path)
     header: dict[str, float] = {}
     start = 0
     for start, line in enumerate(lines):
@@ -1087,7 +1100,8 @@ def _read_asc(path: Path, keep_fill_values: bool = False
         raise _MalformedError(f"not an ESRI ASCII grid: its header has no {', '.join(missing)} "
                               "(ncols, nrows, xllcorner, yllcorner, cellsize, NODATA_value)")
     cols, rows = header["ncols"], header["nrows"]
-    if not (cols == int(cols) and rows == int(rows) and cols >= 2 and rows >= 2):
+    if not (np.isfinite([cols, rows]).all() and cols == int(cols) and rows == int(rows)
+            and cols >= 2 and rows >= 2):
         raise _MalformedError(f"ncols and nrows must be whole numbers of at least 2; got "
                               f"{cols:g} and {rows:g}")
     cols, rows = int(cols), int(rows)
@@ -1097,13 +1111,17 @@ def _read_asc(path: Path, keep_fill_values: bool = False
         raise _MalformedError(f"the cell size must be positive; got {dx:g} x {dy:g}")
     x0 = header["xllcorner"] if "xllcorner" in header else header["xllcenter"] - dx / 2
     y0 = header["yllcorner"] if "yllcorner" in header else header["yllcenter"] - dy / 2
-    try:
-        values = np.array(" ".join(lines[start:]).split(), dtype=np.float64)
-    except ValueError as exc:
-        raise _MalformedError(f"the heights after the header must be numbers ({exc})") from None
+    body = "\n".join(lines[start:])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # (it stops at a bad value: below)
+        values = np.fromstring(body, dtype=np.float64, sep=" ")  # (no string per value)
     if values.size != rows * cols:
+        bad = next((w for w in body.split() if not _is_number(w)), None)  # (errors only)
+        if bad is not None:
+            raise _MalformedError(f"the heights after the header must be numbers; got {bad!r}")
+        short = " (truncated?)" if values.size < rows * cols else ""
         raise _MalformedError(f"the header says {rows} rows of {cols} heights ({rows * cols}), "
-                              f"but {values.size} follow it (truncated?)")
+                              f"but {values.size} follow it{short}")
     grid = {"elevation": values.reshape(rows, cols),
             "geotransform": np.array([x0, dx, 0.0, y0 + rows * dy, 0.0, -dy])}
     if "nodata_value" in header:

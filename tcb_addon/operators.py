@@ -2571,7 +2571,15 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
         coll = (layer.collection if layer is not None and not layer.exclude
                 else context.scene.collection)
         mesh = bridge.new_mesh(name, local, faces)
-        obj = bridge.link_new_object(coll, name, mesh, origin)
+        try:
+            obj = bridge.link_new_object(coll, name, mesh, origin)
+        except RuntimeError as ex:  # (a collection linked from a library: read-only; review)
+            for made in [o for o in bpy.data.objects if o.data == mesh]:
+                bpy.data.objects.remove(made)
+            bpy.data.meshes.remove(mesh)
+            self.report({"ERROR"}, f"Cannot add '{name}' to the collection {coll.name!r} ({ex}); "
+                        "make another collection active and import again")
+            return {"CANCELLED"}
         for other in context.selected_objects:
             other.select_set(False)
         try:

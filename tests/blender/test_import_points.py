@@ -139,7 +139,8 @@ def test_a_utm_dem_keeps_the_file_s_precision_and_fits(clean_scene, tmp_path, ca
     assert f"Imported {len(expected)} points from dem.asc" in out and "far from the world" in out
 
     obj = bpy.context.view_layer.objects.active
-    assert obj.name == "dem" and obj.users_collection[0] == bpy.data.collections["Survey"] and obj.select_get()
+    assert obj.name == "dem" and obj.select_get()
+    assert obj.users_collection[0] == bpy.data.collections["Survey"]
     assert len(obj.data.vertices) == len(expected)
     origin = np.array(obj.matrix_world.translation)
     assert np.abs(origin - expected.mean(axis=0)).max() < 100.0  # the object is at the data

@@ -770,7 +770,8 @@ def test_an_esri_ascii_grid_is_read_as_its_cells_centres(tmp_path: Path) -> None
     lower-left corner or centre, the cell size and NODATA_value, then the rows from the
     north), is read as the same raster with its geotransform in a .npz: the cells' centres,
     the hill where it is, no-data cells left out; GDAL's dx / dy for oblong cells; a header
-    or body that is not a grid is refused with words."""
+    or body that is not a grid is refused with words; a file without the header is x y z
+    text, as other tools write .asc clouds (review)."""
     rows, cols, d, x0, y0 = 5, 6, 10.0, 500_000.0, 4_200_000.0
     elev = np.arange(rows * cols, dtype=float).reshape(rows, cols) % 7
     elev[1, 4] = 100.0  # row 1 from the north, column 4 from the west
@@ -808,9 +809,14 @@ def test_an_esri_ascii_grid_is_read_as_its_cells_centres(tmp_path: Path) -> None
             (corner, body.rsplit(" ", 1)[0], "5 rows of 6 heights \\(30\\), but 29 follow"),
             (corner.replace("nrows 5", "nrows 5.5"), body, "whole numbers of at least 2"),
             (corner.replace(f"cellsize {d}", "cellsize -1"), body, "must be positive"),
-            (corner, body.replace("100", "1OO"), "must be numbers")):
+            (corner, body.replace("100", "1OO"), "must be numbers"),
+            (corner.replace("ncols 6", "ncols inf"), body, "whole numbers of at least 2")):
         with pytest.raises(FileFormatError, match=words):
             read_geometry(write("bad.asc", head, text))
+    # without the header, .asc is x y z text (as CloudCompare and others export clouds)
+    (tmp_path / "cloud.asc").write_text("1 2 3\n4 5 6\n7 8 9.5\n")
+    pts, faces = read_geometry(tmp_path / "cloud.asc")
+    assert faces is None and np.array_equal(pts, [[1, 2, 3], [4, 5, 6], [7, 8, 9.5]])
 
 
 def test_a_dem_fill_value_without_a_nodata_key_is_refused(tmp_path: Path) -> None:

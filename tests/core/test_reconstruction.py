@@ -3116,7 +3116,8 @@ def test_the_face_check_samples_the_border_edges_whatever_the_order_of_the_faces
     """The face check (FaceCheck) draws samples on the mesh's border edges as well as inside
     its faces, as far apart along them as the faces' samples are: on the bent sheet's 60
     border edges, each sample on one, at the border of the domain, and the same samples for
-    the faces shuffled and each face started at another corner (as mesh_samples' draws)."""
+    the faces shuffled and each face started at another corner (as mesh_samples' draws); a
+    long strip's border gets at most a quarter as many as its faces (review)."""
     from core.surface import FaceCheck, _border_samples, border_edges
 
     V, F = bent_sheet()
@@ -3148,6 +3149,14 @@ def test_the_face_check_samples_the_border_edges_whatever_the_order_of_the_faces
           | (check.points[:, 2] > 100 - 1e-9))
     # the border's 600 units of length at the faces' spacing (20 000 / 4000)^0.5: 269
     assert on.sum() == len(check.uv) - 4000 == 269, (on.sum(), len(check.uv))
+    # a long strip (1 x 400): its border, 802 long, would take 1604 samples; a quarter at most
+    x = np.repeat(np.linspace(0.0, 400.0, 401), 2)
+    strip = np.c_[x, np.tile([0.0, 1.0], 401), np.zeros(802)]
+    k = 2 * np.arange(400)
+    tri = np.r_[np.c_[k, k + 2, k + 3], np.c_[k, k + 3, k + 1]]
+    long = FaceCheck(strip, strip[:, :2], tri, budget=500, floor=1e-6, curved=False)
+    long._draw(2000)
+    assert len(long.uv) == 2000 + 500
 
 
 def test_the_face_check_returns_the_samples_of_the_faces_where_a_fit_strays():
