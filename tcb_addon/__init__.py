@@ -6,7 +6,8 @@ extension's own subpackage). Modules:
 - ``bridge``: read the selection into numpy arrays, write meshes and attributes;
 - ``properties``: fit settings (scene) and result data (``object.tcb``);
 - ``operators``: ``bpy.ops.tcb.*`` (fit, refine, re-tessellate, deviation map, net, export,
-  import; File > Import > TCB Spline and TCB Points);
+  import; File > Import > TCB Spline and TCB Points, and point files dropped on the 3D
+  viewport);
 - ``ui``: the View3D > Sidebar > TCB panels.
 """
 

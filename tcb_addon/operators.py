@@ -20,7 +20,8 @@ import weakref
 
 import bpy
 import numpy as np
-from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import (BoolProperty, CollectionProperty, FloatProperty, IntProperty,
+                       StringProperty)
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
 from . import bridge, live
@@ -58,11 +59,15 @@ def _user_errors():
 def _refused_file(op, ex: Exception) -> set:
     """An import operator's ERROR report of ``ex`` (a message for the user, or an OSError
     reading ``op.filepath``) and ``{'CANCELLED'}``."""
-    if isinstance(ex, _user_errors()):
-        op.report({"ERROR"}, str(ex))
-    else:
-        op.report({"ERROR"}, f"Could not read {op.filepath}: {ex.strerror or ex}")
+    op.report({"ERROR"}, _refusal_text(ex, op.filepath))
     return {"CANCELLED"}
+
+
+def _refusal_text(ex: Exception, filepath: str) -> str:
+    """The words of ``ex``: a message for the user, or an OSError reading ``filepath``."""
+    if isinstance(ex, _user_errors()):
+        return str(ex)
+    return f"Could not read {filepath}: {ex.strerror or ex}"
 
 
 def check_settings(op, automatic: bool = False) -> None:
@@ -2474,7 +2479,8 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
     .txt .csv .pts, NumPy .npy .npz, DEM rasters: .npz with 'elevation', ESRI ASCII grid
     .asc), ready for Fit Surface. Points far from the world origin (map coordinates: UTM,
     national grids) keep the file's precision: the object's Location is put near them and the
-    vertices are stored relative to it, as Fit Surface places its results"""
+    vertices are stored relative to it, as Fit Surface places its results. Several files
+    selected in the file browser or dropped on the 3D viewport make an object each"""
 
     # .obj, .ply and .off are read too (as meshes of their triangles; a PLY without faces as
     # points), though Blender imports .obj and .ply itself: its importers store the file's
@@ -2491,6 +2497,10 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
     filepath: StringProperty(name="File Path", description="Filepath used for importing the "
                              "file", maxlen=1024, subtype="FILE_PATH",
                              options={"SKIP_PRESET", "HIDDEN", "PATH_SUPPORTS_BLEND_RELATIVE"})  # fmt: skip
+    # the file browser's selection and a drop (TCB_FH_import_points); scripts give filepath
+    files: CollectionProperty(type=bpy.types.OperatorFileListElement,
+                              options={"HIDDEN", "SKIP_SAVE"})  # fmt: skip
+    directory: StringProperty(subtype="DIR_PATH", options={"HIDDEN", "SKIP_SAVE"})
     drop_invalid: BoolProperty(
         name="Leave Out Invalid Points", default=True,
         description="Leave out points with NaN or infinite coordinates and a DEM's or point "
@@ -2502,7 +2512,64 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
     def poll(cls, context):
         return _poll_object_mode(cls, context, surface=False)
 
+    def invoke(self, context, event):
+        if self.directory and any(f.name for f in self.files):  # dropped: no file browser
+            if context.window is None:  # (background mode)
+                return self.execute(context)
+            names = [f.name for f in self.files if f.name]
+            title = names[0] if len(names) == 1 else f"{len(names)} files in {self.directory}"
+            return context.window_manager.invoke_props_dialog(
+                self, title=f"Import Points: {title}", confirm_text="Import")
+        return ImportHelper.invoke(self, context, event)  # the file browser
+
+    def _paths(self) -> list[str]:
+        """The files to import: those selected in the file browser or dropped (``directory``
+        and ``files``), else ``filepath`` (scripts)."""
+        names = [f.name for f in self.files if f.name]
+        if self.directory and names:
+            return [os.path.join(self.directory, name) for name in names]
+        return [self.filepath]
+
     def execute(self, context):
+        paths = self._paths()
+        if len(paths) == 1:
+            obj = self._import_file(context, paths[0])
+            if obj is None:
+                return {"CANCELLED"}
+            made, refused = [obj], []
+        else:
+            made, refused = [], []
+            for path in paths:  # (each file read, checked and made before the next)
+                obj = self._import_file(context, path, several=True)
+                if obj is None:
+                    refused.append(os.path.basename(path))
+                else:
+                    made.append(obj)
+        if made:
+            for other in context.selected_objects:
+                other.select_set(False)
+            for obj in made:  # (the last one active)
+                try:
+                    obj.select_set(True)
+                    context.view_layer.objects.active = obj
+                except RuntimeError:  # (not in the view layer: cannot be)
+                    pass
+        if len(paths) > 1:
+            names = ", ".join(obj.name for obj in made)
+            if not refused:
+                self.report({"INFO"}, f"Imported {len(made)} files as {names}")
+            elif made:
+                self.report({"WARNING"}, f"Imported {len(made)} of {len(paths)} files, as "
+                            f"{names}; refused {', '.join(refused)} (the errors above say why)")
+            else:
+                self.report({"ERROR"}, f"None of the {len(paths)} files was imported (the "
+                            "errors above say why)")
+        return {"FINISHED"} if made else {"CANCELLED"}
+
+    def _import_file(self, context, filepath: str, several: bool = False):
+        """The new object of one file, or None when the file is refused (an ERROR report says
+        why, prefixed with the file's name with ``several`` when it is not in it; nothing is
+        left made)."""
         core = _core()
         from ..core.meshio import read_geometry
         from ..core.parameterize import fill_value_rows, fill_value_words
@@ -2510,10 +2577,10 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
         notes = []
         # everything that reads the file is done before anything is made (as Import Spline)
         try:
-            if not self.filepath or self.filepath.endswith(("/", "\\")):
+            if not filepath or filepath.endswith(("/", "\\")):
                 raise bridge.SelectionError("No file chosen: choose a point file ("
                                             f"{' '.join(POINT_EXTENSIONS)})")
-            path = _file_path(self.filepath)
+            path = _file_path(filepath)
             label = os.path.basename(path)
             with _warnings.catch_warnings(record=True) as caught:
                 _warnings.simplefilter("always")
@@ -2565,7 +2632,12 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
                         f"{label}: coordinates too large for Blender's 32-bit floats (largest "
                         f"{np.abs(points).max():.3g})")
         except (*_user_errors(), OSError) as ex:
-            return _refused_file(self, ex)
+            text = _refusal_text(ex, filepath)
+            label = os.path.basename(filepath)
+            if several and label not in text:
+                text = f"{label}: {text}"
+            self.report({"ERROR"}, text)
+            return None
         name = os.path.splitext(label)[0] or "Points"
         layer = context.view_layer.active_layer_collection
         coll = (layer.collection if layer is not None and not layer.exclude
@@ -2579,14 +2651,7 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
             bpy.data.meshes.remove(mesh)
             self.report({"ERROR"}, f"Cannot add '{name}' to the collection {coll.name!r} ({ex}); "
                         "make another collection active and import again")
-            return {"CANCELLED"}
-        for other in context.selected_objects:
-            other.select_set(False)
-        try:
-            obj.select_set(True)
-            context.view_layer.objects.active = obj
-        except RuntimeError:  # (not in the view layer: cannot be)
-            pass
+            return None
         hidden = bridge.hiding_collections(context.view_layer, obj)
         if hidden:
             notes.append(f"'{obj.name}' is hidden: its collection {hidden[0]!r} is hidden in the "
@@ -2602,13 +2667,35 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
         self.report({"INFO"}, text)
         for note in notes:  # (after the summary: the status bar shows the last report)
             self.report({"WARNING"}, f"{label}: {note}" if not note.startswith(label) else note)
-        return {"FINISHED"}
+        return obj
 
 
 def menu_import(self, context):
     """File > Import > TCB Spline (.npz) and TCB Points (.xyz .csv .asc ...)."""
     self.layout.operator(TCB_OT_import_spline.bl_idname, text="TCB Spline (.npz)")
     self.layout.operator(TCB_OT_import_points.bl_idname, text="TCB Points (.xyz .csv .asc ...)")
+
+
+# the formats a drop from the file manager onto the 3D viewport imports: not .obj and .ply
+# (Blender's own importers take those, as users expect; File > Import > TCB Points reads them)
+# nor .npz, which is a DEM for Import Points and a spline for Import Spline (Export Spline's
+# format): a file handler is chosen by the extension alone, so every dropped spline would be
+# refused (and a second handler for Import Spline would make Blender ask which, each drop)
+DROP_EXTENSIONS = tuple(e for e in POINT_EXTENSIONS if e not in (".obj", ".ply", ".npz"))
+
+
+class TCB_FH_import_points(bpy.types.FileHandler):
+    """Point files dropped from the file manager onto the 3D viewport: Import Points, an object
+    each (after a dialog with its options)"""
+
+    bl_idname = "TCB_FH_import_points"
+    bl_label = "TCB Points"
+    bl_import_operator = "tcb.import_points"
+    bl_file_extensions = ";".join(DROP_EXTENSIONS)
+
+    @classmethod
+    def poll_drop(cls, context):
+        return context.area is not None and context.area.type == "VIEW_3D"
 
 
 classes = (
@@ -2620,4 +2707,5 @@ classes = (
     TCB_OT_export_spline,
     TCB_OT_import_spline,
     TCB_OT_import_points,
+    TCB_FH_import_points,
 )

@@ -10,6 +10,7 @@ import re
 import sys
 import warnings
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -258,3 +259,131 @@ def test_a_malformed_file_is_refused_with_the_reader_s_words_and_nothing_is_made
     with pytest.raises(RuntimeError, match="No file chosen"):
         import_points(bpy, "")
     assert (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.collections)) == before
+
+
+def write_xyz(path, n, seed=3):
+    """``n`` points of :func:`heights` as x y z text columns."""
+    xy = np.random.default_rng(seed).random((n, 2)) * 80.0
+    pts = np.c_[xy, heights(xy[:, 0], xy[:, 1])]
+    path.write_text("\n".join(f"{x:.9f} {y:.9f} {z:.9f}" for x, y, z in pts) + "\n")
+    return path
+
+
+def import_files(bpy, directory, names, *selected, invoke=False):
+    """Import Points as the file browser's multiple selection, or a drop (``invoke``), calls
+    it: a directory and the files' names, no filepath."""
+    args = ("INVOKE_DEFAULT",) if invoke else ()
+    with bpy.context.temp_override(**select(bpy, *selected)):
+        return bpy.ops.tcb.import_points(*args, directory=str(directory),
+                                         files=[{"name": n} for n in names])
+
+
+def counts(bpy):
+    return len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.collections)
+
+
+def test_several_files_make_an_object_each_all_selected_the_last_active(clean_scene, tmp_path,
+                                                                         capfd):
+    bpy = clean_scene
+    write_xyz(tmp_path / "north.xyz", 50)
+    write_asc(tmp_path / "dem.asc", rows=8, cols=9)
+    other = bpy.data.objects.new("Other", None)
+    bpy.context.scene.collection.objects.link(other)
+    capfd.readouterr()
+    assert import_files(bpy, tmp_path, ["north.xyz", "dem.asc"], other) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "Imported 50 points from north.xyz" in out and "Imported 72 points from dem.asc" in out
+    assert "Imported 2 files as north, dem" in out
+    north, dem = bpy.data.objects["north"], bpy.data.objects["dem"]
+    assert len(north.data.vertices) == 50 and len(dem.data.vertices) == 72
+    assert_georeferenced_exactly(north, read(tmp_path / "north.xyz")[0])
+    assert_georeferenced_exactly(dem, read(tmp_path / "dem.asc")[0])
+    assert north.select_get() and dem.select_get() and not other.select_get()
+    assert bpy.context.view_layer.objects.active == dem
+    # one file of the browser's selection: as filepath alone (no summary of files)
+    capfd.readouterr()
+    assert import_files(bpy, tmp_path, ["north.xyz"]) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "Imported 50 points from north.xyz" in out and "files" not in out
+    assert bpy.context.view_layer.objects.active.name == "north.001"
+
+
+def test_a_refused_file_among_several_is_named_and_the_others_are_imported(clean_scene,
+                                                                          tmp_path, capfd):
+    bpy = clean_scene
+    write_xyz(tmp_path / "good.xyz", 40)
+    (tmp_path / "letters.xyz").write_text("1 2 3\n4 5 6\n7 eight 9\n")
+    before = counts(bpy)
+    capfd.readouterr()
+    # (an ERROR report makes bpy.ops raise, though the operator finished: the good file is in)
+    with pytest.raises(RuntimeError, match="letters.xyz") as said:
+        import_files(bpy, tmp_path, ["letters.xyz", "good.xyz", "missing.csv"])
+    assert "missing.csv" in str(said.value)
+    out = capfd.readouterr().out
+    assert "Imported 40 points from good.xyz" in out
+    assert ("Imported 1 of 3 files, as good; refused letters.xyz, missing.csv (the errors "
+            "above say why)") in out
+    assert counts(bpy) == (before[0] + 1, before[1] + 1, before[2])
+    good = bpy.data.objects["good"]
+    assert len(good.data.vertices) == 40 and good.select_get()
+    assert bpy.context.view_layer.objects.active == good
+    assert [o.name for o in bpy.data.objects] == ["good"]
+
+    # none imported: cancelled, nothing made
+    with pytest.raises(RuntimeError, match="None of the 2 files was imported"):
+        import_files(bpy, tmp_path, ["letters.xyz", "missing.csv"])
+    assert counts(bpy) == (before[0] + 1, before[1] + 1, before[2])
+
+
+def test_files_dropped_on_the_3d_viewport_are_imported(clean_scene, tmp_path, capfd):
+    """The file handler claims the point formats Blender does not import itself (.obj and .ply
+    are Blender's; .npz may be a spline: left out) and hands a drop to Import Points, whose
+    invoke shows a dialog of its options for the dropped files instead of opening the file
+    browser (with a window: checked on stand-ins, background mode has none) and imports them
+    (at once in background mode)."""
+    bpy = clean_scene
+    ops = sys.modules[ADDON + ".tcb_addon.operators"]
+    handlers = [h for h in bpy.types.FileHandler.__subclasses__()
+                if h.bl_idname == "TCB_FH_import_points"]
+    assert len(handlers) == 1 and bpy.types.TCB_FH_import_points is handlers[0]
+    handler = handlers[0]
+    assert handler.bl_import_operator == "tcb.import_points"
+    claimed = set(handler.bl_file_extensions.split(";"))
+    assert claimed == set(ops.POINT_EXTENSIONS) - {".obj", ".ply", ".npz"}
+    assert {".xyz", ".txt", ".csv", ".pts", ".npy", ".asc", ".off"} <= claimed
+
+    class Area:
+        def __init__(self, kind):
+            self.type = kind
+
+    class Context:
+        def __init__(self, area):
+            self.area = area
+
+    assert handler.poll_drop(Context(Area("VIEW_3D")))
+    assert not handler.poll_drop(Context(Area("TEXT_EDITOR")))
+    assert not handler.poll_drop(Context(None))
+
+    write_xyz(tmp_path / "a.xyz", 30)
+    np.save(tmp_path / "b.npy", np.random.default_rng(4).random((25, 3)))
+    capfd.readouterr()
+    assert import_files(bpy, tmp_path, ["a.xyz", "b.npy"], invoke=True) == {"FINISHED"}
+    assert "Imported 2 files as a, b" in capfd.readouterr().out
+    a, b = bpy.data.objects["a"], bpy.data.objects["b"]
+    assert len(a.data.vertices) == 30 and len(b.data.vertices) == 25
+    assert a.select_get() and b.select_get() and bpy.context.view_layer.objects.active == b
+
+    # with a window: the dialog for a drop, the file browser for File > Import
+    calls = []
+    wm = SimpleNamespace(invoke_props_dialog=lambda op, **kw: calls.append(("dialog", kw))
+                         or {"RUNNING_MODAL"},
+                         fileselect_add=lambda op: calls.append(("browser", {})))
+    context = SimpleNamespace(window=object(), window_manager=wm)
+    dropped = SimpleNamespace(directory=str(tmp_path), files=[SimpleNamespace(name="a.xyz")],
+                              filepath="")
+    assert ops.TCB_OT_import_points.invoke(dropped, context, None) == {"RUNNING_MODAL"}
+    assert calls == [("dialog", {"title": "Import Points: a.xyz", "confirm_text": "Import"})]
+    calls.clear()
+    menu = SimpleNamespace(directory="", files=[], filepath="")
+    assert ops.TCB_OT_import_points.invoke(menu, context, None) == {"RUNNING_MODAL"}
+    assert [c[0] for c in calls] == ["browser"]

@@ -108,10 +108,18 @@ def test_unregister_and_register_again(installed, addon):
     assert not hasattr(bpy.types, "TCB_PT_fit")
     assert not hasattr(bpy.types.Scene, "tcb_settings")
     assert not _import_menu_entries(bpy)  # (File > Import > TCB Spline goes with it)
+    assert not _drop_handlers(bpy)  # (and the drop of point files on the 3D viewport)
     addon.register()
     assert _op_registered(bpy, "TCB_OT_fit_surface")
     assert hasattr(bpy.types, "TCB_PT_fit")
     assert len(_import_menu_entries(bpy)) == 1
+    assert len(_drop_handlers(bpy)) == 1
+
+
+def _drop_handlers(bpy) -> list:
+    """The registered file handlers of the extension (Import Points on a drop)."""
+    return [h for h in bpy.types.FileHandler.__subclasses__()
+            if h.bl_idname == "TCB_FH_import_points" and hasattr(bpy.types, h.bl_idname)]
 
 
 def _import_menu_entries(bpy) -> list:
@@ -126,9 +134,11 @@ def test_disable_and_enable_through_preferences(installed):
     bpy.ops.preferences.addon_disable(module=ADDON)
     assert ADDON not in bpy.context.preferences.addons
     assert not _op_registered(bpy, "TCB_OT_fit_surface")
+    assert not _drop_handlers(bpy)
     bpy.ops.preferences.addon_enable(module=ADDON)
     assert ADDON in bpy.context.preferences.addons
     assert _op_registered(bpy, "TCB_OT_fit_surface")
+    assert len(_drop_handlers(bpy)) == 1
 
 
 def _op_registered(bpy, idname: str) -> bool:
