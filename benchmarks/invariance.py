@@ -1,23 +1,15 @@
 """Whether a fit depends on where the data sits, its units and rounding: the same mesh or
-cloud moved, scaled and perturbed, before and after the forty-sixth session's grid of the
-normalized coordinates.
+cloud moved, scaled and perturbed, before and after the forty-fourth session's ordering.
 
-    .venv/bin/python benchmarks/invariance.py [--quick] [--order]
+    .venv/bin/python benchmarks/invariance.py [--quick]
 
 The fit's seeded draws pick points by their place in ``core.geometry.coordinate_order``. That
 order broke exact ties (a CAD mesh's vertices along grid lines) by the next coordinate's last
 bits, so a translation, a change of units or noise of 1e-12 of the diagonal drew other knots
 (a user test: patch-01.off 636 to 731 control points over six draws of such noise, its max
-error 5.3e-3 to 8.8e-3 of the diagonal). Since the forty-fourth session the coordinates are
-ordered on a grid of ``ORDER_QUANTUM`` (1e-9) of their extent first (``--order``: ``before``
-sets it to 0, the old order, in this process).
-
-That left clouds on a lattice (a DEM, a function sampled on a grid): the nearest neighbours
-and every later choice of the fit tie exactly there, and the normalized coordinates of the
-same data scaled or moved differed in their last bits, which broke the ties another way.
-Since the forty-sixth session ``core.parameterize.Normalization.apply`` rounds the normalized
-coordinates to ``GRID`` (2^-30 of the half-diagonal); the default ``before`` sets it to 0 in
-this process (the order on).
+error 5.3e-3 to 8.8e-3 of the diagonal). Now the coordinates are ordered on a grid of
+``ORDER_QUANTUM`` (1e-9) of their extent first; ``before`` sets it to 0 (the old order) in this
+process.
 
 Per dataset (default settings, tolerance 1e-3 of the diagonal, errors in the original units):
 the base fit, then the data translated by (5e5, 4.2e6, 300) and by (64, 0, 0), scaled by 1e-3
@@ -42,11 +34,10 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import datasets as D  # noqa: E402
-from core import fit_surface, geometry, parameterize  # noqa: E402
+from core import fit_surface, geometry  # noqa: E402
 
 NOISE_SEEDS = (1, 2, 3)
 NOW = geometry.ORDER_QUANTUM
-GRID = parameterize.GRID
 
 
 def variants(p: np.ndarray) -> list:
@@ -59,8 +50,8 @@ def variants(p: np.ndarray) -> list:
     return out
 
 
-def run(d: dict, quantum: float, grid: float = GRID) -> list:
-    geometry.ORDER_QUANTUM, parameterize.GRID = quantum, grid
+def run(d: dict, quantum: float) -> list:
+    geometry.ORDER_QUANTUM = quantum
     try:
         diag = float(np.linalg.norm(np.ptp(d["points"], axis=0)))
         rows = []
@@ -72,7 +63,7 @@ def run(d: dict, quantum: float, grid: float = GRID) -> list:
             rows.append((name, r["control_points"], r["max"] / scale))
         return rows
     finally:
-        geometry.ORDER_QUANTUM, parameterize.GRID = NOW, GRID
+        geometry.ORDER_QUANTUM = NOW
 
 
 def cell(rows: list) -> str:
@@ -86,8 +77,6 @@ def cell(rows: list) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="patch-01 only")
-    ap.add_argument("--order", action="store_true",
-                    help="before: the order's grid off (the grid of the coordinates on)")
     args = ap.parse_args()
     sets = [D.mesh("patch-01"), D.mesh("three_peaks"), D.mesh("nefertiti"),
             D.height_field("F1-franke", 5000, sampling="grid"), D.dem(6)]
@@ -97,7 +86,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|")
     for d in sets:
         t0 = time.perf_counter()
-        old = run(d, 0.0) if args.order else run(d, NOW, 0.0)
+        old = run(d, 0.0)
         t1 = time.perf_counter()
         new = run(d, NOW)
         t2 = time.perf_counter()

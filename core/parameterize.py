@@ -247,29 +247,14 @@ def count_duplicates(points: np.ndarray) -> int:
     return int(np.count_nonzero((sub[1:] == sub[:-1]).all(axis=1)))
 
 
-# the grid normalized coordinates are rounded to (Normalization.apply): a power of two, 9.3e-10
-# of the half-diagonal; ulps of a move or of a change of units (1e-16) cross its cells' edges
-# at 2e-7 of the coordinates, far below float32's rounding (6e-8) that Blender stores
-GRID = 2.0**-30
-
-
 @dataclass(frozen=True, eq=False)
 class Normalization:
     """Similarity that maps the bounding box of the data to a box of half-diagonal 1.
 
-    ``apply(p) = round((p - center) / scale, GRID)`` and ``undo(q) = q * scale + center``, with
-    ``center`` the centre of the bounding box and ``scale`` half its diagonal (method.md section
-    4; the tolerances of this module are relative to this scale). ``apply`` rounds to the
-    nearest multiple of :data:`GRID` (2^-30, exact in binary): the same data in other units or
-    moved (a mesh in millimetres and in metres, an object moved in Blender) normalizes to the
-    same numbers, not to numbers a few ulps apart, so every choice of the fit is the same and
-    so is the surface, up to the similarity. Without it a lattice (a DEM, Franke's function on
-    a 71 x 71 grid), whose nearest neighbours and knot draws tie exactly, broke its ties by
-    those ulps: Franke's grid scaled by 1e-3 or 1e3, or moved by 64, got 290-298 control
-    points against the base's 280 (``benchmarks/invariance.py``).
-    ``undo(apply(p))`` is ``p`` to ``GRID / 2`` of the half-diagonal (4.7e-10) and an ulp of
-    the coordinates; data that differs by more than rounding (noise of 1e-12 of the diagonal,
-    coordinates near 4e6 that a move rounded at 1e-9) may still round apart.
+    ``apply(p) = (p - center) / scale`` and ``undo(q) = q * scale + center``, with ``center`` the
+    centre of the bounding box and ``scale`` half its diagonal (method.md section 4; the
+    tolerances of this module are relative to this scale). The two maps invert each other to
+    about one ulp of the coordinates.
 
     Attributes:
         center: ``(3,) float64`` centre of the bounding box.
@@ -280,14 +265,8 @@ class Normalization:
     scale: float
 
     def apply(self, p: np.ndarray) -> np.ndarray:
-        """Map original coordinates ``(..., 3)`` to normalized ones: ``(p - center) / scale``
-        rounded to the nearest multiple of :data:`GRID`."""
-        q = (np.asarray(p, dtype=np.float64) - self.center) / self.scale
-        if GRID > 0:  # (0: off; benchmarks/invariance.py's "before")
-            q *= 1.0 / GRID  # (powers of two: exact)
-            np.rint(q, out=q)
-            q *= GRID
-        return q
+        """Map original coordinates ``(..., 3)`` to normalized ones: ``(p - center) / scale``."""
+        return (np.asarray(p, dtype=np.float64) - self.center) / self.scale
 
     def undo(self, q: np.ndarray) -> np.ndarray:
         """Map normalized coordinates ``(..., 3)`` back: ``q * scale + center``."""
