@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import HolesError, InvalidInputError, OutlierError, TCBError
 from .fit import DEFAULT_SMOOTHNESS
-from .meshio import WRITE_EXTENSIONS, read_geometry, write_mesh
+from .meshio import WRITE_EXTENSIONS, is_raster, read_geometry, write_mesh
 from .parameterize import (SPIKES_DISSOLVED, fill_value_rows, fill_value_words,
                           projection_direction)
 from .refine import (SWINGS_LEFT, mostly_taken_back, replaced_default_reason,
@@ -95,10 +95,14 @@ def _parser() -> argparse.ArgumentParser:
                    "if the holes were filled, so that the surface spans them, instead of "
                    "refusing them; point clouds: cover the gaps inside the cloud (occlusions, "
                    "dropouts) with surface, which the output mesh otherwise leaves open")
-    f.add_argument("--projection", type=_projection, default=None, metavar="x|y|z|DX,DY,DZ",
+    f.add_argument("--projection", type=_projection, default=None,
+                   metavar="auto|x|y|z|DX,DY,DZ",
                    help="point clouds: project along this direction (a height field over the "
-                   "plane across it) instead of choosing it; still checked for folds. Its sign "
-                   "does not matter (a leading minus needs the form --projection=-1,0,0)")
+                   "plane across it) instead of choosing it (auto: the best-fit plane, or a "
+                   "direction the cloud is less steep over); still checked for folds. Its sign "
+                   "does not matter (a leading minus needs the form --projection=-1,0,0). "
+                   "Default: z for a DEM raster (.asc grid, .npz elevation), whose tiles then "
+                   "keep their straight edges; auto for other clouds")
     f.add_argument("--join", nargs=2, action="append", metavar=("MESH", "SPLINE"),
                    help="join the surface to a neighbouring patch's along the border the two "
                         "meshes share (vertices at identical coordinates): MESH is that "
@@ -119,19 +123,20 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _projection(text: str):
-    """``--projection``: an axis name, or three comma-separated numbers."""
-    if text.strip().lower() in ("x", "y", "z"):
+    """``--projection``: ``auto``, an axis name, or three comma-separated numbers."""
+    if text.strip().lower() in ("auto", "x", "y", "z"):
         return text.strip().lower()
     try:
         d = [float(t) for t in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"expected x, y, z or three numbers such as 0,0,1; got {text!r}") from None
+            f"expected auto, x, y, z or three numbers such as 0,0,1; got {text!r}") from None
     try:
         projection_direction(d)
     except InvalidInputError:
         raise argparse.ArgumentTypeError(
-            f"expected x, y, z or three numbers, not all zero, such as 0,0,1; got {text!r}"
+            f"expected auto, x, y, z or three numbers, not all zero, such as 0,0,1; got "
+            f"{text!r}"
         ) from None
     return d
 
@@ -316,7 +321,7 @@ def _fit(args) -> int:
     # a DEM's no-data cells come back as points, found and refused or left out below as a
     # cloud's (the reader had refused them before --drop-invalid was seen: user test)
     points, faces = read_geometry(args.input, keep_fill_values=True)
-    if faces is not None and args.projection is not None:
+    if faces is not None and args.projection not in (None, "auto"):
         raise TCBError(
             f"--projection applies to point clouds; {args.input} is a mesh, which is "
             "parameterized by its faces: leave the option out"
@@ -364,13 +369,19 @@ def _fit(args) -> int:
         kind = f"mesh with {len(faces)} faces" if faces is not None else "point cloud"
         print(f"read {args.input}: {len(points)} points, {kind}", file=sys.stderr)
     join = _neighbours(args, points, faces)
+    # a DEM raster is heights over x and y: fitted along z unless told (meshio.is_raster)
+    raster = faces is None and args.projection is None and is_raster(args.input)
+    projection = "z" if raster else None if args.projection == "auto" else args.projection
+    if raster and not args.quiet:
+        print(f"{args.input} is a DEM raster: fitted as heights over x and y (--projection z; "
+              "--projection auto chooses the best-fit plane)", file=sys.stderr)
     try:
         surf = fit_surface(
             points, faces, degree=args.degree, mode=args.mode, tolerance=args.tolerance,
             relative=args.relative, max_control_points=args.max_control_points,
             max_iterations=args.max_iterations, smoothness=args.smoothness,
             criterion=args.criterion, callback=_progress(args.quiet, args.relative),
-            drop_outliers=args.drop_outliers, projection=args.projection,
+            drop_outliers=args.drop_outliers, projection=projection,
             fill_holes=args.fill_holes, join=join,
         )
     except HolesError as exc:
@@ -410,7 +421,8 @@ def _fit(args) -> int:
     ]
     param = surf.parameterization
     if param.kind == "plane":  # the direction used, to pass as --projection another time
-        chosen = "given" if args.projection is not None else "chosen"
+        chosen = ("a DEM raster" if raster else
+                  "given" if args.projection not in (None, "auto") else "chosen")
         rows.append(("projection", ",".join(f"{x:.4g}" for x in param.axes[2])
                      + f" ({chosen})"))
     rows += [

@@ -370,7 +370,7 @@ def test_projection_option(tmp_path):
     for bad in ("w", "0,0,0", "1,2", "1,nan,0"):
         r = run("fit", cloud, "-o", tmp_path / "t.obj", f"--projection={bad}", *fast)
         assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr  # one line
-        assert "--projection" in r.stderr and "expected x, y, z" in r.stderr
+        assert "--projection" in r.stderr and "expected auto, x, y, z" in r.stderr
     r = run("fit", ROOT / "data" / "nefertiti.off", "-o", tmp_path / "t.obj", "--projection",
             "z", *fast)
     assert r.returncode == 2 and "--projection applies to point clouds" in r.stderr
@@ -552,6 +552,43 @@ def test_an_esri_ascii_grid_dem_is_fitted(tmp_path):
     assert verts[:, 0].min() >= 350_000 and verts[:, 1].max() <= 4_100_300
     hole = (np.abs(verts[:, 0] - 350_200) < 20) & (np.abs(verts[:, 1] - 4_100_160) < 20)
     assert not hole.any()  # (the middle of the no-data block: 60 m from the nearest node)
+
+
+def test_a_dem_raster_is_fitted_along_z_and_keeps_its_tile_s_edges(tmp_path):
+    """A DEM raster (.asc grid, .npz elevation) is heights over x and y: fitted along z by
+    default, so a sloping tile's surface ends at the tile's straight edges (on its best-fit
+    plane, tilted, it reached past them); --projection auto chooses that plane, and a text
+    file of the same points is a cloud as any."""
+    ys, xs = np.mgrid[0:30, 0:40]
+    elev = 100 + 3.0 * xs + 4 * np.sin(xs / 6.0) + 3 * np.cos(ys / 5.0)  # (a 17-degree slope)
+    asc = tmp_path / "dem.asc"
+    with open(asc, "w") as fh:
+        fh.write("ncols 40\nnrows 30\nxllcorner 1000\nyllcorner 2000\ncellsize 10\n")
+        np.savetxt(fh, elev, fmt="%.3f")
+    npz = tmp_path / "dem.npz"  # (the same nodes: row 0 at ymin)
+    np.savez(npz, elevation=elev[::-1], xmin=1005.0, xmax=1395.0, ymin=2005.0, ymax=2295.0,
+             units="metres")
+    xyz = tmp_path / "dem.xyz"
+    np.savetxt(xyz, read_geometry(asc)[0])
+    fast = ("--max-control-points", "150", "--max-iterations", "2")
+    for src, projection, expected in ((asc, (), "a DEM raster"), (npz, (), "a DEM raster"),
+                                      (asc, ("--projection", "auto"), "chosen"),
+                                      (xyz, (), "chosen")):
+        out = tmp_path / f"{src.stem}{len(projection)}{src.suffix[1:]}.obj"
+        r = run("fit", src, "-o", out, *fast, *projection)
+        assert r.returncode == 0, r.stderr
+        row = re.search(r"^projection\s+(\S+),(\S+),(\S+) \((.*)\)$", r.stdout, re.M)
+        assert row and row.group(4) == expected, r.stdout
+        z_axis = [float(row.group(i)) for i in (1, 2, 3)] == [0.0, 0.0, 1.0]
+        assert z_axis == (expected == "a DEM raster")
+        assert ("is a DEM raster" in r.stderr) == (expected == "a DEM raster")
+        verts, _ = read_geometry(out)
+        past = max(1005 - verts[:, 0].min(), verts[:, 0].max() - 1395,
+                   2005 - verts[:, 1].min(), verts[:, 1].max() - 2295)
+        if expected == "a DEM raster":  # (the tessellation's border on the tile's edges)
+            assert past < 1e-6, past
+        else:  # (the tilted plane's border bulges past them)
+            assert past > 1.0, past
 
 
 def test_a_mesh_with_a_nan_vertex_gets_command_line_advice(tmp_path):
