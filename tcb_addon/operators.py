@@ -42,6 +42,10 @@ PART_KEY = "tcb_source_part"
 # a surface made by Import Spline: the file's path (Fit Surface with Replace Previous Result
 # leaves it and makes a new result: it may be a long fit's, made elsewhere)
 IMPORTED_KEY = "tcb_imported_from"
+# an object Import Points made of a DEM raster (.asc grid, .npz elevation: core.meshio.is_raster):
+# heights over its x and y, which Fit Surface with Projection Auto fits along the object's z (on
+# its tilted best-fit plane a sloping tile's surface reached past its straight edges)
+RASTER_KEY = "tcb_raster"
 
 
 def _core():
@@ -1374,6 +1378,33 @@ def set_up_result(context, surface, net, surf, sources, settings: dict, live_net
     return warnings
 
 
+def raster_projection(sources) -> tuple[tuple | None, str | None]:
+    """The direction Projection Auto fits a point cloud along when all its ``sources`` are DEM
+    rasters Import Points made (:data:`RASTER_KEY`): their z axis in world space (the object's
+    3x3 matrix applied to (0, 0, 1), as bridge.read_selection maps the points: a height field
+    over the object's x and y projects along it onto a parallelogram, so a tile keeps its
+    straight edges), with a note; (None, None) otherwise, and (None, a note) when the rasters'
+    z axes are not parallel (Auto chooses then)."""
+    if not sources or not all(bool(o.get(RASTER_KEY, False)) for o in sources):
+        return None, None
+    axes = []
+    for obj in sources:
+        d = np.array(obj.matrix_world, dtype=np.float64)[:3, 2]
+        size = float(np.linalg.norm(d))
+        if not np.isfinite(size) or size == 0.0:  # (a Scale of 0 in z: no direction)
+            return None, None
+        axes.append(d / size)
+    names = ", ".join(f"'{o.name}'" for o in sources)
+    if any(np.linalg.norm(np.cross(axes[0], d)) > 1e-6 for d in axes[1:]):
+        return None, (f"the DEM rasters {names} have z axes that are not parallel: Projection "
+                      "Auto chose the direction from the data")
+    what = (f"'{sources[0].name}' is a DEM raster (Import Points)" if len(sources) == 1
+            else f"{names} are DEM rasters (Import Points)")
+    return tuple(float(x) for x in axes[0]), (
+        f"{what}: fitted along {'its' if len(sources) == 1 else 'their'} z, as heights over x "
+        "and y (the Projection setting chooses another)")
+
+
 # the engine's words for a mesh that is no disk as a whole, where a patch of it may be one (Fit
 # Surface then says how to fit one: Edit Mode's selected faces)
 _NO_DISK = ("the mesh is closed", "separate pieces (connected components)",
@@ -1441,6 +1472,13 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
             kwargs["projection"] = None
             self._ignored.append(f"Projection applies to point clouds: '{data.name}' is a "
                                  "mesh, mapped through its faces")
+        if data.faces is None and self.projection == "AUTO":
+            # a DEM raster: along its z (its tile's straight edges kept), as the command line
+            direction, note = raster_projection(data.sources)
+            if direction is not None:
+                kwargs["projection"] = direction
+            if note:
+                self._ignored.append(note)
         # a raster's no-data fill value, in Blender's words (the engine's are Python: review)
         held = data.points if data.faces is None else data.points[np.unique(data.faces)]
         fill = _core().parameterize.fill_value_rows(held)
@@ -2571,7 +2609,7 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
         why, prefixed with the file's name with ``several`` when it is not in it; nothing is
         left made)."""
         core = _core()
-        from ..core.meshio import read_geometry
+        from ..core.meshio import is_raster, read_geometry
         from ..core.parameterize import fill_value_rows, fill_value_words
 
         notes = []
@@ -2638,6 +2676,7 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
                 text = f"{label}: {text}"
             self.report({"ERROR"}, text)
             return None
+        raster = faces is None and is_raster(path)
         name = os.path.splitext(label)[0] or "Points"
         layer = context.view_layer.active_layer_collection
         coll = (layer.collection if layer is not None and not layer.exclude
@@ -2652,6 +2691,8 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
             self.report({"ERROR"}, f"Cannot add '{name}' to the collection {coll.name!r} ({ex}); "
                         "make another collection active and import again")
             return None
+        if raster:
+            obj[RASTER_KEY] = True
         hidden = bridge.hiding_collections(context.view_layer, obj)
         if hidden:
             notes.append(f"'{obj.name}' is hidden: its collection {hidden[0]!r} is hidden in the "
@@ -2664,6 +2705,9 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
                      f"({', '.join(f'{c:.10g}' for c in origin)}), its vertices relative to it "
                      "(32-bit floats keep the file's precision; View > Frame Selected shows "
                      "it)")
+        if raster:
+            text += ("; a DEM raster: Fit Surface fits it along its z, as heights over its x and "
+                     "y (the Projection setting chooses another)")
         self.report({"INFO"}, text)
         for note in notes:  # (after the summary: the status bar shows the last report)
             self.report({"WARNING"}, f"{label}: {note}" if not note.startswith(label) else note)

@@ -158,7 +158,8 @@ class FitSettings:
             "noisy for that check is fitted only along a given axis (not used for meshes, "
             "which are mapped through their faces)"
         ),
-        items=(("AUTO", "Auto", "The best-fit plane, or a direction the cloud is less steep over"),
+        items=(("AUTO", "Auto", "The best-fit plane, or a direction the cloud is less steep "
+                "over; a DEM raster imported with Import Points: along its z"),
                ("X", "World X", "Project along the world X axis"),
                ("Y", "World Y", "Project along the world Y axis"),
                ("Z", "World Z", "Project along the world Z axis (terrain, height maps)")),

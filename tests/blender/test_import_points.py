@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from scenes import ADDON, core_module, fit, grid, positions, select  # noqa: E402
+from scenes import ADDON, core_module, fit, grid, positions, select, spline_of  # noqa: E402
 
 UTM = np.array([350000.0, 4100000.0, 0.0])
 CORNER = UTM + [0.37, 0.21, 0.0]  # (not on float32's lattice there: 1/32 and 1/2 apart)
@@ -387,3 +387,125 @@ def test_files_dropped_on_the_3d_viewport_are_imported(clean_scene, tmp_path, ca
     menu = SimpleNamespace(directory="", files=[], filepath="")
     assert ops.TCB_OT_import_points.invoke(menu, context, None) == {"RUNNING_MODAL"}
     assert [c[0] for c in calls] == ["browser"]
+
+
+# a sloping DEM tile (17 degrees along x): on its tilted best-fit plane the fitted surface
+# reached more than 1 m past the tile's straight edges; along its z it ends at them
+SLOPE_ROWS, SLOPE_COLS, SLOPE_CELL = 30, 40, 10.0
+
+
+def slope_points():
+    """The cell centres of the sloping tile, row 0 the northern edge (as the .asc reads)."""
+    j, i = np.meshgrid(np.arange(SLOPE_COLS), np.arange(SLOPE_ROWS))
+    z = 100.0 + 3.0 * j + 4.0 * np.sin(j / 6.0) + 3.0 * np.cos(i / 5.0)
+    x, y = (j + 0.5) * SLOPE_CELL, (SLOPE_ROWS - i - 0.5) * SLOPE_CELL
+    return np.c_[x.ravel(), y.ravel(), z.ravel()], z
+
+
+def write_slope(path):
+    """The sloping tile as an ESRI ASCII grid (``.asc``) or as .xyz text columns."""
+    pts, z = slope_points()
+    if path.suffix == ".asc":
+        head = (f"ncols {SLOPE_COLS}\nnrows {SLOPE_ROWS}\nxllcorner 0\nyllcorner 0\n"
+                f"cellsize {SLOPE_CELL:g}\n")
+        path.write_text(head + "\n".join(" ".join(f"{v:.9f}" for v in r) for r in z) + "\n")
+    else:
+        path.write_text("\n".join(f"{x:.9f} {y:.9f} {h:.9f}" for x, y, h in pts) + "\n")
+    return path
+
+
+def past_the_tile(xy) -> float:
+    """How far points' x, y reach past the rectangle of the tile's cell centres (negative:
+    inside it)."""
+    lo = np.array([0.5, 0.5]) * SLOPE_CELL
+    hi = np.array([SLOPE_COLS - 0.5, SLOPE_ROWS - 0.5]) * SLOPE_CELL
+    return float(max((lo - xy[:, :2]).max(), (xy[:, :2] - hi).max()))
+
+
+def fit_slope(bpy, obj, **props):
+    """Fit Surface on the tile with the default Projection (Auto), kept quick."""
+    props.setdefault("max_control_points", 150)
+    props.setdefault("max_iterations", 2)
+    assert fit(bpy, obj, **props) == {"FINISHED"}
+    surface = bpy.context.view_layer.objects.active
+    assert surface.tcb.role == "SURFACE"
+    return surface
+
+
+def test_a_dem_raster_is_fitted_along_its_z_and_keeps_its_straight_edges(clean_scene, tmp_path,
+                                                                        capfd):
+    """Import Points marks an object made of a DEM raster; Fit Surface with Projection Auto
+    fits it along its z (the report says so), so that a sloping tile's surface ends at the
+    tile's edges, and Refine keeps that projection."""
+    bpy = clean_scene
+    path = write_slope(tmp_path / "slope.asc")
+    assert meshio().is_raster(path)
+    capfd.readouterr()
+    assert import_points(bpy, path) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert f"Imported {SLOPE_ROWS * SLOPE_COLS} points from slope.asc" in out
+    assert "a DEM raster: Fit Surface fits it along its z" in out
+    obj = bpy.context.view_layer.objects.active
+    assert obj["tcb_raster"] is True or obj["tcb_raster"] == 1
+    assert np.allclose(world(obj), read(path)[0], atol=1e-4)
+
+    surface = fit_slope(bpy, obj)
+    out = capfd.readouterr().out
+    assert "'slope' is a DEM raster (Import Points): fitted along its z" in out
+    assert "the Projection setting chooses another" in out
+    spline = spline_of(surface)
+    assert spline.report.get("projection_given")
+    axis = spline.parameterization.axes[2]
+    assert abs(abs(axis[2]) - 1.0) < 1e-9
+    verts = world(surface)
+    assert len(verts) > 100 and past_the_tile(verts) < 1e-3
+
+    # Refine continues along the same direction (the stored parameterization's)
+    with bpy.context.temp_override(**select(bpy, surface)):
+        assert bpy.ops.tcb.refine(max_control_points=200, max_iterations=2) == {"FINISHED"}
+    refined = spline_of(surface)
+    assert abs(abs(refined.parameterization.axes[2][2]) - 1.0) < 1e-9
+    assert past_the_tile(world(surface)) < 1e-3
+
+
+def test_the_same_tile_as_text_columns_keeps_auto_s_tilted_plane(clean_scene, tmp_path, capfd):
+    """The same points in an .xyz file are no raster: Projection Auto chooses the best-fit
+    plane, tilted with the slope, and the surface reaches past the tile's edges."""
+    bpy = clean_scene
+    path = write_slope(tmp_path / "slope.xyz")
+    assert not meshio().is_raster(path)
+    capfd.readouterr()
+    assert import_points(bpy, path) == {"FINISHED"}
+    assert "DEM raster" not in capfd.readouterr().out
+    obj = bpy.context.view_layer.objects.active
+    assert "tcb_raster" not in obj
+    surface = fit_slope(bpy, obj)
+    assert "DEM raster" not in capfd.readouterr().out
+    assert not spline_of(surface).report.get("projection_given")
+    assert past_the_tile(world(surface)) > 1.0
+
+
+@pytest.mark.parametrize("axis, degrees", [("X", 90.0), ("Y", 30.0)])
+def test_a_rotated_raster_is_fitted_along_its_own_z(clean_scene, tmp_path, capfd, axis,
+                                                    degrees):
+    """A raster object turned is fitted along its own z in world space: the surface, in the
+    object's frame, ends at the tile's edges; World Z given still wins over it."""
+    bpy = clean_scene
+    path = write_slope(tmp_path / "slope.asc")
+    assert import_points(bpy, path) == {"FINISHED"}
+    obj = bpy.context.view_layer.objects.active
+    obj.rotation_euler["XYZ".index(axis)] = np.radians(degrees)
+    bpy.context.view_layer.update()
+    m = np.array(obj.matrix_world, dtype=np.float64)
+    capfd.readouterr()
+    surface = fit_slope(bpy, obj)
+    assert "fitted along its z" in capfd.readouterr().out
+    axis_used = spline_of(surface).parameterization.axes[2]
+    assert np.linalg.norm(np.cross(axis_used, m[:3, 2])) < 1e-6
+    local = (world(surface) - m[:3, 3]) @ np.linalg.inv(m[:3, :3]).T
+    assert past_the_tile(local) < 1e-3
+
+    if axis == "Y":  # World Z chosen in Projection is used as given
+        surface = fit_slope(bpy, obj, projection="Z")
+        assert "fitted along its z" not in capfd.readouterr().out
+        assert abs(abs(spline_of(surface).parameterization.axes[2][2]) - 1.0) < 1e-9
