@@ -509,3 +509,31 @@ def test_a_rotated_raster_is_fitted_along_its_own_z(clean_scene, tmp_path, capfd
         surface = fit_slope(bpy, obj, projection="Z")
         assert "fitted along its z" not in capfd.readouterr().out
         assert abs(abs(spline_of(surface).parameterization.axes[2][2]) - 1.0) < 1e-9
+
+
+def test_rasters_fitted_together_go_along_their_z_only_when_it_is_parallel(clean_scene,
+                                                                           tmp_path, capfd):
+    """Two raster tiles side by side, selected together: along their common z; one of them
+    turned by a degree (z axes not parallel): Projection Auto chooses, and the report says
+    why."""
+    bpy = clean_scene
+    path = write_slope(tmp_path / "slope.asc")
+    assert import_points(bpy, path) == {"FINISHED"}
+    first = bpy.context.view_layer.objects.active
+    assert import_points(bpy, path) == {"FINISHED"}
+    second = bpy.context.view_layer.objects.active
+    second.location = (SLOPE_COLS * SLOPE_CELL, 0.0, 3.0 * SLOPE_COLS)  # the slope goes on
+    bpy.context.view_layer.update()
+    capfd.readouterr()
+    assert fit(bpy, first, second, max_control_points=150, max_iterations=2) == {"FINISHED"}
+    assert "are DEM rasters (Import Points): fitted along their z" in capfd.readouterr().out
+    surface = bpy.context.view_layer.objects.active
+    assert abs(abs(spline_of(surface).parameterization.axes[2][2]) - 1.0) < 1e-9
+
+    second.rotation_euler[1] = np.radians(1.0)
+    bpy.context.view_layer.update()
+    assert fit(bpy, first, second, max_control_points=150, max_iterations=2) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "have z axes that are not parallel: Projection Auto chose" in out
+    assert "fitted along their z" not in out
+    assert not spline_of(bpy.context.view_layer.objects.active).report.get("projection_given")
