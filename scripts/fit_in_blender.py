@@ -20,8 +20,9 @@ What it does, with Blender's own operators:
    ``tcb_surface`` extension is used as is; otherwise the zip is installed into a temporary
    local repository that is removed again at exit (your preferences are not saved);
 2. imports the input: PLY and OBJ with Blender's importers (file coordinates are kept: no axis
-   conversion), OFF and the point-cloud formats (``.xyz .txt .csv .pts .npy .npz``, including
-   DEMs) with the extension's ``core.meshio`` into a new mesh object;
+   conversion), OFF and the point-cloud formats (``.xyz .txt .csv .pts .npy .npz .asc``,
+   including DEMs, which are fitted along their z as Import Points' are) with the extension's
+   ``core.meshio`` into a new mesh object;
 3. selects it and runs ``bpy.ops.tcb.fit_surface`` (synchronously: ``execute``), then
    ``bpy.ops.tcb.deviation_map`` (the surface's ``tcb_deviation_color`` attribute);
 4. saves the ``.blend`` (surface, live control net, source), exports the surface mesh
@@ -53,7 +54,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 EXT_ID = "tcb_surface"
 BLENDER_IMPORT = {".ply": "ply_import", ".obj": "obj_import"}
-OTHER_FORMATS = (".off", ".xyz", ".txt", ".csv", ".pts", ".npy", ".npz")
+OTHER_FORMATS = (".off", ".xyz", ".txt", ".csv", ".pts", ".npy", ".npz", ".asc")
 EXPORT_FORMATS = {".obj": "obj_export", ".ply": "ply_export"}
 # the limits of the Fit settings (tcb_addon/properties.py; this script checks them before
 # Blender starts), and of Blender's integer settings
@@ -139,7 +140,7 @@ def parse_args(args: list[str]) -> argparse.Namespace:
     ap.add_argument("--projection", choices=("auto", "x", "y", "z"), default="auto",
                     help="point clouds: project along this world axis (z for terrain tiles that "
                     "meet their neighbours) instead of choosing the direction (default "
-                    "%(default)s)")
+                    "%(default)s: the best-fit plane, or a DEM raster's z)")
     ap.add_argument("--resolution", type=int, default=64,
                     help="subdivisions of the output surface mesh per side (default %(default)s)")
     ap.add_argument("--no-live-net", dest="live_net", action="store_false",
@@ -365,7 +366,10 @@ def import_input(bpy, addon: str, path: Path) -> list:
     # and the mesh coordinates relative to it: 32-bit world coordinates would round them
     origin = bridge.local_origin(points)
     mesh = bridge.new_mesh(path.stem, points - origin, faces)
-    return [bridge.link_new_object(bpy.context.scene.collection, path.stem, mesh, origin)]
+    obj = bridge.link_new_object(bpy.context.scene.collection, path.stem, mesh, origin)
+    if faces is None and meshio.is_raster(path):  # (fitted along its z, as Import Points')
+        obj[importlib.import_module(f"{addon}.tcb_addon.operators").RASTER_KEY] = True
+    return [obj]
 
 
 def select_only(bpy, objs) -> None:

@@ -1378,30 +1378,58 @@ def set_up_result(context, surface, net, surf, sources, settings: dict, live_net
     return warnings
 
 
+def _on_its_grid(obj) -> bool:
+    """Whether a raster object's vertices still lie on a grid of its x and y, as Import Points
+    made them: the distinct x times the distinct y at most 4 times the vertices (a quarter of
+    the cells with data at least). Turned inside the mesh (Apply Rotation, a rotation in Edit
+    Mode) or joined with another cloud, they are not, and its z may cross the points' surface
+    (fitted along it, a tile turned 90 degrees and applied was refused as folded: review)."""
+    n = len(obj.data.vertices)
+    if not n:
+        return False
+    co = np.empty(3 * n, dtype=np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    return len(np.unique(co[:, 0])) * len(np.unique(co[:, 1])) <= 4 * n
+
+
 def raster_projection(sources) -> tuple[tuple | None, str | None]:
     """The direction Projection Auto fits a point cloud along when all its ``sources`` are DEM
-    rasters Import Points made (:data:`RASTER_KEY`): their z axis in world space (the object's
-    3x3 matrix applied to (0, 0, 1), as bridge.read_selection maps the points: a height field
-    over the object's x and y projects along it onto a parallelogram, so a tile keeps its
-    straight edges), with a note; (None, None) otherwise, and (None, a note) when the rasters'
-    z axes are not parallel (Auto chooses then)."""
-    if not sources or not all(bool(o.get(RASTER_KEY, False)) for o in sources):
+    rasters Import Points made (:data:`RASTER_KEY`) whose vertices are still on their grid
+    (:func:`_on_its_grid`): their z axis in world space (the object's 3x3 matrix applied to
+    (0, 0, 1), as bridge.read_selection maps the points: a height field over the object's x
+    and y projects along it onto a parallelogram, so a tile keeps its straight edges), with a
+    note; (None, None) when none is a raster, and (None, a note) when only some are, when one
+    is off its grid, or when their z axes are not parallel (Auto chooses then)."""
+    rasters = [o for o in sources or () if bool(o.get(RASTER_KEY, False))]
+    if not rasters:
         return None, None
+    auto = "Projection Auto chose the direction from the data"
+    others = [o for o in sources if o not in rasters]
+    if others:
+        return None, (f"{', '.join(repr(o.name) for o in others)} "
+                      f"{'is no DEM raster' if len(others) == 1 else 'are no DEM rasters'} "
+                      f"(Import Points) as {', '.join(repr(o.name) for o in rasters)}: {auto}")
+    moved = [o for o in rasters if not _on_its_grid(o)]
+    if moved:
+        return None, (f"{', '.join(repr(o.name) for o in moved)} "
+                      f"{'was' if len(moved) == 1 else 'were'} imported as a DEM raster, but "
+                      "its points are no longer on its grid of x and y (rotated in the mesh, "
+                      f"joined or edited): {auto}")
     axes = []
-    for obj in sources:
+    for obj in rasters:
         d = np.array(obj.matrix_world, dtype=np.float64)[:3, 2]
         size = float(np.linalg.norm(d))
         if not np.isfinite(size) or size == 0.0:  # (a Scale of 0 in z: no direction)
             return None, None
         axes.append(d / size)
-    names = ", ".join(f"'{o.name}'" for o in sources)
+    names = ", ".join(f"'{o.name}'" for o in rasters)
     if any(np.linalg.norm(np.cross(axes[0], d)) > 1e-6 for d in axes[1:]):
-        return None, (f"the DEM rasters {names} have z axes that are not parallel: Projection "
-                      "Auto chose the direction from the data")
-    what = (f"'{sources[0].name}' is a DEM raster (Import Points)" if len(sources) == 1
+        return None, (f"the DEM rasters {names} have z axes that are not parallel: {auto}")
+    what = (f"'{rasters[0].name}' is a DEM raster (Import Points)" if len(rasters) == 1
             else f"{names} are DEM rasters (Import Points)")
     return tuple(float(x) for x in axes[0]), (
-        f"{what}: fitted along {'its' if len(sources) == 1 else 'their'} z, as heights over x "
+        f"{what}: fitted along {'its' if len(rasters) == 1 else 'their'} z, as heights over x "
         "and y (the Projection setting chooses another)")
 
 
@@ -2555,7 +2583,8 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
             if context.window is None:  # (background mode)
                 return self.execute(context)
             names = [f.name for f in self.files if f.name]
-            title = names[0] if len(names) == 1 else f"{len(names)} files in {self.directory}"
+            folder = os.path.basename(os.path.normpath(self.directory))
+            title = names[0] if len(names) == 1 else f"{len(names)} files in {folder}"
             return context.window_manager.invoke_props_dialog(
                 self, title=f"Import Points: {title}", confirm_text="Import")
         return ImportHelper.invoke(self, context, event)  # the file browser
@@ -2672,7 +2701,7 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
         except (*_user_errors(), OSError) as ex:
             text = _refusal_text(ex, filepath)
             label = os.path.basename(filepath)
-            if several and label not in text:
+            if several and not text.startswith(label) and f"'{label}'" not in text:
                 text = f"{label}: {text}"
             self.report({"ERROR"}, text)
             return None
@@ -2739,7 +2768,9 @@ class TCB_FH_import_points(bpy.types.FileHandler):
 
     @classmethod
     def poll_drop(cls, context):
-        return context.area is not None and context.area.type == "VIEW_3D"
+        # (in Object Mode, where Import Points runs: elsewhere the drop is refused visibly)
+        return (context.area is not None and context.area.type == "VIEW_3D"
+                and context.mode == "OBJECT")
 
 
 classes = (

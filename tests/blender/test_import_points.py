@@ -357,11 +357,12 @@ def test_files_dropped_on_the_3d_viewport_are_imported(clean_scene, tmp_path, ca
             self.type = kind
 
     class Context:
-        def __init__(self, area):
-            self.area = area
+        def __init__(self, area, mode="OBJECT"):
+            self.area, self.mode = area, mode
 
     assert handler.poll_drop(Context(Area("VIEW_3D")))
     assert not handler.poll_drop(Context(Area("TEXT_EDITOR")))
+    assert not handler.poll_drop(Context(Area("VIEW_3D"), "EDIT_MESH"))  # (Import's poll)
     assert not handler.poll_drop(Context(None))
 
     write_xyz(tmp_path / "a.xyz", 30)
@@ -536,4 +537,37 @@ def test_rasters_fitted_together_go_along_their_z_only_when_it_is_parallel(clean
     out = capfd.readouterr().out
     assert "have z axes that are not parallel: Projection Auto chose" in out
     assert "fitted along their z" not in out
+    assert not spline_of(bpy.context.view_layer.objects.active).report.get("projection_given")
+
+
+def test_a_raster_turned_in_its_mesh_or_fitted_with_a_cloud_is_left_to_auto(clean_scene,
+                                                                             tmp_path, capfd):
+    """The raster mark holds while the object's vertices are on its grid of x and y: turned
+    inside the mesh (Apply Rotation) its z crosses the tile, and fitted along it the cloud was
+    refused as folded (review); with a cloud that is no raster, Auto chooses too. The reports
+    say why."""
+    bpy = clean_scene
+    assert import_points(bpy, write_slope(tmp_path / "slope.asc")) == {"FINISHED"}
+    obj = bpy.context.view_layer.objects.active
+    obj.rotation_euler[0] = np.radians(90.0)
+    with bpy.context.temp_override(**select(bpy, obj)):
+        bpy.ops.object.transform_apply(location=False, rotation=True, scale=False)
+    assert obj["tcb_raster"]  # (the mark stays: the user's object is not changed)
+    capfd.readouterr()
+    surface = fit_slope(bpy, obj)
+    out = capfd.readouterr().out
+    assert "'slope' was imported as a DEM raster, but its points are no longer on its grid" in out
+    assert "fitted along its z" not in out
+    assert not spline_of(surface).report.get("projection_given")
+
+    assert import_points(bpy, write_slope(tmp_path / "tile.asc")) == {"FINISHED"}
+    tile = bpy.context.view_layer.objects.active
+    assert import_points(bpy, write_slope(tmp_path / "cloud.xyz")) == {"FINISHED"}
+    cloud = bpy.context.view_layer.objects.active
+    cloud.location = (SLOPE_COLS * SLOPE_CELL, 0.0, 3.0 * SLOPE_COLS)
+    bpy.context.view_layer.update()
+    capfd.readouterr()
+    assert fit(bpy, tile, cloud, max_control_points=150, max_iterations=2) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "'cloud' is no DEM raster (Import Points) as 'tile': Projection Auto chose" in out
     assert not spline_of(bpy.context.view_layer.objects.active).report.get("projection_given")

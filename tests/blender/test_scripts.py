@@ -92,6 +92,30 @@ def test_fit_point_cloud_xyz_without_render(tmp_path):
     assert len(row) == 1 and row[0].endswith("(auto)"), proc.stdout
 
 
+def test_a_dem_raster_is_fitted_along_z_as_on_the_command_line(tmp_path):
+    """A sloping DEM tile (.asc) is fitted along z (core.meshio.is_raster, the object marked
+    as Import Points marks it): the surface ends at the tile's straight edges (on its tilted
+    best-fit plane, the script's Auto before, more than 1 m past them)."""
+    import numpy as np
+
+    j, i = np.meshgrid(np.arange(40), np.arange(30))
+    z = 100.0 + 3.0 * j + 4.0 * np.sin(j / 6.0) + 3.0 * np.cos(i / 5.0)  # (17 degrees)
+    src = tmp_path / "slope.asc"
+    src.write_text("ncols 40\nnrows 30\nxllcorner 0\nyllcorner 0\ncellsize 10\n"
+                   + "\n".join(" ".join(f"{v:.6f}" for v in row) for row in z) + "\n")
+    blend, ply = tmp_path / "slope.blend", tmp_path / "slope.ply"
+    proc = run_script(src, "-o", blend, "--max-control-points", "150", "--max-iterations", "2",
+                      "--resolution", "16", "--export", ply, "--no-deviation")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "is a DEM raster (Import Points): fitted along its z" in proc.stdout + proc.stderr
+    from core.meshio import read_geometry
+
+    verts = read_geometry(ply)[0]
+    past = max((5.0 - verts[:, :2]).max(), (verts[:, 0] - 395.0).max(),
+               (verts[:, 1] - 295.0).max())
+    assert past < 1e-3, past
+
+
 def test_bad_smoothness_is_refused(tmp_path):
     proc = run_script(ROOT / "data" / "nefertiti.off", "-o", tmp_path / "x.blend",
                       "--smoothness", "lots", timeout=60)
