@@ -2633,6 +2633,20 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
                             "errors above say why)")
         return {"FINISHED"} if made else {"CANCELLED"}
 
+    def _import_spline(self, context, path: str, label: str):
+        """The surface Import Spline makes of a spline file given to Import Points (dropped
+        with point files, or chosen among them: the same extension), or None when it refuses
+        the file (the ERROR report says why)."""
+        before = set(bpy.data.objects)
+        try:
+            bpy.ops.tcb.import_spline(filepath=path)
+        except RuntimeError as ex:  # (its ERROR report, raised here)
+            text = str(ex).strip().removeprefix("Error:").strip()
+            self.report({"ERROR"}, text if label in text else f"{label}: {text}")
+            return None
+        made = [o for o in bpy.data.objects if o not in before and o.tcb.role == "SURFACE"]
+        return made[0] if made else None
+
     def _import_file(self, context, filepath: str, several: bool = False):
         """The new object of one file, or None when the file is refused (an ERROR report says
         why, prefixed with the file's name with ``several`` when it is not in it; nothing is
@@ -2656,8 +2670,9 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
                     points, faces = read_geometry(path, keep_fill_values=True)
                 except core.FileFormatError as ex:
                     if "'control_points'" in str(ex) and "'knots'" in str(ex):
-                        ex.args = (f"{ex}: it is a TCB spline; import it with File > Import > "
-                                   "TCB Spline (.npz)",)
+                        # a TCB spline (Export Spline's .npz), dropped or chosen here: the
+                        # surface and net Import Spline makes of it
+                        return self._import_spline(context, path, label)
                     raise
             notes += [str(w.message) for w in caught
                       if issubclass(w.category, (RuntimeWarning, UserWarning))]
@@ -2750,11 +2765,11 @@ def menu_import(self, context):
 
 
 # the formats a drop from the file manager onto the 3D viewport imports: not .obj and .ply
-# (Blender's own importers take those, as users expect; File > Import > TCB Points reads them)
-# nor .npz, which is a DEM for Import Points and a spline for Import Spline (Export Spline's
-# format): a file handler is chosen by the extension alone, so every dropped spline would be
-# refused (and a second handler for Import Spline would make Blender ask which, each drop)
-DROP_EXTENSIONS = tuple(e for e in POINT_EXTENSIONS if e not in (".obj", ".ply", ".npz"))
+# (Blender's own importers take those, as users expect; File > Import > TCB Points reads them).
+# A .npz is points, a DEM, or a spline (Export Spline's format): Import Points hands a spline
+# to Import Spline (a file handler is chosen by the extension alone; a second one for .npz
+# would make Blender ask which, each drop)
+DROP_EXTENSIONS = tuple(e for e in POINT_EXTENSIONS if e not in (".obj", ".ply"))
 
 
 class TCB_FH_import_points(bpy.types.FileHandler):

@@ -249,13 +249,6 @@ def test_a_malformed_file_is_refused_with_the_reader_s_words_and_nothing_is_made
             import_points(bpy, path)
         assert (len(bpy.data.objects), len(bpy.data.meshes),
                 len(bpy.data.collections)) == before
-    # a spline saved by Export Spline: the other importer is named
-    surf = core.fit_surface(grid(8)[0], tolerance=1e-2, max_control_points=100)
-    spline = tmp_path / "spline.npz"
-    surf.save(spline)
-    with pytest.raises(RuntimeError, match="it is a TCB spline; import it with File > Import > "
-                       "TCB Spline"):
-        import_points(bpy, spline)
     with pytest.raises(RuntimeError, match="No file chosen"):
         import_points(bpy, "")
     assert (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.collections)) == before
@@ -337,7 +330,8 @@ def test_a_refused_file_among_several_is_named_and_the_others_are_imported(clean
 
 def test_files_dropped_on_the_3d_viewport_are_imported(clean_scene, tmp_path, capfd):
     """The file handler claims the point formats Blender does not import itself (.obj and .ply
-    are Blender's; .npz may be a spline: left out) and hands a drop to Import Points, whose
+    are Blender's; a .npz may be a spline, which Import Points hands to Import Spline) and
+    hands a drop to Import Points, whose
     invoke shows a dialog of its options for the dropped files instead of opening the file
     browser (with a window: checked on stand-ins, background mode has none) and imports them
     (at once in background mode)."""
@@ -349,8 +343,8 @@ def test_files_dropped_on_the_3d_viewport_are_imported(clean_scene, tmp_path, ca
     handler = handlers[0]
     assert handler.bl_import_operator == "tcb.import_points"
     claimed = set(handler.bl_file_extensions.split(";"))
-    assert claimed == set(ops.POINT_EXTENSIONS) - {".obj", ".ply", ".npz"}
-    assert {".xyz", ".txt", ".csv", ".pts", ".npy", ".asc", ".off"} <= claimed
+    assert claimed == set(ops.POINT_EXTENSIONS) - {".obj", ".ply"}
+    assert {".xyz", ".txt", ".csv", ".pts", ".npy", ".npz", ".asc", ".off"} <= claimed
 
     class Area:
         def __init__(self, kind):
@@ -571,3 +565,34 @@ def test_a_raster_turned_in_its_mesh_or_fitted_with_a_cloud_is_left_to_auto(clea
     out = capfd.readouterr().out
     assert "'cloud' is no DEM raster (Import Points) as 'tile': Projection Auto chose" in out
     assert not spline_of(bpy.context.view_layer.objects.active).report.get("projection_given")
+
+
+def test_a_spline_among_dropped_files_is_imported_as_import_spline_makes_it(clean_scene,
+                                                                            tmp_path, capfd):
+    """A .npz dropped (or chosen) with Import Points that is a TCB spline (Export Spline's
+    format, the same extension as points and DEMs) is handed to Import Spline: its surface and
+    net are made beside the points' objects; a damaged spline is refused with its words."""
+    bpy = clean_scene
+    surf = core_module().fit_surface(grid(8)[0], tolerance=1e-2, max_control_points=100)
+    surf.save(tmp_path / "spline.npz")
+    write_xyz(tmp_path / "scan.xyz", 30)
+    capfd.readouterr()
+    assert import_files(bpy, tmp_path, ["scan.xyz", "spline.npz"], invoke=True) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "imported 'spline.npz' as 'spline TCB Surface'" in out
+    assert "Imported 2 files as scan, spline TCB Surface" in out
+    surface = bpy.data.objects["spline TCB Surface"]
+    assert surface.tcb.role == "SURFACE" and surface.tcb.net is not None
+    np.testing.assert_array_equal(spline_of(surface).control_points, surf.control_points)
+    assert surface.select_get() and bpy.data.objects["scan"].select_get()
+    assert bpy.context.view_layer.objects.active == surface
+    # filepath alone (a script) as well; a spline whose knots were cut is refused
+    assert import_points(bpy, tmp_path / "spline.npz") == {"FINISHED"}
+    with np.load(tmp_path / "spline.npz") as z:
+        parts = dict(z)
+    parts["knots"] = parts["knots"][:3]
+    np.savez(tmp_path / "cut.npz", **parts)
+    before = counts(bpy)
+    with pytest.raises(RuntimeError, match="cut.npz"):
+        import_points(bpy, tmp_path / "cut.npz")
+    assert counts(bpy) == before
