@@ -854,6 +854,59 @@ def local_origin(points: np.ndarray) -> np.ndarray:
     return (np.round(center / step) * step).astype(np.float32).astype(np.float64)
 
 
+# Framing a 3D view on imported data (Import Points): Clip End at least this many times the
+# data's diagonal (the eye at about one diagonal from its centre, as View > Frame Selected
+# puts it, its farthest point is 1.5 diagonals away: room to zoom out 2.5 times), and Clip
+# Start raised only to keep Clip End / Clip Start within Blender's default ratio (0.01 to
+# 1000 m): its manual names no number, only that a large range costs depth precision
+# (z-fighting) and that a larger Clip Start helps on large scenes.
+VIEW_CLIP_DIAGONALS = 4.0
+VIEW_CLIP_RATIO = 1e5
+
+
+def _round_up(value: float) -> float:
+    """``value`` (> 0) rounded up to two significant digits (56568 -> 57000)."""
+    step = 10.0 ** (np.floor(np.log10(value)) - 1)
+    return float(np.ceil(value / step - 1e-9) * step)
+
+
+def frame_views(spaces, lo, hi) -> list[str]:
+    """Frame the 3D views (``SpaceView3D``: ``clip_start``, ``clip_end``, ``region_3d``) on
+    the world bounding box ``lo``..``hi`` where some of it may be out of reach: its farthest
+    corner from ``view_location`` plus ``view_distance`` (a bound for its distance from the
+    eye) beyond ``clip_end``; a map tile imported at its UTM coordinates is 4e6 away from a
+    view at the world origin, and a tile a few km across is wider than the default 1000 m.
+    Such a view is centred on the box at about its diagonal (leaving camera view, as Frame
+    Selected does), its Clip End raised (never lowered) to :data:`VIEW_CLIP_DIAGONALS` times
+    the diagonal and its Clip Start only as needed by :data:`VIEW_CLIP_RATIO`. Views that
+    reach all of it are left as they are. One note per view changed ("Clip End raised to
+    57000, Clip Start to 0.57"), empty where the clip range was kept."""
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    center, diag = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo))
+    notes = []
+    for space in spaces:
+        r3d = space.region_3d
+        at = np.array(r3d.view_location, dtype=np.float64)
+        farthest = float(np.linalg.norm(np.maximum(np.abs(lo - at), np.abs(hi - at))))
+        if farthest + r3d.view_distance <= space.clip_end:
+            continue
+        r3d.view_location = [float(c) for c in center]
+        r3d.view_distance = max(diag, 1.0)  # (one point, or a few close together: 1 m away)
+        if getattr(r3d, "view_perspective", None) == "CAMERA":
+            r3d.view_perspective = "PERSP"
+        raised = []
+        end = _round_up(VIEW_CLIP_DIAGONALS * max(diag, 1.0))
+        if end > space.clip_end:
+            space.clip_end = end
+            raised.append(f"Clip End raised to {length_text(end, digits=6)}")
+            start = end / VIEW_CLIP_RATIO
+            if start > space.clip_start:
+                space.clip_start = start
+                raised.append(f"Clip Start to {length_text(start, digits=6)}")
+        notes.append(", ".join(raised))
+    return notes
+
+
 # the scene's length units (Unit Settings > Length): metres per unit, and the symbol
 _LENGTH_UNITS = {"KILOMETERS": (1e3, "km"), "METERS": (1.0, "m"), "CENTIMETERS": (1e-2, "cm"),
                  "MILLIMETERS": (1e-3, "mm"), "MICROMETERS": (1e-6, "\u00b5m"),

@@ -2621,6 +2621,7 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
                     context.view_layer.objects.active = obj
                 except RuntimeError:  # (not in the view layer: cannot be)
                     pass
+            self._frame_views(context, made)
         if len(paths) > 1:
             names = ", ".join(obj.name for obj in made)
             if not refused:
@@ -2632,6 +2633,30 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
                 self.report({"ERROR"}, f"None of the {len(paths)} files was imported (the "
                             "errors above say why)")
         return {"FINISHED"} if made else {"CANCELLED"}
+
+    def _frame_views(self, context, made: list) -> None:
+        """Frame the 3D views of the open windows that do not reach all of the new objects
+        (map coordinates far from a view at the world origin, a tile wider than its Clip End:
+        the user saw nothing; :func:`bridge.frame_views`), with one INFO note. None in
+        background mode."""
+        areas = [area for window in context.window_manager.windows
+                 for area in window.screen.areas if area.type == "VIEW_3D"]
+        pts = [bridge.read_world_positions(o) for o in made if o.type == "MESH"]
+        pts = np.concatenate(pts) if pts else np.empty((0, 3))
+        if not areas or not len(pts):
+            return
+        notes = bridge.frame_views([a.spaces.active for a in areas], pts.min(axis=0),
+                                   pts.max(axis=0))
+        if not notes:
+            return
+        for area in areas:
+            area.tag_redraw()
+        views, its = (("the 3D view", "its") if len(notes) == 1
+                      else (f"{len(notes)} 3D views", "their"))
+        names = ", ".join(f"'{o.name}'" for o in made)
+        raised = "; ".join(dict.fromkeys(n for n in notes if n))
+        self.report({"INFO"}, f"Framed {views} on {names}, out of {its} clip range"
+                    + (f"; {raised}" if raised else ""))
 
     def _import_spline(self, context, path: str, label: str):
         """The surface Import Spline makes of a spline file given to Import Points (dropped

@@ -596,3 +596,116 @@ def test_a_spline_among_dropped_files_is_imported_as_import_spline_makes_it(clea
     with pytest.raises(RuntimeError, match="cut.npz"):
         import_points(bpy, tmp_path / "cut.npz")
     assert counts(bpy) == before
+
+
+def view_stand_in(location=(0.0, 0.0, 0.0), distance=15.0, start=0.01, end=1000.0):
+    """A SpaceView3D as frame_views reads it: Blender's default clip range and view."""
+    from mathutils import Vector
+
+    r3d = SimpleNamespace(view_location=Vector(location), view_distance=distance,
+                          view_perspective="PERSP")
+    return SimpleNamespace(clip_start=start, clip_end=end, region_3d=r3d)
+
+
+def view_state(space):
+    r3d = space.region_3d
+    return (space.clip_start, space.clip_end, tuple(r3d.view_location), r3d.view_distance,
+            r3d.view_perspective)
+
+
+TILE = (UTM, UTM + [10000.0, 8000.0, 300.0])  # a DEM tile 10 km by 8 km at UTM coordinates
+
+
+def assert_framed_on_tile(space):
+    lo, hi = TILE
+    diag = np.linalg.norm(hi - lo)
+    r3d = space.region_3d
+    assert np.allclose(np.array(r3d.view_location), 0.5 * (lo + hi), rtol=0, atol=0.5)
+    assert r3d.view_distance == pytest.approx(diag, rel=1e-6)
+    # the whole tile within Clip End from the eye, with room to zoom out; the ratio kept
+    assert space.clip_end >= 4 * diag > 1.5 * diag
+    assert space.clip_end / space.clip_start == pytest.approx(1e5, rel=1e-6)
+    assert space.clip_start < 0.5 * diag  # (the nearest point of the tile not clipped)
+
+
+def test_a_utm_tile_out_of_the_views_reach_is_framed_and_its_clip_range_raised(clean_scene):
+    """A tile at its map coordinates is 4e6 from a view at the world origin and wider than its
+    Clip End (1000): the view is centred on it at about its diagonal, Clip End raised to 4
+    diagonals (rounded up) and Clip Start only as needed to keep the ratio at 1e5 (Blender's
+    default range). A view whose Clip End already covers it keeps its clip range (never
+    lowered); a small object next to a view is left alone, without a note."""
+    bridge = sys.modules[ADDON + ".tcb_addon.bridge"]
+    lo, hi = TILE
+    view, wide = view_stand_in(), view_stand_in(start=1.0, end=1e6)
+    notes = bridge.frame_views([view, wide], lo, hi)
+    assert_framed_on_tile(view)
+    assert view.clip_end == 52000.0 and view.clip_start == pytest.approx(0.52)  # (4 x 12810)
+    assert notes[0] == "Clip End raised to 52000, Clip Start to 0.52"
+    assert np.allclose(np.array(wide.region_3d.view_location), 0.5 * (lo + hi))
+    assert (wide.clip_start, wide.clip_end) == (1.0, 1e6) and notes[1] == ""
+    assert len(notes) == 2
+
+    near = view_stand_in()
+    before = view_state(near)
+    assert bridge.frame_views([near], [-1.0, -1.0, 0.0], [1.0, 1.0, 0.5]) == []
+    assert view_state(near) == before
+    # camera view is left for the framed perspective view, as Frame Selected does
+    camera = view_stand_in()
+    camera.region_3d.view_perspective = "CAMERA"
+    bridge.frame_views([camera], lo, hi)
+    assert camera.region_3d.view_perspective == "PERSP"
+
+
+def test_a_real_3d_view_is_framed_on_a_utm_tile_and_left_alone_for_a_small_object(
+        clean_scene):
+    """The same on a SpaceView3D of the file's screens (background mode has them, without
+    windows): its Vector view location and float32 clip range."""
+    bpy = clean_scene
+    bridge = sys.modules[ADDON + ".tcb_addon.bridge"]
+    areas = [a for s in bpy.data.screens for a in s.areas if a.type == "VIEW_3D"]
+    assert areas
+    space = areas[0].spaces.active
+    before = view_state(space)
+    try:
+        space.clip_start, space.clip_end = 0.01, 1000.0
+        space.region_3d.view_location = (0.0, 0.0, 0.0)
+        space.region_3d.view_distance = 15.0
+        space.region_3d.view_perspective = "PERSP"
+        start = view_state(space)
+        assert bridge.frame_views([space], [-1.0, -1.0, 0.0], [1.0, 1.0, 0.5]) == []
+        assert view_state(space) == start
+        notes = bridge.frame_views([space], *TILE)
+        assert notes == ["Clip End raised to 52000, Clip Start to 0.52"]
+        assert_framed_on_tile(space)
+    finally:
+        space.clip_start, space.clip_end = before[0], before[1]
+        r3d = space.region_3d
+        r3d.view_location, r3d.view_distance, r3d.view_perspective = before[2:]
+
+
+def test_import_frames_the_open_windows_3d_views_in_one_note(clean_scene, tmp_path, capfd):
+    """Import Points frames the 3D views of the open windows on what it made (background mode
+    has no windows: the operator's step is run on a stand-in window of the real import's
+    object) and says so once; with no window nothing is done."""
+    bpy = clean_scene
+    ops = sys.modules[ADDON + ".tcb_addon.operators"]
+    write_asc(tmp_path / "dem.asc", rows=30, cols=40, cell=100.0)  # 4 km by 3 km at UTM
+    capfd.readouterr()
+    assert import_points(bpy, tmp_path / "dem.asc") == {"FINISHED"}
+    assert "Framed" not in capfd.readouterr().out  # (no windows)
+    dem = bpy.data.objects["dem"]
+
+    view, reports, redrawn = view_stand_in(), [], []
+    area = SimpleNamespace(type="VIEW_3D", spaces=SimpleNamespace(active=view),
+                           tag_redraw=lambda: redrawn.append(1))
+    window = SimpleNamespace(screen=SimpleNamespace(areas=[area]))
+    context = SimpleNamespace(window_manager=SimpleNamespace(windows=[window]))
+    me = SimpleNamespace(report=lambda kind, text: reports.append((kind, text)))
+    ops.TCB_OT_import_points._frame_views(me, context, [dem])
+    assert len(reports) == 1 and reports[0][0] == {"INFO"} and redrawn
+    assert reports[0][1].startswith("Framed the 3D view on 'dem', out of its clip range; "
+                                    "Clip End raised to ")
+    pts = world(dem)
+    assert np.allclose(np.array(view.region_3d.view_location),
+                       0.5 * (pts.min(axis=0) + pts.max(axis=0)), rtol=0, atol=0.5)
+    assert view.clip_end >= 4 * np.linalg.norm(np.ptp(pts, axis=0))
