@@ -888,7 +888,10 @@ def frame_views(spaces, lo, hi) -> list[str]:
         r3d = space.region_3d
         at = np.array(r3d.view_location, dtype=np.float64)
         farthest = float(np.linalg.norm(np.maximum(np.abs(lo - at), np.abs(hi - at))))
-        if farthest + r3d.view_distance <= space.clip_end:
+        # (an orthographic view draws half of Clip End each side of the eye: Blender's
+        # BKE_camera_params_from_view3d halves it for depth precision)
+        reach = space.clip_end * (0.5 if getattr(r3d, "view_perspective", None) == "ORTHO" else 1.0)
+        if farthest + r3d.view_distance <= reach:
             continue
         r3d.view_location = [float(c) for c in center]
         r3d.view_distance = max(diag, 1.0)  # (one point, or a few close together: 1 m away)

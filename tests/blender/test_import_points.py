@@ -649,6 +649,13 @@ def test_a_utm_tile_out_of_the_views_reach_is_framed_and_its_clip_range_raised(c
     before = view_state(near)
     assert bridge.frame_views([near], [-1.0, -1.0, 0.0], [1.0, 1.0, 0.5]) == []
     assert view_state(near) == before
+    # an orthographic view draws half of Clip End each side of the eye: 600 m is out of reach
+    ortho, persp = view_stand_in(distance=100.0), view_stand_in(distance=100.0)
+    ortho.region_3d.view_perspective = "ORTHO"
+    assert bridge.frame_views([persp], [500.0, 0.0, 0.0], [600.0, 0.0, 0.0]) == []
+    assert bridge.frame_views([ortho], [500.0, 0.0, 0.0], [600.0, 0.0, 0.0]) == [""]
+    assert np.allclose(np.array(ortho.region_3d.view_location), [550.0, 0.0, 0.0])
+    assert ortho.clip_end == 1000.0  # (4 x 100 m: its clip range kept)
     # camera view is left for the framed perspective view, as Frame Selected does
     camera = view_stand_in()
     camera.region_3d.view_perspective = "CAMERA"
