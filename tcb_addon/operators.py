@@ -2599,6 +2599,9 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
 
     def execute(self, context):
         paths = self._paths()
+        # the imported files' reports, given after the note on the views framed (the status
+        # bar shows the last report: a file's warnings, not that note)
+        self._pending = []
         if len(paths) == 1:
             obj = self._import_file(context, paths[0])
             if obj is None:
@@ -2622,6 +2625,8 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
                 except RuntimeError:  # (not in the view layer: cannot be)
                     pass
             self._frame_views(context, made)
+        for level, text in self._pending:
+            self.report(level, text)
         if len(paths) > 1:
             names = ", ".join(obj.name for obj in made)
             if not refused:
@@ -2777,9 +2782,10 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
         if raster:
             text += ("; a DEM raster: Fit Surface fits it along its z, as heights over its x and "
                      "y (the Projection setting chooses another)")
-        self.report({"INFO"}, text)
+        self._pending.append(({"INFO"}, text))
         for note in notes:  # (after the summary: the status bar shows the last report)
-            self.report({"WARNING"}, f"{label}: {note}" if not note.startswith(label) else note)
+            self._pending.append(
+                ({"WARNING"}, f"{label}: {note}" if not note.startswith(label) else note))
         return obj
 
 
