@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import HolesError, InvalidInputError, OutlierError, TCBError
 from .fit import DEFAULT_SMOOTHNESS
-from .meshio import WRITE_EXTENSIONS, is_raster, read_geometry, write_mesh
+from .meshio import WRITE_EXTENSIONS, is_dem, read_geometry, write_mesh
 from .parameterize import (SPIKES_DISSOLVED, fill_value_rows, fill_value_words,
                           projection_direction)
 from .refine import (SWINGS_LEFT, mostly_taken_back, replaced_default_reason,
@@ -101,8 +101,9 @@ def _parser() -> argparse.ArgumentParser:
                    "plane across it) instead of choosing it (auto: the best-fit plane, or a "
                    "direction the cloud is less steep over); still checked for folds. Its sign "
                    "does not matter (a leading minus needs the form --projection=-1,0,0). "
-                   "Default: z for a DEM raster (.asc grid, .npz elevation), whose tiles then "
-                   "keep their straight edges; auto for other clouds")
+                   "Default: z for a DEM raster (.asc grid, .npz elevation, or x y z text on a "
+                   "grid of x and y), whose tiles then keep their straight edges; auto for "
+                   "other clouds")
     f.add_argument("--join", nargs=2, action="append", metavar=("MESH", "SPLINE"),
                    help="join the surface to a neighbouring patch's along the border the two "
                         "meshes share (vertices at identical coordinates): MESH is that "
@@ -369,12 +370,12 @@ def _fit(args) -> int:
         kind = f"mesh with {len(faces)} faces" if faces is not None else "point cloud"
         print(f"read {args.input}: {len(points)} points, {kind}", file=sys.stderr)
     join = _neighbours(args, points, faces)
-    # a DEM raster is heights over x and y: fitted along z unless told (meshio.is_raster)
-    raster = faces is None and args.projection is None and is_raster(args.input)
+    # a DEM is heights over a grid of x and y: fitted along z unless told (meshio.is_dem)
+    raster = faces is None and args.projection is None and is_dem(args.input, points)
     projection = "z" if raster else None if args.projection == "auto" else args.projection
     if raster and not args.quiet:
-        print(f"{args.input} is a DEM raster: fitted as heights over x and y (--projection z; "
-              "--projection auto chooses the best-fit plane)", file=sys.stderr)
+        print(f"{args.input} is a DEM raster (heights over a grid of x and y): fitted along z "
+              "(--projection z; --projection auto chooses the best-fit plane)", file=sys.stderr)
     try:
         surf = fit_surface(
             points, faces, degree=args.degree, mode=args.mode, tolerance=args.tolerance,

@@ -51,9 +51,10 @@ import numpy as np
 
 from .errors import FileFormatError, InvalidInputError
 from .geometry import float32_rounding, polygon_triangles
-from .parameterize import fill_value_rows
+from .parameterize import fill_value_rows, on_xy_grid
 
-__all__ = ["READ_EXTENSIONS", "WRITE_EXTENSIONS", "is_raster", "read_geometry", "write_mesh"]
+__all__ = ["READ_EXTENSIONS", "WRITE_EXTENSIONS", "is_dem", "is_raster", "read_geometry",
+           "write_mesh"]
 
 READ_EXTENSIONS = (".off", ".obj", ".ply", ".xyz", ".txt", ".csv", ".pts", ".npy", ".npz",
                    ".asc")
@@ -160,6 +161,15 @@ def is_raster(path: PathLike) -> bool:
     except (OSError, zipfile.BadZipFile, ValueError, _MalformedError):
         return False
     return False
+
+
+def is_dem(path: PathLike, points: np.ndarray) -> bool:
+    """Whether the point cloud read from ``path`` is a DEM, heights over a grid of x and y,
+    which the command line and Blender's Import Points fit along z: a raster file
+    (:func:`is_raster`, whatever share of its cells has data) or points on a grid of x and y
+    with one height per node (:func:`core.parameterize.on_xy_grid`: gridded XYZ text, as
+    survey agencies publish DEM tiles)."""
+    return is_raster(path) or on_xy_grid(points)
 
 
 def write_mesh(path: PathLike, vertices: np.ndarray, faces: np.ndarray,

@@ -367,7 +367,7 @@ def import_input(bpy, addon: str, path: Path) -> list:
     origin = bridge.local_origin(points)
     mesh = bridge.new_mesh(path.stem, points - origin, faces)
     obj = bridge.link_new_object(bpy.context.scene.collection, path.stem, mesh, origin)
-    if faces is None and meshio.is_raster(path):  # (fitted along its z, as Import Points')
+    if faces is None and meshio.is_dem(path, points):  # (fitted along its z, as Import Points')
         obj[importlib.import_module(f"{addon}.tcb_addon.operators").RASTER_KEY] = True
     return [obj]
 

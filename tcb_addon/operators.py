@@ -42,8 +42,8 @@ PART_KEY = "tcb_source_part"
 # a surface made by Import Spline: the file's path (Fit Surface with Replace Previous Result
 # leaves it and makes a new result: it may be a long fit's, made elsewhere)
 IMPORTED_KEY = "tcb_imported_from"
-# an object Import Points made of a DEM raster (.asc grid, .npz elevation: core.meshio.is_raster):
-# heights over its x and y, which Fit Surface with Projection Auto fits along the object's z (on
+# an object Import Points made of a DEM raster (.asc grid, .npz elevation, x y z text on a grid
+# of x and y: core.meshio.is_dem): heights over its x and y, which Fit Surface with Projection Auto fits along the object's z (on
 # its tilted best-fit plane a sloping tile's surface reached past its straight edges)
 RASTER_KEY = "tcb_raster"
 
@@ -1379,18 +1379,15 @@ def set_up_result(context, surface, net, surf, sources, settings: dict, live_net
 
 
 def _on_its_grid(obj) -> bool:
-    """Whether a raster object's vertices still lie on a grid of its x and y, as Import Points
-    made them: the distinct x times the distinct y at most 4 times the vertices (a quarter of
-    the cells with data at least). Turned inside the mesh (Apply Rotation, a rotation in Edit
-    Mode) or joined with another cloud, they are not, and its z may cross the points' surface
-    (fitted along it, a tile turned 90 degrees and applied was refused as folded: review)."""
+    """Whether a raster object's vertices are still heights over a grid of its x and y
+    (``core.parameterize.on_xy_grid``), as Import Points made them. Turned inside the mesh
+    (Apply Rotation, a rotation in Edit Mode) or joined with another cloud, they are not, and
+    its z may cross the points' surface (fitted along it, a tile turned 90 degrees and applied
+    was refused as folded: review)."""
     n = len(obj.data.vertices)
-    if not n:
-        return False
     co = np.empty(3 * n, dtype=np.float32)
     obj.data.vertices.foreach_get("co", co)
-    co = co.reshape(-1, 3)
-    return len(np.unique(co[:, 0])) * len(np.unique(co[:, 1])) <= 4 * n
+    return _core().parameterize.on_xy_grid(co.reshape(-1, 3))
 
 
 def raster_projection(sources) -> tuple[tuple | None, str | None]:
@@ -2682,7 +2679,7 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
         why, prefixed with the file's name with ``several`` when it is not in it; nothing is
         left made)."""
         core = _core()
-        from ..core.meshio import is_raster, read_geometry
+        from ..core.meshio import is_dem, read_geometry
         from ..core.parameterize import fill_value_rows, fill_value_words
 
         notes = []
@@ -2750,7 +2747,7 @@ class TCB_OT_import_points(bpy.types.Operator, ImportHelper):
                 text = f"{label}: {text}"
             self.report({"ERROR"}, text)
             return None
-        raster = faces is None and is_raster(path)
+        raster = faces is None and is_dem(path, points)
         name = os.path.splitext(label)[0] or "Points"
         layer = context.view_layer.active_layer_collection
         coll = (layer.collection if layer is not None and not layer.exclude

@@ -397,9 +397,17 @@ def slope_points():
     return np.c_[x.ravel(), y.ravel(), z.ravel()], z
 
 
-def write_slope(path):
-    """The sloping tile as an ESRI ASCII grid (``.asc``) or as .xyz text columns."""
+def write_slope(path, jitter=False):
+    """The sloping tile as an ESRI ASCII grid (``.asc``) or as .xyz text columns; with
+    ``jitter`` the surface at its nodes moved by up to a quarter cell in x and y (scattered
+    points: no grid)."""
     pts, z = slope_points()
+    if jitter:
+        xy = pts[:, :2] + np.random.default_rng(7).uniform(-0.25, 0.25, (len(pts), 2)) * SLOPE_CELL
+        xy = np.clip(xy, 0.5 * SLOPE_CELL, [(SLOPE_COLS - 0.5) * SLOPE_CELL,
+                                             (SLOPE_ROWS - 0.5) * SLOPE_CELL])
+        j, i = xy[:, 0] / SLOPE_CELL - 0.5, SLOPE_ROWS - 0.5 - xy[:, 1] / SLOPE_CELL
+        pts = np.c_[xy, 100.0 + 3.0 * j + 4.0 * np.sin(j / 6.0) + 3.0 * np.cos(i / 5.0)]
     if path.suffix == ".asc":
         head = (f"ncols {SLOPE_COLS}\nnrows {SLOPE_ROWS}\nxllcorner 0\nyllcorner 0\n"
                 f"cellsize {SLOPE_CELL:g}\n")
@@ -463,12 +471,16 @@ def test_a_dem_raster_is_fitted_along_its_z_and_keeps_its_straight_edges(clean_s
     assert past_the_tile(world(surface)) < 1e-3
 
 
-def test_the_same_tile_as_text_columns_keeps_auto_s_tilted_plane(clean_scene, tmp_path, capfd):
-    """The same points in an .xyz file are no raster: Projection Auto chooses the best-fit
-    plane, tilted with the slope, and the surface reaches past the tile's edges."""
+def test_scattered_points_of_the_tile_keep_auto_s_tilted_plane(clean_scene, tmp_path, capfd):
+    """The tile's nodes as .xyz text (a gridded XYZ export) are a DEM raster too; the same
+    surface at scattered points is not: Projection Auto chooses the best-fit plane, tilted
+    with the slope, and the surface reaches past the tile's edges."""
     bpy = clean_scene
-    path = write_slope(tmp_path / "slope.xyz")
-    assert not meshio().is_raster(path)
+    grid_text = write_slope(tmp_path / "nodes.xyz")
+    assert not meshio().is_raster(grid_text)  # (the file's type: text columns)
+    assert import_points(bpy, grid_text) == {"FINISHED"}
+    assert bpy.context.view_layer.objects.active["tcb_raster"]
+    path = write_slope(tmp_path / "slope.xyz", jitter=True)
     capfd.readouterr()
     assert import_points(bpy, path) == {"FINISHED"}
     assert "DEM raster" not in capfd.readouterr().out
@@ -556,7 +568,7 @@ def test_a_raster_turned_in_its_mesh_or_fitted_with_a_cloud_is_left_to_auto(clea
 
     assert import_points(bpy, write_slope(tmp_path / "tile.asc")) == {"FINISHED"}
     tile = bpy.context.view_layer.objects.active
-    assert import_points(bpy, write_slope(tmp_path / "cloud.xyz")) == {"FINISHED"}
+    assert import_points(bpy, write_slope(tmp_path / "cloud.xyz", jitter=True)) == {"FINISHED"}
     cloud = bpy.context.view_layer.objects.active
     cloud.location = (SLOPE_COLS * SLOPE_CELL, 0.0, 3.0 * SLOPE_COLS)
     bpy.context.view_layer.update()

@@ -555,10 +555,10 @@ def test_an_esri_ascii_grid_dem_is_fitted(tmp_path):
 
 
 def test_a_dem_raster_is_fitted_along_z_and_keeps_its_tile_s_edges(tmp_path):
-    """A DEM raster (.asc grid, .npz elevation) is heights over x and y: fitted along z by
-    default, so a sloping tile's surface ends at the tile's straight edges (on its best-fit
-    plane, tilted, it reached past them); --projection auto chooses that plane, and a text
-    file of the same points is a cloud as any."""
+    """A DEM raster (.asc grid, .npz elevation, x y z text on a grid) is heights over x and
+    y: fitted along z by default, so a sloping tile's surface ends at the tile's straight
+    edges (on its best-fit plane, tilted, it reached past them); --projection auto chooses
+    that plane, and the surface at scattered points is a cloud as any."""
     ys, xs = np.mgrid[0:30, 0:40]
     elev = 100 + 3.0 * xs + 4 * np.sin(xs / 6.0) + 3 * np.cos(ys / 5.0)  # (a 17-degree slope)
     asc = tmp_path / "dem.asc"
@@ -568,12 +568,19 @@ def test_a_dem_raster_is_fitted_along_z_and_keeps_its_tile_s_edges(tmp_path):
     npz = tmp_path / "dem.npz"  # (the same nodes: row 0 at ymin)
     np.savez(npz, elevation=elev[::-1], xmin=1005.0, xmax=1395.0, ymin=2005.0, ymax=2295.0,
              units="metres")
-    xyz = tmp_path / "dem.xyz"
-    np.savetxt(xyz, read_geometry(asc)[0])
+    nodes = read_geometry(asc)[0]
+    xyz = tmp_path / "dem.xyz"  # (gridded XYZ text, as survey agencies publish DEM tiles)
+    np.savetxt(xyz, nodes)
+    scattered = tmp_path / "scattered.xyz"  # (the surface moved off the grid: a scan)
+    xy = nodes[:, :2] + np.random.default_rng(1).uniform(-2.5, 2.5, (len(nodes), 2))
+    xy = np.clip(xy, [1005, 2005], [1395, 2295])
+    c, r = (xy[:, 0] - 1005) / 10, (2295 - xy[:, 1]) / 10
+    np.savetxt(scattered, np.c_[xy, 100 + 3.0 * c + 4 * np.sin(c / 6.0) + 3 * np.cos(r / 5.0)])
     fast = ("--max-control-points", "150", "--max-iterations", "2")
     for src, projection, expected in ((asc, (), "a DEM raster"), (npz, (), "a DEM raster"),
+                                      (xyz, (), "a DEM raster"),
                                       (asc, ("--projection", "auto"), "chosen"),
-                                      (xyz, (), "chosen")):
+                                      (scattered, (), "chosen")):
         out = tmp_path / f"{src.stem}{len(projection)}{src.suffix[1:]}.obj"
         r = run("fit", src, "-o", out, *fast, *projection)
         assert r.returncode == 0, r.stderr

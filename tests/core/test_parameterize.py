@@ -2394,3 +2394,20 @@ def test_the_dissection_order_is_a_fill_reducing_permutation_and_keeps_the_map()
     np.testing.assert_allclose(nested.solve(rhs[:, 0], trans="T"),
                                pz.splu(pz.sp.csc_matrix(a)).solve(rhs[:, 0], trans="T"),
                                rtol=0, atol=1e-12 * np.abs(rhs).max())
+
+
+def test_on_xy_grid_tells_heights_over_a_grid_from_scattered_points():
+    """A DEM's nodes (one height per node of a grid of x and y, of any spacing; a quarter of
+    the nodes held at least) are; scattered points, two heights at one node, a grid turned in
+    the plane and a grid mostly empty are not."""
+    rng = np.random.default_rng(0)
+    x, y = np.meshgrid(np.cumsum(rng.uniform(1, 2, 40)), 3.0 * np.arange(30))
+    nodes = np.c_[x.ravel(), y.ravel(), rng.normal(size=x.size)]
+    assert pz.on_xy_grid(nodes) and pz.on_xy_grid(nodes[rng.permutation(len(nodes))])
+    assert pz.on_xy_grid(nodes[rng.random(len(nodes)) < 0.3])  # (no-data cells)
+    assert not pz.on_xy_grid(nodes[rng.random(len(nodes)) < 0.2])
+    assert not pz.on_xy_grid(np.r_[nodes, nodes[:1] + [0, 0, 1]])  # (two heights at a node)
+    assert not pz.on_xy_grid(nodes + np.c_[rng.uniform(-0.1, 0.1, (len(nodes), 2)), 0 * x.ravel()])
+    c, s = np.cos(0.5), np.sin(0.5)
+    assert not pz.on_xy_grid(nodes @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]]))
+    assert not pz.on_xy_grid(nodes[:9]) and not pz.on_xy_grid(nodes[nodes[:, 1] == 0])
