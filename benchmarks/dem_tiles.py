@@ -7,7 +7,9 @@ row and column, default 1; ``--quick``: every 3rd) cut into 2 x 2 tiles that sha
 row and column of nodes, each tile fitted with every default (tolerance 1e-3 of its diagonal)
 on its best-fit plane (``projection=None``, what ``fit_surface`` chooses for a cloud) and along z
 (``projection="z"``, what the command line and Blender's Import Points give a DEM raster since
-the forty-sixth session: ``core.meshio.is_raster``). Per projection, over the four tiles:
+the forty-sixth session: ``core.meshio.is_raster``), and along z joined (*z, joined*: each tile
+fitted with ``join=`` the tiles before it that share a side with it, forty-seventh session).
+Per projection, over the four tiles:
 
 * *tilt*: the largest angle between a tile's projection direction and z (degrees);
 * *cp*: the control points of the four fits, summed; *s*: their seconds, summed;
@@ -38,6 +40,9 @@ from core import fit_surface  # noqa: E402
 
 RESOLUTION = 128
 SEAM_POINTS = 500
+# "z, joined": the tiles fitted in turn, each joined to those before it that share a side
+# with it (core.join.CloudSeam): 1 to 0, 2 to 0, 3 to 1 and 2
+JOINS = ((), (0,), (0,), (1, 2))
 
 
 def tiles(step: int):
@@ -68,13 +73,15 @@ def run(step: int) -> None:
           f"{', '.join(str(len(p)) for p, _, _ in parts)}")
     print("| projection | tilt (deg) | cp | past edges (m) | seam dz RMS / max (m) | seam NaN | s |")
     print("|---|---|---|---|---|---|---|")
-    for label, projection in (("best-fit plane", None), ("z", "z")):
+    for label, projection, joins in (("best-fit plane", None, False), ("z", "z", False),
+                                     ("z, joined", "z", True)):
         surfs, cp, secs, tilt, past = [], 0, 0.0, 0.0, 0.0
-        for pts, lo, hi in parts:
+        for k, (pts, lo, hi) in enumerate(parts):
             t0 = time.perf_counter()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                s = fit_surface(pts, projection=projection)
+                join = [surfs[i] for i in JOINS[k]] if joins and JOINS[k] else None
+                s = fit_surface(pts, projection=projection, join=join)
             secs += time.perf_counter() - t0
             surfs.append(s)
             cp += len(s.control_points)

@@ -104,11 +104,14 @@ def _parser() -> argparse.ArgumentParser:
                    "Default: z for a DEM raster (.asc grid, .npz elevation, or x y z text on a "
                    "grid of x and y), whose tiles then keep their straight edges; auto for "
                    "other clouds")
-    f.add_argument("--join", nargs=2, action="append", metavar=("MESH", "SPLINE"),
-                   help="join the surface to a neighbouring patch's along the border the two "
-                        "meshes share (vertices at identical coordinates): MESH is that "
-                        "patch's mesh file, SPLINE the .npz its fit wrote with --spline; "
-                        "repeat for more neighbours (core.join)")
+    f.add_argument("--join", nargs=2, action="append", metavar=("DATA", "SPLINE"),
+                   help="join the surface to a neighbour's along the border the two share: "
+                        "DATA is the neighbour's file, SPLINE the .npz its fit wrote with "
+                        "--spline; repeat for more neighbours (core.join). Meshes: patches of "
+                        "one mesh (vertices at identical coordinates); point clouds: clouds "
+                        "fitted along the same projection, such as DEM tiles that share their "
+                        "edge row of nodes or overlap, joined where this one's border lies on "
+                        "the neighbour's surface")
     f.add_argument("--quiet", action="store_true", help="no progress output")
     h = sub.add_parser("heights", help="the z of a fitted point cloud's surface over the x "
                        "and y of points (resampling a terrain, checking survey points)")
@@ -479,8 +482,10 @@ def _fit(args) -> int:
                                f"at most ({j['gap_max_rel']:.2e} of the diagonal)"))
     elif "join" in r:
         j = r["join"]
+        along = (f"along {j['shared_edges']} shared border edges" if j["shared_edges"]
+                 else f"along {j['shared_length']:.4g} of shared border ({j['pins']} pins)")
         rows.append(("joined", f"{j['surfaces']} neighbour{'s' if j['surfaces'] > 1 else ''} "
-                               f"along {j['shared_edges']} shared border edges: the borders "
+                               f"{along}: the borders "
                                f"{j['gap_max']:.4g} apart at most ({j['gap_max_rel']:.2e} of "
                                f"the diagonal; {j['gap_max_unjoined_rel']:.2e} unjoined)"
                                + (f", {j['knots_added']} knots added along them"
@@ -556,27 +561,32 @@ def _fit(args) -> int:
 
 
 def _neighbours(args, points: np.ndarray, faces) -> list | None:
-    """``fit_surface``'s ``join`` from ``--join MESH SPLINE`` (each neighbour's mesh and the
-    spline fitted to it), or None; a one-line error for a point cloud, a file that is not a
-    mesh, a spline not fitted to that mesh, or a mesh sharing no vertex with the input."""
+    """``fit_surface``'s ``join`` from ``--join DATA SPLINE`` (each neighbour's data file and
+    the spline fitted to it), or None; a one-line error for a neighbour of another kind (a
+    cloud for a mesh or a mesh for a cloud), a spline not fitted to that data, or a mesh
+    sharing no vertex with the input. A point cloud's neighbours are their surfaces
+    (``core.join.cloud_seam`` finds the border they share)."""
     from .join import shared_vertices
     from .surface import TCBSurface
 
     if not args.join:
         return None
-    if faces is None:
-        raise TCBError(f"--join joins a mesh's surface to its neighbours' along their shared "
-                       f"border; {args.input} is a point cloud")
     join = []
     for mesh, spline in args.join:
         other, other_faces = read_geometry(mesh)
-        if other_faces is None:
+        if faces is None and other_faces is not None:
+            raise TCBError(f"--join {mesh} {spline}: {mesh} is a mesh and {args.input} a "
+                           "point cloud; give the neighbouring cloud's file")
+        if faces is not None and other_faces is None:
             raise TCBError(f"--join {mesh} {spline}: {mesh} is a point cloud; give the "
                            "neighbouring patch's mesh")
         surf = TCBSurface.load(spline)
         if not surf.fitted_to(other):
             raise TCBError(f"--join {mesh} {spline}: {spline} was not fitted to {mesh} (fit "
                            f"{mesh} with --spline {spline}, then join to it)")
+        if faces is None:
+            join.append(surf)
+            continue
         pairs = shared_vertices(points, other)
         if not len(pairs):
             raise TCBError(f"--join {mesh} {spline}: {mesh} has no vertex at the coordinates "

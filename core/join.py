@@ -37,8 +37,12 @@ import dataclasses
 
 import numpy as np
 
+from scipy.spatial import cKDTree
+
 from .errors import BorderError, InvalidInputError, SingularSystemError, TCBError
 from .fit import fit_control_points
+from .geometry import coordinate_order
+from .parameterize import in_voids, trim_distance
 from .refine import _feature_cost, insertion_points, make_space
 
 # pins inside each shared edge, as fractions along it (its two vertices are pinned too)
@@ -63,6 +67,14 @@ GAP_SEGMENTS = 32
 # joined to its cap turned its normal over at 23 of 20 800 such points, on 4 of its 64 seam
 # triangles, reported "folded 0"
 SEAM_FOLD_STEPS = 16
+# point clouds (CloudSeam): pins along the shared border this share of the data's spacing
+# apart (the gap measured at twice as many points); a neighbour's domain holds points on its
+# border to this share of its size (the pins come from this cloud's parameters through 3D,
+# rounded at about 1e-16 of the coordinates: UTM's 4e6 m on a tile 500 m across is 1e-12);
+# the two projection directions are parallel to this (1 - |cos|)
+CLOUD_PIN_SPACING = 0.25
+CLOUD_BORDER_TOL = 1e-9
+CLOUD_PARALLEL = 1e-9
 
 
 def border_edges(faces: np.ndarray) -> np.ndarray:
@@ -177,6 +189,129 @@ class Seam:
         return at(own_uv, self.own) if own else None, at(other_uv, self.other)
 
 
+class CloudSeam:
+    """The border a point cloud's surface shares with a neighbouring cloud's surface, both
+    projected along the same direction (DEM tiles along z, :func:`cloud_seam`): the pins
+    ``uv`` ``(m, 2)`` (this cloud's parameters, on its domain's border where the neighbour's
+    surface is fitted) and their ``targets`` ``(m, 3)``, the neighbour's surface on the same
+    projection rays (data units); ``gap_uv`` and ``gap_targets`` the same at twice as many
+    points, where the gap is measured; ``length`` the length of border they cover (data
+    units) and ``neighbour_error`` the neighbour's largest error at its data points nearest
+    to the pins. The two surfaces share their projection, so a pin's target lies on the ray
+    through the pin: nothing slides along the border, and nothing lies across it."""
+
+    vertices = np.zeros((0, 2), dtype=np.int64)  # (none: a cloud has no vertices to share)
+    own = np.zeros((0, 2), dtype=np.int64)
+
+    def __init__(self, surface, uv, targets, gap_uv, gap_targets, length, neighbour_error):
+        self.surface = surface
+        self.uv, self.targets = uv, targets
+        self.gap_uv, self.gap_targets = gap_uv, gap_targets
+        self.length = float(length)
+        self.neighbour_error = float(neighbour_error)
+
+
+def _spacing(data: np.ndarray, tree) -> float:
+    """The median distance of a data point to its nearest one at another place (a sample of
+    about 5000 taken in the order of their coordinates, as ``trim_distance`` takes it)."""
+    order = coordinate_order(data)
+    sample = (data if order is None else data[order])[:: max(1, len(data) // 5000)]
+    dist = tree.query(sample, k=min(9, len(data)))[0]
+    apart = np.where(dist[:, 1:] > 0, dist[:, 1:], np.inf).min(axis=1, initial=np.inf)
+    apart = apart[np.isfinite(apart)]
+    return float(np.median(apart)) if len(apart) else 0.0
+
+
+def _on_border(polygon: np.ndarray, step: float) -> tuple[np.ndarray, float]:
+    """Points along the closed ``polygon`` ``(b, 2)`` at most ``step`` apart (each edge cut
+    into equal pieces, its first end included), and the length each stands for."""
+    a = np.asarray(polygon, dtype=np.float64)
+    d = np.roll(a, -1, axis=0) - a
+    length = np.linalg.norm(d, axis=1)
+    k = np.maximum(1, np.ceil(length / step)).astype(np.int64)
+    edge = np.repeat(np.arange(len(a)), k)
+    t = (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)) / k[edge]
+    return a[edge] + t[:, None] * d[edge], (length / k)[edge]
+
+
+def _fitted_part(param, uv: np.ndarray) -> np.ndarray:
+    """Mask of the parameters ``uv`` on the fitted part of a cloud's surface (where its
+    tessellation and :meth:`core.surface.TCBSurface.heights` reach): inside its domain (its
+    border included, to :data:`CLOUD_BORDER_TOL` of its size), and within the trim distance
+    of its data or in a void between its points, or anywhere inside with ``fill_holes``."""
+    inside = param.contains(uv, tol=CLOUD_BORDER_TOL)
+    if param.holes is not None or not inside.any():
+        return inside
+    data = np.asarray(param.uv)[np.isfinite(param.uv).all(axis=1)]
+    tree = cKDTree(data)
+    near = tree.query(uv[inside])[0] <= trim_distance(param, data, tree)
+    near[~near] = in_voids(param, uv[inside][~near])
+    inside[np.flatnonzero(inside)[~near]] = False
+    return inside
+
+
+def cloud_seam(param, surface, k: int = 0) -> CloudSeam:
+    """The :class:`CloudSeam` of a point cloud (parameterization ``param``, a plane) with the
+    neighbouring cloud's ``surface`` (``join[k]``): the points of this cloud's domain border,
+    :data:`CLOUD_PIN_SPACING` of its data's spacing apart, that are within the trim distance
+    of its data and on the fitted part of the neighbour's surface (:func:`_fitted_part`),
+    where the two are to meet. Two DEM tiles sharing a row of nodes share that row; tiles
+    that overlap, the part of this one's border inside the other. A clear
+    :class:`InvalidInputError` for a neighbour fitted to a mesh or projected along another
+    direction, and for one that reaches none of this border, or all of it (the same data,
+    or a cloud inside it)."""
+    other = surface.parameterization
+    if other.kind != "plane" or other.axes is None or other.origin is None:
+        raise InvalidInputError(f"join[{k}]: that surface was fitted to a mesh; a point "
+                                "cloud's surface joins the surfaces of neighbouring clouds")
+    n_own = np.asarray(param.axes[2], dtype=np.float64)
+    n_other = np.asarray(other.axes[2], dtype=np.float64)
+    if abs(float(n_own @ n_other)) < 1.0 - CLOUD_PARALLEL:
+        raise InvalidInputError(
+            f"join[{k}]: the two clouds were projected along different directions "
+            f"({_direction(n_own)} and {_direction(n_other)}); neighbouring clouds are joined "
+            "as heights along one direction: fit both with the same projection (DEM tiles: "
+            "projection='z', which the command line and Blender choose for DEMs)")
+    data = np.asarray(param.uv)[np.isfinite(param.uv).all(axis=1)]
+    tree = cKDTree(data)
+    step = CLOUD_PIN_SPACING * _spacing(data, tree) / 2.0
+    if not step > 0:
+        raise InvalidInputError(f"join[{k}]: this cloud's points have no spacing to pin "
+                                "its border at")
+    uv, piece = _on_border(param.domain_polygon, step)
+    own = tree.query(uv)[0] <= trim_distance(param, data, tree)
+    p = np.asarray(param.origin) + param.scale * (uv @ np.asarray(param.axes[:2]))
+    theirs = other.project(p)
+    shared = own & _fitted_part(other, theirs)
+    if shared.any():
+        targets = np.full((len(uv), 3), np.nan)
+        targets[shared] = surface(theirs[shared])
+        shared &= np.isfinite(targets).all(axis=1)
+    if not shared.any():
+        raise InvalidInputError(
+            f"join[{k}]: that surface reaches no part of this cloud's border: neighbouring "
+            "clouds are joined where one's border lies on the other's fitted surface (DEM "
+            "tiles sharing their edge row of nodes, or overlapping)")
+    if shared.sum() == own.sum():
+        raise InvalidInputError(
+            f"join[{k}]: that surface reaches all of this cloud's border (the same data, or a "
+            "cloud inside it): join to the surface of a neighbouring cloud, which shares a "
+            "part of the border with this one")
+    rest = np.asarray(other.uv)
+    ok = np.isfinite(rest).all(axis=1)
+    nearest = np.flatnonzero(ok)[cKDTree(rest[ok]).query(theirs[shared])[1]]
+    worst = np.nanmax(np.asarray(surface.errors, dtype=np.float64)[nearest], initial=0.0)
+    pins = shared & (np.arange(len(uv)) % 2 == 0)
+    if not pins.any():  # (one shared point: pinned too)
+        pins = shared
+    return CloudSeam(surface, uv[pins], targets[pins], uv[shared], targets[shared],
+                     float(piece[shared].sum()) * param.scale, worst)
+
+
+def _direction(n: np.ndarray) -> str:
+    return "(" + ", ".join(f"{x:.3g}" for x in n) + ")"
+
+
 def seams(param, join) -> list[Seam]:
     """The :class:`Seam` of each ``(surface, shared)`` of ``join`` (one pair, or a list of
     them) with the mesh of parameterization ``param``; ``shared`` ``(k, 2)`` pairs ``(i, j)``:
@@ -189,9 +324,7 @@ def seams(param, join) -> list[Seam]:
     if isinstance(join, tuple) and len(join) == 2 and hasattr(join[0], "parameterization"):
         join = [join]
     if param.faces is None:
-        raise InvalidInputError("join= joins a mesh's surface to its neighbours' along their "
-                                "shared border: give the mesh's faces (a point cloud has no "
-                                "border to share)")
+        return _cloud_seams(param, join)
     out = []
     for k, item in enumerate(join):
         if not (isinstance(item, (tuple, list)) and len(item) == 2
@@ -235,6 +368,27 @@ def seams(param, join) -> list[Seam]:
                 "surface to join must be of a neighbouring patch of the same mesh")
         verts = np.unique(np.column_stack([mine.ravel(), theirs.ravel()]), axis=0)
         out.append(Seam(surface, mine, theirs, verts))
+    return out
+
+
+def _cloud_seams(param, join) -> list[CloudSeam]:
+    """:func:`seams` for a point cloud: ``join`` a neighbouring cloud's surface, a pair
+    ``(surface, None)`` as for meshes (no vertices are shared: the second is not used), or a
+    list of them."""
+    if hasattr(join, "parameterization"):
+        join = [join]
+    if param.kind != "plane" or param.axes is None or param.origin is None:
+        raise InvalidInputError("join= joins a point cloud's surface to its neighbours' only "
+                                "for a cloud projected on a plane")
+    out = []
+    for k, item in enumerate(join):
+        if isinstance(item, (tuple, list)) and len(item) == 2:
+            item = item[0]  # (a pair as for meshes: no vertices are shared, the rest unused)
+        if not hasattr(item, "parameterization"):
+            raise InvalidInputError(
+                f"join[{k}] must be the TCBSurface of a neighbouring point cloud (or a pair "
+                "(surface, None))")
+        out.append(cloud_seam(param, item, k))
     return out
 
 
@@ -306,6 +460,10 @@ def join_pins(seam_list, own_uv: np.ndarray, evaluate,
     uvs, targets = [], []
     fractions = (0.0, *EDGE_PINS, 1.0)
     for k, seam in enumerate(seam_list):
+        if isinstance(seam, CloudSeam):
+            uvs.append(seam.uv)
+            targets.append(seam.targets)
+            continue
         p, near, mine = _borders(seam, own_uv, evaluate, fractions)
         near = near.reshape(-1, 3)
         if inward is not None:
@@ -327,6 +485,9 @@ def seam_gaps(seam_list, own_uv: np.ndarray, evaluate, inward=None) -> np.ndarra
     t = np.linspace(0.0, 1.0, GAP_SAMPLES)
     gaps = []
     for k, seam in enumerate(seam_list):
+        if isinstance(seam, CloudSeam):
+            gaps.append(np.linalg.norm(evaluate(seam.gap_uv) - seam.gap_targets, axis=1))
+            continue
         p, near, _ = _borders(seam, own_uv, evaluate, t)
         if inward is not None:
             p, near = p.reshape(-1, 3), near.reshape(-1, 3)
@@ -494,9 +655,14 @@ def join_fit(best, seam_list, own_uv, fit_uv, fit_q, norm, options, domain, fold
         "control_points_unjoined": int(best.n_control),
         "seam_samples": int(len(samples[0])), "seam_folds": int(turns),
         # how far the neighbours' surfaces are from the shared vertices (their errors there)
-        "neighbour_error_max": float(max(np.nanmax(
-            np.asarray(m.surface.errors, dtype=np.float64)[m.vertices[:, 1]], initial=0.0)
+        "neighbour_error_max": float(max(
+            m.neighbour_error if isinstance(m, CloudSeam) else np.nanmax(
+                np.asarray(m.surface.errors, dtype=np.float64)[m.vertices[:, 1]], initial=0.0)
             for m in seam_list)),
+        # (point clouds: the pins along the border shared, and its length in data units)
+        "pins": int(len(join_pins(seam_list, own_uv, surface_of(best), inward)[0])),
+        "shared_length": float(sum(m.length for m in seam_list
+                                   if isinstance(m, CloudSeam))),
     }
 
 
@@ -516,7 +682,7 @@ def join_warning(report: dict) -> str | None:
         return ("joined to its neighbours, the surface misses the tolerance at its data (RMS "
                 f"{report['rms_rel']:.2g}, max {report['max_rel']:.2g} of the diagonal): the "
                 "neighbours' surfaces are up to "
-                f"{j['neighbour_error_max'] / report['diagonal']:.2g} of it from the shared "
-                "border's vertices; refine them to this tolerance first (a larger budget if "
+                f"{j['neighbour_error_max'] / report['diagonal']:.2g} of it from their data "
+                "along the shared border; refine them to this tolerance first (a larger budget if "
                 "they ran out of control points), or fit this one without joining")
     return None

@@ -135,3 +135,18 @@ def bent_sheet(n: int = 11, size: float = 100.0):
     i, j = (a.ravel() for a in np.meshgrid(np.arange(n - 1), np.arange(m - 1), indexing="ij"))
     a, b, c, d = i * m + j, i * m + j + 1, (i + 1) * m + j + 1, (i + 1) * m + j
     return points, np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+
+
+def terrain_tiles(n: int = 41, spacing: float = 5.0, origin=(5.0e5, 4.2e6)):
+    """Two DEM tiles of a hilly terrain (heights in m over x and y in m, at UTM-like
+    coordinates ``origin``) on one grid of ``n`` x ``n`` nodes ``spacing`` apart, side by
+    side: the west tile the columns up to the middle one, the east tile from it on, so the
+    two share the middle column of nodes (as tiles cut from one DEM do). Returns
+    ``(west, east, x_of_the_shared_column)``."""
+    g = np.arange(n) * spacing
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    z = (40 * np.sin(x / 37) * np.cos(y / 53) + 15 * np.tanh((x - 0.7 * y - 20) / 8)
+         + 0.3 * x + 250)
+    pts = np.c_[x + origin[0], y + origin[1], z]
+    mid = g[n // 2]
+    return pts[x <= mid], pts[x >= mid], mid + origin[0]

@@ -868,7 +868,38 @@ def test_join_fits_a_patch_to_its_neighbour_s_spline(tmp_path, capsys, monkeypat
     assert r.returncode != 0 and "no vertex at the coordinates" in r.stderr
     np.save(tmp_path / "cloud.npy", pb)
     r = run("fit", tmp_path / "cloud.npy", "-o", tmp_path / "x.obj", "--join", a_mesh, a_spline)
-    assert r.returncode != 0 and "is a point cloud" in r.stderr
+    assert r.returncode != 0 and "is a mesh and" in r.stderr and "a point cloud" in r.stderr
+    r = run("fit", b_mesh, "-o", tmp_path / "x.obj", "--join", tmp_path / "cloud.npy", a_spline)
+    assert r.returncode != 0 and "cloud.npy is a point cloud" in r.stderr
+
+
+def test_join_fits_a_dem_tile_to_its_neighbour_s_spline(tmp_path, capsys):
+    """--join DATA SPLINE for point clouds: two DEM tiles as x y z text sharing a column of
+    nodes (each fitted along z, as a DEM) meet along it when the second joins the first; the
+    table's row says along how much border and how far apart the surfaces are left."""
+    from core import cli
+    from meshes import terrain_tiles
+
+    west, east, x_shared = terrain_tiles()
+    w, e = tmp_path / "west.xyz", tmp_path / "east.xyz"
+    np.savetxt(w, west, fmt="%.3f")
+    np.savetxt(e, east, fmt="%.3f")
+    assert cli.main(["fit", str(w), "-o", str(tmp_path / "w.obj"), "--spline",
+                     str(tmp_path / "w.npz"), "--quiet"]) == 0
+    capsys.readouterr()
+    assert cli.main(["fit", str(e), "-o", str(tmp_path / "e.obj"), "--spline",
+                     str(tmp_path / "e.npz"), "--join", str(w), str(tmp_path / "w.npz"),
+                     "--quiet"]) == 0
+    row = next(line for line in capsys.readouterr().out.splitlines()
+               if line.startswith("joined"))
+    joined = TCBSurface.load(tmp_path / "e.npz").report["join"]
+    assert f"1 neighbour along {joined['shared_length']:.4g} of shared border" in row, row
+    assert joined["gap_max"] < 0.1 * joined["gap_max_unjoined"]
+    ys = np.linspace(east[:, 1].min(), east[:, 1].max(), 101)
+    column = np.c_[np.full_like(ys, x_shared), ys]
+    dz = (TCBSurface.load(tmp_path / "w.npz").heights(column)
+          - TCBSurface.load(tmp_path / "e.npz").heights(column))
+    assert np.abs(dz).max() < 0.1 * joined["gap_max_unjoined"]
 
 
 def test_longitude_latitude_and_metres_are_told_to_be_projected(tmp_path):

@@ -13,7 +13,7 @@ from core.join import (border_edges, inward_directions, seam_folds, seam_samples
                        shared_border_edges, shared_vertices)
 from core.refine import border_rings
 from core.spline_space import build_space
-from meshes import noisy_grid, split_mesh, uv_sphere, wavy_halves
+from meshes import noisy_grid, split_mesh, terrain_tiles, uv_sphere, wavy_halves
 
 
 def test_pins_draw_the_fit_to_their_targets_and_are_not_counted_as_data():
@@ -135,8 +135,8 @@ def test_join_refuses_what_it_cannot_join():
     (pa, fa), (pb, fb) = wavy_halves(20)
     a = fit_surface(pa, fa, tolerance=1e-2)
     pairs = shared_vertices(pb, pa)
-    with pytest.raises(InvalidInputError, match="point cloud has no border"):
-        fit_surface(pb, join=(a, pairs))
+    with pytest.raises(InvalidInputError, match="fitted to a mesh; a point cloud's surface"):
+        fit_surface(pb, join=(a, pairs))  # (a cloud joins clouds: test_dem_tiles_...)
     cloud = fit_surface(pa, tolerance=1e-2)
     with pytest.raises(InvalidInputError, match="fitted to a point cloud"):
         fit_surface(pb, fb, join=(cloud, pairs))
@@ -195,3 +195,47 @@ def test_join_keeps_to_the_tolerance_and_the_budget_or_says_so():
     assert loose.report["join"]["tolerance_missed"]
     assert not fit_surface(pb, fb, tolerance=1e-3, join=(a, pairs)).report["join"][
         "tolerance_missed"]
+
+
+def test_dem_tiles_fitted_along_z_are_joined_where_they_share_a_row_of_nodes():
+    """Two DEM tiles sharing a column of nodes, fitted along z one after the other: alone,
+    the second's surface is up to 2.2 m off the first's along that column (each within its
+    tolerance of its own data, 0.25 m RMS); joined (``join=first``: core.join.CloudSeam, its
+    border pinned where it lies on the first's fitted surface) the two meet there to a small
+    share of the tolerance, seen by TCBSurface.heights at points between the nodes, and the
+    second still meets its tolerance at its data."""
+    west, east, x_shared = terrain_tiles()
+    a = fit_surface(west, projection="z")
+    b = fit_surface(east, projection="z", join=a)
+    tol = 1e-3 * b.report["diagonal"]
+    j = b.report["join"]
+    assert j["surfaces"] == 1 and j["shared_edges"] == 0 and j["pins"] >= 80
+    assert 195 < j["shared_length"] < 205  # (the column is 200 m long)
+    assert j["gap_max_unjoined"] > 4 * tol and j["gap_max"] < 0.5 * tol
+    assert not j["tolerance_missed"] and b.report["rms"] <= tol
+    ys = np.linspace(east[:, 1].min(), east[:, 1].max(), 301)  # (between the nodes too)
+    column = np.c_[np.full_like(ys, x_shared), ys]
+    dz = a.heights(column) - b.heights(column)
+    assert np.isfinite(dz).all() and np.abs(dz).max() < 0.5 * tol
+    # the data's z is met as before away from the seam: the east half of the east tile
+    far = east[:, 0] > x_shared + 50
+    assert np.abs(b.heights(east[far, :2]) - east[far, 2]).max() < 8 * tol
+
+
+def test_cloud_joins_refuse_what_they_cannot_join():
+    """A point cloud joins the surface of a neighbouring cloud fitted along the same
+    direction that reaches a part of its border: anything else is refused in words."""
+    west, east, _ = terrain_tiles(n=21, spacing=10.0)
+    a = fit_surface(west, projection="z", tolerance=1e-2)
+    with pytest.raises(InvalidInputError, match="reaches all of this cloud's border"):
+        fit_surface(west, projection="z", tolerance=1e-2, join=a)
+    with pytest.raises(InvalidInputError, match="reaches no part of this cloud's border"):
+        fit_surface(east + [30.0, 0, 0], projection="z", tolerance=1e-2, join=a)
+    with pytest.raises(InvalidInputError, match="projected along different directions"):
+        fit_surface(east, projection=(0.3, 0.0, 1.0), tolerance=1e-2, join=a)
+    with pytest.raises(InvalidInputError, match="must be the TCBSurface of a neighbouring"):
+        fit_surface(east, projection="z", tolerance=1e-2, join=[np.zeros((3, 2))])
+    # a pair as for meshes is taken, its vertex pairs unused: the same fit
+    b = fit_surface(east, projection="z", tolerance=1e-2, join=(a, None))
+    c = fit_surface(east, projection="z", tolerance=1e-2, join=[a])
+    assert np.array_equal(b.control_points, c.control_points)
