@@ -573,7 +573,27 @@ def _neighbours(args, points: np.ndarray, faces) -> list | None:
         return None
     join = []
     for mesh, spline in args.join:
-        other, other_faces = read_geometry(mesh)
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            other, other_faces = read_geometry(mesh, keep_fill_values=faces is None)
+        if faces is None and any("bounds are in degrees" in str(w.message) for w in said):
+            # (each such tile is put in metres from its own south-west corner: neighbouring
+            # tiles would lie on each other; review)
+            raise TCBError(f"--join {mesh} {spline}: {mesh} is a DEM with its bounds in "
+                           "degrees, which is converted to metres from its own south-west "
+                           "corner, so neighbouring tiles do not line up; save the tiles "
+                           "with projected bounds (units='metres') to join them")
+        for w in said:  # (the other warnings, as reading the input shows them)
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        dropped = 0
+        if faces is None:  # the rows the input's fit leaves out (--drop-invalid) ...
+            bad = ~np.isfinite(other).all(axis=1)
+            fill = fill_value_rows(other)
+            if fill is not None:
+                bad |= fill[0]
+            dropped = int(bad.sum())
+            if args.drop_invalid:  # ... left out of the neighbour's as they were of its fit
+                other = other[~bad]
         if faces is None and other_faces is not None:
             raise TCBError(f"--join {mesh} {spline}: {mesh} is a mesh and {args.input} a "
                            "point cloud; give the neighbouring cloud's file")
@@ -582,8 +602,10 @@ def _neighbours(args, points: np.ndarray, faces) -> list | None:
                            "neighbouring patch's mesh")
         surf = TCBSurface.load(spline)
         if not surf.fitted_to(other):
+            hint = (f"; {mesh} has {dropped} points with no data: pass --drop-invalid, as for "
+                    "its fit" if dropped and not args.drop_invalid else "")
             raise TCBError(f"--join {mesh} {spline}: {spline} was not fitted to {mesh} (fit "
-                           f"{mesh} with --spline {spline}, then join to it)")
+                           f"{mesh} with --spline {spline}, then join to it{hint})")
         if faces is None:
             join.append(surf)
             continue

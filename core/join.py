@@ -222,9 +222,10 @@ def _spacing(data: np.ndarray, tree) -> float:
     return float(np.median(apart)) if len(apart) else 0.0
 
 
-def _on_border(polygon: np.ndarray, step: float) -> tuple[np.ndarray, float]:
+def _on_border(polygon: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     """Points along the closed ``polygon`` ``(b, 2)`` at most ``step`` apart (each edge cut
-    into equal pieces, its first end included), and the length each stands for."""
+    into equal pieces, its first end included), in order, and the length of the piece from
+    each to the next (the last's to the first)."""
     a = np.asarray(polygon, dtype=np.float64)
     d = np.roll(a, -1, axis=0) - a
     length = np.linalg.norm(d, axis=1)
@@ -271,7 +272,8 @@ def cloud_seam(param, surface, k: int = 0) -> CloudSeam:
             f"join[{k}]: the two clouds were projected along different directions "
             f"({_direction(n_own)} and {_direction(n_other)}); neighbouring clouds are joined "
             "as heights along one direction: fit both with the same projection (DEM tiles: "
-            "projection='z', which the command line and Blender choose for DEMs)")
+            "projection='z', on the command line --projection z, which it chooses by itself "
+            "for DEM rasters and gridded x y z text)")
     data = np.asarray(param.uv)[np.isfinite(param.uv).all(axis=1)]
     tree = cKDTree(data)
     step = CLOUD_PIN_SPACING * _spacing(data, tree) / 2.0
@@ -305,7 +307,7 @@ def cloud_seam(param, surface, k: int = 0) -> CloudSeam:
     if not pins.any():  # (one shared point: pinned too)
         pins = shared
     return CloudSeam(surface, uv[pins], targets[pins], uv[shared], targets[shared],
-                     float(piece[shared].sum()) * param.scale, worst)
+                     float(piece[shared & np.roll(shared, -1)].sum()) * param.scale, worst)
 
 
 def _direction(n: np.ndarray) -> str:
@@ -321,10 +323,15 @@ def seams(param, join) -> list[Seam]:
     them on both borders."""
     if join is None:
         return []
-    if isinstance(join, tuple) and len(join) == 2 and hasattr(join[0], "parameterization"):
+    if (isinstance(join, tuple) and len(join) == 2 and hasattr(join[0], "parameterization")
+            and not hasattr(join[1], "parameterization")):  # (two surfaces: two neighbours)
         join = [join]
     if param.faces is None:
         return _cloud_seams(param, join)
+    if hasattr(join, "parameterization"):
+        raise InvalidInputError("join= for a mesh takes pairs (surface, shared): the "
+                                "neighbour's surface and the (k, 2) vertex pairs the two "
+                                "meshes share (core.join.shared_vertices finds them)")
     out = []
     for k, item in enumerate(join):
         if not (isinstance(item, (tuple, list)) and len(item) == 2
@@ -382,12 +389,13 @@ def _cloud_seams(param, join) -> list[CloudSeam]:
                                 "for a cloud projected on a plane")
     out = []
     for k, item in enumerate(join):
-        if isinstance(item, (tuple, list)) and len(item) == 2:
+        if (isinstance(item, (tuple, list)) and len(item) == 2
+                and not hasattr(item[1], "parameterization")):
             item = item[0]  # (a pair as for meshes: no vertices are shared, the rest unused)
         if not hasattr(item, "parameterization"):
             raise InvalidInputError(
                 f"join[{k}] must be the TCBSurface of a neighbouring point cloud (or a pair "
-                "(surface, None))")
+                "(surface, None)); give several neighbours as a list of surfaces")
         out.append(cloud_seam(param, item, k))
     return out
 
