@@ -2407,6 +2407,13 @@ def test_on_xy_grid_tells_heights_over_a_grid_from_scattered_points():
     assert pz.on_xy_grid(nodes[rng.random(len(nodes)) < 0.3])  # (no-data cells)
     assert not pz.on_xy_grid(nodes[rng.random(len(nodes)) < 0.2])
     assert not pz.on_xy_grid(np.r_[nodes, nodes[:1] + [0, 0, 1]])  # (two heights at a node)
+    # the same node twice with the same height is one (tiles sharing a row put in one file)
+    west, east = nodes[nodes[:, 1] <= 45.0], nodes[nodes[:, 1] >= 45.0]
+    assert len(west) + len(east) == len(nodes) + 40 and pz.on_xy_grid(np.r_[west, east])
+    assert pz.on_xy_grid(np.r_[nodes, nodes])
+    # (the share of the nodes held counts each node once: 20% held, each twice, is too few)
+    few = nodes[rng.random(len(nodes)) < 0.2]
+    assert not pz.on_xy_grid(np.r_[few, few])
     assert not pz.on_xy_grid(nodes + np.c_[rng.uniform(-0.1, 0.1, (len(nodes), 2)), 0 * x.ravel()])
     c, s = np.cos(0.5), np.sin(0.5)
     assert not pz.on_xy_grid(nodes @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]]))
