@@ -50,10 +50,12 @@ def _parser() -> argparse.ArgumentParser:
     )
     sub = p.add_subparsers(dest="command", required=True)
     f = sub.add_parser("fit", help="fit a surface to a point cloud or a disk-like mesh")
-    f.add_argument("input", help="points or mesh: .ply .obj .off .xyz .pts .txt .csv .npy .npz "
+    f.add_argument("input", nargs="+",
+                   help="points or mesh: .ply .obj .off .xyz .pts .txt .csv .npy .npz "
                    "(a DEM .npz: 'elevation' with xmin/xmax/ymin/ymax, row 0 at ymin; a "
                    "north-up raster needs dy < 0 or its 'transform' / 'geotransform'), or a "
-                   "DEM as an ESRI ASCII grid .asc")
+                   "DEM as an ESRI ASCII grid .asc. Several point files (DEM tiles, scans "
+                   "of one surface) are fitted together as one cloud")
     f.add_argument("-o", "--output", required=True, help="tessellated surface: .obj or .ply")
     f.add_argument("--tolerance", type=float, default=1e-3,
                    help="stop when the error (RMS, or max with --criterion max) is at most "
@@ -225,8 +227,8 @@ def _same_file(a: str, b: str) -> bool:
 
 def _check_distinct(args) -> None:
     """Refuse, before the fit, an output that would replace the input or another output."""
-    paths = [("the input", args.input), ("-o", args.output), ("--net", args.net),
-             ("--spline", args.spline)]
+    paths = [*(("the input", i) for i in args.inputs), ("-o", args.output),
+             ("--net", args.net), ("--spline", args.spline)]
     paths = [(name, p) for name, p in paths if p is not None]
     for i, (name, path) in enumerate(paths):
         for other, earlier in paths[:i]:
@@ -308,6 +310,45 @@ def _progress(quiet: bool, relative: bool = True):
     return callback
 
 
+def _read_inputs(paths: list, want_dem: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray | None, bool]:
+    """The points and faces of the input files (``read_geometry``, fill values kept), and
+    whether each is a DEM (``meshio.is_dem``; False without ``want_dem``). Several files are point clouds put together
+    (DEM tiles: their shared nodes are the same point twice, which is one node of the grid);
+    a mesh among several, and DEMs converted from degrees (each to metres from its own
+    south-west corner, so tiles would lie on each other), are refused in one line."""
+    if len(paths) == 1:
+        points, faces = read_geometry(paths[0], keep_fill_values=True)
+        return points, faces, want_dem and faces is None and is_dem(paths[0], points)
+    parts, dems = [], True
+    for path in paths:
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            points, faces = read_geometry(path, keep_fill_values=True)
+        if faces is not None:
+            raise TCBError(f"{path} is a mesh: several inputs are point clouds fitted together "
+                           "(fit a mesh alone, or its patches one by one with --join)")
+        if any("bounds are in degrees" in str(w.message) for w in said):
+            raise TCBError(f"{path} is a DEM with its bounds in degrees, which is converted to "
+                           "metres from its own south-west corner, so several such tiles do "
+                           "not line up; save the tiles with projected bounds (units='metres') "
+                           "to fit them together")
+        for w in said:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        parts.append(points)
+        dems = dems and want_dem and is_dem(path, points)
+    return np.vstack(parts), None, dems
+
+
+def _input_text(paths: list) -> str:
+    """The input files as the messages name them: ``a.xyz``, ``a.xyz, b.xyz``, or the first
+    two and how many more."""
+    names = [str(p) for p in paths]
+    if len(names) <= 3:
+        return ", ".join(names)
+    return f"{names[0]}, {names[1]} and {len(names) - 2} more files"
+
+
 def _fit(args) -> int:
     from .parameterize import holes_error, outlier_error, spike_error
     from .surface import fit_surface
@@ -324,7 +365,7 @@ def _fit(args) -> int:
     t0 = time.perf_counter()
     # a DEM's no-data cells come back as points, found and refused or left out below as a
     # cloud's (the reader had refused them before --drop-invalid was seen: user test)
-    points, faces = read_geometry(args.input, keep_fill_values=True)
+    points, faces, dems = _read_inputs(args.inputs, args.projection is None)
     if faces is not None and args.projection not in (None, "auto"):
         raise TCBError(
             f"--projection applies to point clouds; {args.input} is a mesh, which is "
@@ -374,10 +415,11 @@ def _fit(args) -> int:
         print(f"read {args.input}: {len(points)} points, {kind}", file=sys.stderr)
     join = _neighbours(args, points, faces)
     # a DEM is heights over a grid of x and y: fitted along z unless told (meshio.is_dem)
-    raster = faces is None and args.projection is None and is_dem(args.input, points)
+    raster = faces is None and args.projection is None and dems
     projection = "z" if raster else None if args.projection == "auto" else args.projection
     if raster and not args.quiet:
-        print(f"{args.input} is a DEM raster (heights over a grid of x and y): fitted along z "
+        what = "is a DEM raster" if len(args.inputs) == 1 else "are DEM rasters"
+        print(f"{args.input} {what} (heights over a grid of x and y): fitted along z "
               "(--projection z; --projection auto chooses the best-fit plane)", file=sys.stderr)
     try:
         surf = fit_surface(
@@ -655,6 +697,8 @@ def _warning_line(message, category, filename, lineno, line=None) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    if args.command == "fit":  # (several input files: args.input names them in messages)
+        args.inputs, args.input = list(args.input), _input_text(args.input)
     shown = warnings.formatwarning
     warnings.formatwarning = _warning_line
     try:

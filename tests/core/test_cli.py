@@ -914,6 +914,41 @@ def test_join_fits_a_dem_tile_to_its_neighbour_s_spline(tmp_path, capsys):
     assert r.returncode == 2 and "bounds in degrees" in r.stderr, r.stderr
 
 
+def test_several_point_files_are_fitted_together(tmp_path):
+    """`fit A B ... -o OUT`: DEM tiles (x y z text on one grid, sharing a column of nodes) are
+    one cloud, a DEM along z, whose mesh spans both tiles; a mesh among them, a DEM in degrees
+    (put in metres from its own corner) and an output that is one of the inputs are refused
+    in one line."""
+    from meshes import terrain_tiles
+
+    west, east, x_shared = terrain_tiles()
+    w, e = tmp_path / "west.xyz", tmp_path / "east.xyz"
+    np.savetxt(w, west, fmt="%.3f")
+    np.savetxt(e, east, fmt="%.3f")
+    r = run("fit", w, e, "-o", tmp_path / "both.obj", "--spline", tmp_path / "both.npz")
+    assert r.returncode == 0, r.stderr
+    assert "west.xyz, " in r.stderr and "east.xyz are DEM rasters" in r.stderr
+    assert re.search(r"input +\S*west\.xyz, \S*east\.xyz \(1722 points\)", r.stdout), r.stdout
+    v = read_geometry(tmp_path / "both.obj")[0]
+    lo, hi = np.minimum(west.min(axis=0), east.min(axis=0)), np.maximum(west.max(axis=0), east.max(axis=0))
+    np.testing.assert_allclose([v[:, 0].min(), v[:, 0].max()], [lo[0], hi[0]], atol=1e-6)
+    surf = TCBSurface.load(tmp_path / "both.npz")
+    assert np.allclose(surf.parameterization.axes[2], [0, 0, 1])
+    assert surf.fitted_to(np.r_[read_geometry(w)[0], read_geometry(e)[0]])  # (in order)
+    write_mesh(tmp_path / "m.obj", *read_geometry(tmp_path / "both.obj"))
+    g = np.linspace(0.0, 0.002, 9)
+    np.savez(tmp_path / "geo.npz", elevation=300 + 50 * np.outer(g, g) / 4e-6,
+             xmin=-84.4, xmax=-84.398, ymin=36.4, ymax=36.402)
+    for other, words in ((tmp_path / "m.obj", "m.obj is a mesh: several inputs are point"),
+                         (tmp_path / "geo.npz", "geo.npz is a DEM with its bounds in degrees")):
+        r = run("fit", w, other, "-o", tmp_path / "x.obj")
+        assert r.returncode == 2 and words in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    np.savez(tmp_path / "east.npz", points=east)
+    r = run("fit", w, tmp_path / "east.npz", "-o", tmp_path / "x.obj", "--spline",
+            tmp_path / "east.npz")
+    assert r.returncode == 2 and "is the same file as the input" in r.stderr, r.stderr
+
+
 def test_longitude_latitude_and_metres_are_told_to_be_projected(tmp_path):
     """A GIS export with longitude and latitude in degrees and heights in metres, 1 km
     across: the points stand as a thin upright strip, refused as "almost on a curve" with no
