@@ -313,8 +313,9 @@ def _progress(quiet: bool, relative: bool = True):
 def _read_inputs(paths: list, want_dem: bool = True
                  ) -> tuple[np.ndarray, np.ndarray | None, bool]:
     """The points and faces of the input files (``read_geometry``, fill values kept), and
-    whether each is a DEM (``meshio.is_dem``; False without ``want_dem``). Several files are point clouds put together
-    (DEM tiles: their shared nodes are the same point twice, which is one node of the grid);
+    whether each is a DEM (``meshio.is_dem``; False without ``want_dem``). Several files are
+    point clouds put together (DEM tiles: their shared nodes are the same point twice, which
+    is one node of the grid: ``core.parameterize.on_xy_grid``);
     a mesh among several, and DEMs converted from degrees (each to metres from its own
     south-west corner, so tiles would lie on each other), are refused in one line."""
     if len(paths) == 1:

@@ -29,6 +29,12 @@ The gap that is left (:func:`seam_gaps`, at :data:`GAP_SAMPLES` points per share
 overlap not counted) is what the patch's spline space cannot follow of its neighbour between
 the pins. A joined fit that turns over on the patch's triangles along the seam
 (:func:`seam_folds`) is not returned.
+
+Point clouds (:class:`CloudSeam`, forty-seventh session) have no vertices to share: a cloud
+fitted along the same projection as its neighbour (DEM tiles along z) is pinned where its
+domain's border lies on the neighbour's fitted surface (a shared row of nodes, or an overlap),
+each pin to the neighbour's surface on the projection ray through it, so its height there
+(:func:`cloud_seam`); the rest is the meshes' loop.
 """
 
 from __future__ import annotations
@@ -36,7 +42,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-
 from scipy.spatial import cKDTree
 
 from .errors import BorderError, InvalidInputError, SingularSystemError, TCBError
@@ -691,6 +696,6 @@ def join_warning(report: dict) -> str | None:
                 f"{report['rms_rel']:.2g}, max {report['max_rel']:.2g} of the diagonal): the "
                 "neighbours' surfaces are up to "
                 f"{j['neighbour_error_max'] / report['diagonal']:.2g} of it from their data "
-                "along the shared border; refine them to this tolerance first (a larger budget if "
-                "they ran out of control points), or fit this one without joining")
+                "along the shared border; refine them to this tolerance first (a larger budget "
+                "if they ran out of control points), or fit this one without joining")
     return None

@@ -930,8 +930,8 @@ def test_several_point_files_are_fitted_together(tmp_path):
     assert "west.xyz, " in r.stderr and "east.xyz are DEM rasters" in r.stderr
     assert re.search(r"input +\S*west\.xyz, \S*east\.xyz \(1722 points\)", r.stdout), r.stdout
     v = read_geometry(tmp_path / "both.obj")[0]
-    lo, hi = np.minimum(west.min(axis=0), east.min(axis=0)), np.maximum(west.max(axis=0), east.max(axis=0))
-    np.testing.assert_allclose([v[:, 0].min(), v[:, 0].max()], [lo[0], hi[0]], atol=1e-6)
+    np.testing.assert_allclose([v[:, 0].min(), v[:, 0].max()],
+                               [west[:, 0].min(), east[:, 0].max()], atol=1e-6)
     surf = TCBSurface.load(tmp_path / "both.npz")
     assert np.allclose(surf.parameterization.axes[2], [0, 0, 1])
     assert surf.fitted_to(np.r_[read_geometry(w)[0], read_geometry(e)[0]])  # (in order)
