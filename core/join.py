@@ -270,15 +270,6 @@ def cloud_seam(param, surface, k: int = 0) -> CloudSeam:
     if other.kind != "plane" or other.axes is None or other.origin is None:
         raise InvalidInputError(f"join[{k}]: that surface was fitted to a mesh; a point "
                                 "cloud's surface joins the surfaces of neighbouring clouds")
-    n_own = np.asarray(param.axes[2], dtype=np.float64)
-    n_other = np.asarray(other.axes[2], dtype=np.float64)
-    if abs(float(n_own @ n_other)) < 1.0 - CLOUD_PARALLEL:
-        raise InvalidInputError(
-            f"join[{k}]: the two clouds were projected along different directions "
-            f"({_direction(n_own)} and {_direction(n_other)}); neighbouring clouds are joined "
-            "as heights along one direction: fit both with the same projection (DEM tiles: "
-            "projection='z', on the command line --projection z, which it chooses by itself "
-            "for DEM rasters and gridded x y z text)")
     data = np.asarray(param.uv)[np.isfinite(param.uv).all(axis=1)]
     tree = cKDTree(data)
     step = CLOUD_PIN_SPACING * _spacing(data, tree) / 2.0
@@ -290,10 +281,23 @@ def cloud_seam(param, surface, k: int = 0) -> CloudSeam:
     p = np.asarray(param.origin) + param.scale * (uv @ np.asarray(param.axes[:2]))
     theirs = other.project(p)
     shared = own & _fitted_part(other, theirs)
-    if shared.any():
-        targets = np.full((len(uv), 3), np.nan)
-        targets[shared] = surface(theirs[shared])
-        shared &= np.isfinite(targets).all(axis=1)
+    if not shared.any():  # (said first: the words for any surface apart from this cloud)
+        raise InvalidInputError(
+            f"join[{k}]: that surface reaches no part of this cloud's border: neighbouring "
+            "clouds are joined where one's border lies on the other's fitted surface (DEM "
+            "tiles sharing their edge row of nodes, or overlapping)")
+    n_own = np.asarray(param.axes[2], dtype=np.float64)
+    n_other = np.asarray(other.axes[2], dtype=np.float64)
+    if abs(float(n_own @ n_other)) < 1.0 - CLOUD_PARALLEL:
+        raise InvalidInputError(
+            f"join[{k}]: the two clouds were projected along different directions "
+            f"({_direction(n_own)} and {_direction(n_other)}); neighbouring clouds are joined "
+            "as heights along one direction: fit both with the same projection (DEM tiles: "
+            "projection='z', on the command line --projection z, which it chooses by itself "
+            "for DEM rasters and gridded x y z text)")
+    targets = np.full((len(uv), 3), np.nan)
+    targets[shared] = surface(theirs[shared])
+    shared &= np.isfinite(targets).all(axis=1)
     if not shared.any():
         raise InvalidInputError(
             f"join[{k}]: that surface reaches no part of this cloud's border: neighbouring "

@@ -648,7 +648,9 @@ def store_stats(tcb, surf, settings: dict) -> None:
     tcb.holes_filled = int(rep.get("holes_filled", 0))
     tcb.folded = float(rep.get("folded", 0.0))
     joined = rep.get("join") or {}
-    tcb.joined_edges = int(joined.get("shared_edges", 0)) if not joined.get("kept_unjoined") else 0
+    # (a cloud's join has no edges: its pins; what the panel's Joined Gap row is shown for)
+    tcb.joined_edges = (int(joined.get("shared_edges", 0) or joined.get("pins", 0))
+                        if not joined.get("kept_unjoined") else 0)
     tcb.join_gap_rel = float(joined.get("gap_max_rel", 0.0))
     tcb.stop_reason = str(rep.get("stop_reason", ""))
     for key in ("rms", "max", "rms_rel", "max_rel", "rms_area", "noise", "noise_rel", "seconds"):
@@ -1264,6 +1266,57 @@ def neighbour_joins(context, obj, part: str, data) -> tuple[list, list, list]:
     return join, names, notes
 
 
+def cloud_neighbours(context, data, kwargs: dict) -> tuple[list, list, list]:
+    """The neighbours to join a point cloud's fit ``data`` to (Join Neighbours; in Object Mode,
+    ``core.join.cloud_seam``), as :func:`neighbour_joins` gives a part's: ``(join, names,
+    notes)``. Height fields only: a cloud fitted along a given direction (a DEM raster along
+    its z, or a world axis chosen in Projection), and the surfaces in the view layer fitted so
+    to other objects' clouds (DEM tiles imported one by one and fitted in turn) whose fitted
+    part reaches this cloud's border, parameterized as the fit will be; a surface reaching it
+    that cannot be joined (fitted along another direction, or reaching all of the border) is
+    named in a note. Scans on their best-fit planes are not joined (two overlapping scans of a
+    part fitted one by one are not tiles)."""
+    core = _core()
+    if kwargs.get("projection") is None:
+        return [], [], []
+    mine = {o.as_pointer() for o in data.sources}
+    found = []
+    for ob in context.view_layer.objects:
+        if (ob.tcb.role != "SURFACE" or ob.get(PART_KEY) or live.deleted(ob)
+                or not ob.tcb.sources
+                or any(s.object is None or s.object.as_pointer() in mine
+                       for s in ob.tcb.sources)):
+            continue
+        try:
+            surf = stored_surface(ob, use_net=True)
+        except bridge.SelectionError:
+            continue
+        if (surf is not None and surf.parameterization.kind == "plane"
+                and surf.report.get("projection_given")):
+            found.append((ob, surf))
+    if not found:
+        return [], [], []
+    try:  # (this cloud's parameters, as the fit makes them: where its border is)
+        param = core.parameterize.parameterize(
+            data.points, projection=kwargs.get("projection"),
+            drop_outliers=bool(kwargs.get("drop_outliers")),
+            fill_holes=bool(kwargs.get("fill_holes")))
+    except core.TCBError:
+        return [], [], []  # (the fit says why)
+    join, names, notes = [], [], []
+    for ob, surf in found:
+        try:
+            core.join.cloud_seam(param, surf)
+        except core.InvalidInputError as exc:
+            if "reaches no part" not in str(exc):  # (apart: not a neighbour, said nothing)
+                notes.append(f"not joined to '{ob.name}': "
+                             + str(exc).split(": ", 1)[-1].split(";")[0])
+            continue
+        join.append((surf, None))
+        names.append(ob.name)
+    return join, names, notes
+
+
 def join_words(surf, names: list) -> list:
     """The summary's sentence on a joined fit (``report["join"]``), or none."""
     j = (surf.report or {}).get("join")
@@ -1278,7 +1331,9 @@ def join_words(surf, names: list) -> list:
     added = (f"; {j['knots_added']} knots added along it: {j['control_points']} control "
              f"points, {j['control_points_unjoined']} fitted alone" if j.get("knots_added")
              else "")
-    return [f"joined to {who} along {j['shared_edges']} shared border edges: the borders "
+    along = (f"{j['shared_edges']} shared border edges" if j.get("shared_edges")
+             else f"{bridge.length_text(j.get('shared_length', 0.0))} of shared border")
+    return [f"joined to {who} along {along}: the borders "
             f"{bridge.length_text(j['gap_max'])} apart at most ({j['gap_max_rel']:.2g} of the "
             "diagonal; "
             f"{j['gap_max_unjoined_rel']:.2g} unjoined{added})"]
@@ -1522,6 +1577,11 @@ class TCB_OT_fit_surface(_EngineOperator, FitSettings, ResultSettings, bpy.types
         self._joined, joined_notes = [], []
         if self._part and self.join_neighbours:
             join, self._joined, joined_notes = neighbour_joins(context, obj, self._part, data)
+            if join:
+                kwargs["join"] = join
+        elif self.join_neighbours and data.faces is None and not edit:
+            # point clouds fitted one by one (DEM tiles): to the surfaces of those they touch
+            join, self._joined, joined_notes = cloud_neighbours(context, data, kwargs)
             if join:
                 kwargs["join"] = join
         self._ignored += joined_notes

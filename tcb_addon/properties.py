@@ -228,7 +228,9 @@ class ResultSettings:
             "Edit Mode: join the surface of the selected faces to the surfaces already fitted "
             "to the mesh's neighbouring patches, along the border they share (the patches "
             "then meet to a share of the tolerance; knots are added along that border where "
-            "needed; the neighbours are not changed). Off: fit the faces on their own"
+            "needed; the neighbours are not changed). Point clouds fitted along a given "
+            "direction (DEM tiles along their z, a World axis): join to the surfaces of the "
+            "tiles fitted before that reach this one's border. Off: fit on their own"
         ),
         default=True,
     )  # fmt: skip

@@ -728,3 +728,38 @@ def test_import_frames_the_open_windows_3d_views_in_one_note(clean_scene, tmp_pa
     assert np.allclose(np.array(view.region_3d.view_location),
                        0.5 * (pts.min(axis=0) + pts.max(axis=0)), rtol=0, atol=0.5)
     assert view.clip_end >= 4 * np.linalg.norm(np.ptp(pts, axis=0))
+
+
+def test_dem_tiles_fitted_one_by_one_join_the_tiles_fitted_before(clean_scene, tmp_path,
+                                                                  capfd):
+    """Join Neighbours for point clouds: two DEM tiles sharing a column of nodes, imported and
+    fitted one after the other (each along its z): the second's surface is joined to the
+    first's along that column (core.join.CloudSeam), which is not changed, and the summary
+    says so; with Join Neighbours off it is fitted on its own."""
+    bpy = clean_scene
+    pts, _ = slope_points()
+    middle = (SLOPE_COLS // 2 + 0.5) * SLOPE_CELL
+    for name, keep in (("west", pts[:, 0] <= middle), ("east", pts[:, 0] >= middle)):
+        (tmp_path / f"{name}.xyz").write_text(
+            "\n".join(f"{x:.9f} {y:.9f} {h:.9f}" for x, y, h in pts[keep]) + "\n")
+        assert import_points(bpy, tmp_path / f"{name}.xyz") == {"FINISHED"}
+    west, east = bpy.data.objects["west"], bpy.data.objects["east"]
+    assert west["tcb_raster"] and east["tcb_raster"]
+    first = fit_slope(bpy, west)
+    blob = first["tcb_spline"]
+    capfd.readouterr()
+    second = fit_slope(bpy, east)
+    out = capfd.readouterr().out
+    joined = spline_of(second).report["join"]
+    assert joined["surfaces"] == 1 and joined["shared_edges"] == 0
+    assert abs(joined["shared_length"] - (SLOPE_ROWS - 1) * SLOPE_CELL) < 1e-6
+    assert joined["gap_max"] < 0.5 * joined["gap_max_unjoined"], joined
+    assert f"joined to '{first.name}' along 290 of shared border" in out, out
+    assert first["tcb_spline"] == blob and second.tcb.joined_edges == joined["pins"] > 0
+    # the two surfaces' heights along the shared column, between the nodes too
+    ys = np.linspace(0.5 * SLOPE_CELL, (SLOPE_ROWS - 0.5) * SLOPE_CELL, 117)
+    column = np.c_[np.full_like(ys, middle), ys]
+    dz = spline_of(first).heights(column) - spline_of(second).heights(column)
+    assert np.isfinite(dz).all() and np.abs(dz).max() <= 1.01 * joined["gap_max"]
+    alone = fit_slope(bpy, east, join_neighbours=False)
+    assert "join" not in spline_of(alone).report
