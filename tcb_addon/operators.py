@@ -1897,6 +1897,15 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
                 [] if found else ["no longer joined: no neighbouring patch's surface shares "
                                   "its border now"])
             join = found or None
+        elif not part and data.faces is None and (stored.report or {}).get("join"):
+            # a DEM tile joined to the tiles fitted before: to them as they are now, along the
+            # direction it was fitted
+            found, self._joined, notes = cloud_neighbours(
+                context, data, {"projection": tuple(stored.parameterization.axes[2])})
+            self._notes = list(self._notes) + notes + (
+                [] if found else ["no longer joined: no other tile's surface reaches its "
+                                  "border now"])
+            join = found or None
         self._engine = []
         return ("run", _as_stored(_recording(surf.refine, self._engine), st.resolution,
                                   st.auto_resolution),

@@ -761,5 +761,11 @@ def test_dem_tiles_fitted_one_by_one_join_the_tiles_fitted_before(clean_scene, t
     column = np.c_[np.full_like(ys, middle), ys]
     dz = spline_of(first).heights(column) - spline_of(second).heights(column)
     assert np.isfinite(dz).all() and np.abs(dz).max() <= 1.01 * joined["gap_max"]
+    # Refine joins it again, to the first as it is now
+    capfd.readouterr()
+    with bpy.context.temp_override(**select(bpy, second)):
+        assert bpy.ops.tcb.refine() == {"FINISHED"}
+    assert f"joined to '{first.name}'" in capfd.readouterr().out
+    assert spline_of(second).report["join"]["surfaces"] == 1
     alone = fit_slope(bpy, east, join_neighbours=False)
     assert "join" not in spline_of(alone).report
