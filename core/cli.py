@@ -232,6 +232,8 @@ def _check_distinct(args) -> None:
     paths = [(name, p) for name, p in paths if p is not None]
     for i, (name, path) in enumerate(paths):
         for other, earlier in paths[:i]:
+            if _same_file(earlier, path) and name == other == "the input":
+                raise TCBError(f"{path} is given twice as input")
             if _same_file(earlier, path):
                 raise TCBError(
                     f"{name} {path} is the same file as {other}"
@@ -310,18 +312,17 @@ def _progress(quiet: bool, relative: bool = True):
     return callback
 
 
-def _read_inputs(paths: list, want_dem: bool = True
-                 ) -> tuple[np.ndarray, np.ndarray | None, bool]:
+def _read_inputs(paths: list) -> tuple[np.ndarray, np.ndarray | None, list]:
     """The points and faces of the input files (``read_geometry``, fill values kept), and
-    whether each is a DEM (``meshio.is_dem``; False without ``want_dem``). Several files are
-    point clouds put together (DEM tiles: their shared nodes are the same point twice, which
-    is one node of the grid: ``core.parameterize.on_xy_grid``);
-    a mesh among several, and DEMs converted from degrees (each to metres from its own
-    south-west corner, so tiles would lie on each other), are refused in one line."""
+    each file's path and count of rows, in order. Several files are point clouds put together
+    (DEM tiles: their shared nodes are the same point twice, which is one node of the grid:
+    ``core.parameterize.on_xy_grid``); a mesh among several, and DEMs converted from degrees
+    (each to metres from its own south-west corner, so tiles would lie on each other), are
+    refused in one line."""
     if len(paths) == 1:
         points, faces = read_geometry(paths[0], keep_fill_values=True)
-        return points, faces, want_dem and faces is None and is_dem(paths[0], points)
-    parts, dems = [], True
+        return points, faces, [(paths[0], len(points))]
+    parts, files = [], []
     for path in paths:
         with warnings.catch_warnings(record=True) as said:
             warnings.simplefilter("always")
@@ -337,8 +338,21 @@ def _read_inputs(paths: list, want_dem: bool = True
         for w in said:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         parts.append(points)
-        dems = dems and want_dem and is_dem(path, points)
-    return np.vstack(parts), None, dems
+        files.append((path, len(points)))
+    return np.vstack(parts), None, files
+
+
+def _all_dems(files: list, points: np.ndarray, bad: np.ndarray) -> bool:
+    """Whether every input file is a DEM (``meshio.is_dem``), each judged by its rows of
+    ``points`` that are fitted (``bad``: those left out, NaN or no-data fill values, which
+    are on no grid)."""
+    start = 0
+    for path, n in files:
+        rows = slice(start, start + n)
+        start += n
+        if not is_dem(path, points[rows][~bad[rows]]):
+            return False
+    return True
 
 
 def _input_text(paths: list) -> str:
@@ -366,7 +380,7 @@ def _fit(args) -> int:
     t0 = time.perf_counter()
     # a DEM's no-data cells come back as points, found and refused or left out below as a
     # cloud's (the reader had refused them before --drop-invalid was seen: user test)
-    points, faces, dems = _read_inputs(args.inputs, args.projection is None)
+    points, faces, files = _read_inputs(args.inputs)
     if faces is not None and args.projection not in (None, "auto"):
         raise TCBError(
             f"--projection applies to point clouds; {args.input} is a mesh, which is "
@@ -416,7 +430,7 @@ def _fit(args) -> int:
         print(f"read {args.input}: {len(points)} points, {kind}", file=sys.stderr)
     join = _neighbours(args, points, faces)
     # a DEM is heights over a grid of x and y: fitted along z unless told (meshio.is_dem)
-    raster = faces is None and args.projection is None and dems
+    raster = faces is None and args.projection is None and _all_dems(files, given, bad)
     projection = "z" if raster else None if args.projection == "auto" else args.projection
     if raster and not args.quiet:
         what = "is a DEM raster" if len(args.inputs) == 1 else "are DEM rasters"
@@ -468,7 +482,7 @@ def _fit(args) -> int:
     ]
     param = surf.parameterization
     if param.kind == "plane":  # the direction used, to pass as --projection another time
-        chosen = ("a DEM raster" if raster else
+        chosen = (("a DEM raster" if len(args.inputs) == 1 else "DEM rasters") if raster else
                   "given" if args.projection not in (None, "auto") else "chosen")
         rows.append(("projection", ",".join(f"{x:.4g}" for x in param.axes[2])
                      + f" ({chosen})"))
@@ -616,6 +630,9 @@ def _neighbours(args, points: np.ndarray, faces) -> list | None:
         return None
     join = []
     for mesh, spline in args.join:
+        if any(_same_file(mesh, i) for i in args.inputs):
+            raise TCBError(f"--join {mesh} {spline}: {mesh} is an input of this fit; join to "
+                           "a neighbour's file and spline")
         with warnings.catch_warnings(record=True) as said:
             warnings.simplefilter("always")
             other, other_faces = read_geometry(mesh, keep_fill_values=faces is None)

@@ -256,7 +256,7 @@ def _fitted_part(param, uv: np.ndarray) -> np.ndarray:
     return inside
 
 
-def cloud_seam(param, surface, k: int = 0) -> CloudSeam:
+def cloud_seam(param, surface, k: int = 0, points=None) -> CloudSeam:
     """The :class:`CloudSeam` of a point cloud (parameterization ``param``, a plane) with the
     neighbouring cloud's ``surface`` (``join[k]``): the points of this cloud's domain border,
     :data:`CLOUD_PIN_SPACING` of its data's spacing apart, that are within the trim distance
@@ -265,20 +265,30 @@ def cloud_seam(param, surface, k: int = 0) -> CloudSeam:
     that overlap, the part of this one's border inside the other. A clear
     :class:`InvalidInputError` for a neighbour fitted to a mesh or projected along another
     direction, and for one that reaches none of this border, or all of it (the same data,
-    or a cloud inside it)."""
+    or a cloud inside it). ``points`` (the cloud's, ``(n, 3)``, rows as ``param.uv``'s): the
+    border is looked for on the other surface at the height of this cloud's nearest points
+    (along a direction the other does not share, the border's points on this cloud's plane
+    project elsewhere: an adjacent tile fitted 17 degrees off had been told it reached no
+    part of the border; review)."""
     other = surface.parameterization
     if other.kind != "plane" or other.axes is None or other.origin is None:
         raise InvalidInputError(f"join[{k}]: that surface was fitted to a mesh; a point "
                                 "cloud's surface joins the surfaces of neighbouring clouds")
-    data = np.asarray(param.uv)[np.isfinite(param.uv).all(axis=1)]
+    finite = np.isfinite(param.uv).all(axis=1)
+    data = np.asarray(param.uv)[finite]
     tree = cKDTree(data)
     step = CLOUD_PIN_SPACING * _spacing(data, tree) / 2.0
     if not step > 0:
         raise InvalidInputError(f"join[{k}]: this cloud's points have no spacing to pin "
                                 "its border at")
     uv, piece = _on_border(param.domain_polygon, step)
-    own = tree.query(uv)[0] <= trim_distance(param, data, tree)
+    dist, nearest = tree.query(uv)
+    own = dist <= trim_distance(param, data, tree)
     p = np.asarray(param.origin) + param.scale * (uv @ np.asarray(param.axes[:2]))
+    if points is not None:  # (at the height of the nearest data point over the plane)
+        normal = np.asarray(param.axes[2], dtype=np.float64)
+        near = np.asarray(points, dtype=np.float64)[np.flatnonzero(finite)[nearest]]
+        p = p + ((near - np.asarray(param.origin)) @ normal)[:, None] * normal
     theirs = other.project(p)
     shared = own & _fitted_part(other, theirs)
     if not shared.any():  # (said first: the words for any surface apart from this cloud)
@@ -323,7 +333,7 @@ def _direction(n: np.ndarray) -> str:
     return "(" + ", ".join(f"{x:.3g}" for x in n) + ")"
 
 
-def seams(param, join) -> list[Seam]:
+def seams(param, join, points=None) -> list[Seam]:
     """The :class:`Seam` of each ``(surface, shared)`` of ``join`` (one pair, or a list of
     them) with the mesh of parameterization ``param``; ``shared`` ``(k, 2)`` pairs ``(i, j)``:
     vertex ``i`` of this mesh is vertex ``j`` of the data ``surface`` was fitted to (such as
@@ -336,7 +346,7 @@ def seams(param, join) -> list[Seam]:
             and not hasattr(join[1], "parameterization")):  # (two surfaces: two neighbours)
         join = [join]
     if param.faces is None:
-        return _cloud_seams(param, join)
+        return _cloud_seams(param, join, points)
     if hasattr(join, "parameterization"):
         raise InvalidInputError("join= for a mesh takes pairs (surface, shared): the "
                                 "neighbour's surface and the (k, 2) vertex pairs the two "
@@ -387,7 +397,7 @@ def seams(param, join) -> list[Seam]:
     return out
 
 
-def _cloud_seams(param, join) -> list[CloudSeam]:
+def _cloud_seams(param, join, points=None) -> list[CloudSeam]:
     """:func:`seams` for a point cloud: ``join`` a neighbouring cloud's surface, a pair
     ``(surface, None)`` as for meshes (no vertices are shared: the second is not used), or a
     list of them."""
@@ -405,7 +415,7 @@ def _cloud_seams(param, join) -> list[CloudSeam]:
             raise InvalidInputError(
                 f"join[{k}] must be the TCBSurface of a neighbouring point cloud (or a pair "
                 "(surface, None)); give several neighbours as a list of surfaces")
-        out.append(cloud_seam(param, item, k))
+        out.append(cloud_seam(param, item, k, points))
     return out
 
 

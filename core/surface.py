@@ -1634,7 +1634,7 @@ class TCBSurface:
                        rings=self.knots[self._n_interior:],
                        history=self._report.get("history", []), start_degree=self.degree,
                        projection_given=bool(self._report.get("projection_given")),
-                       seam_list=seams(param, join))
+                       seam_list=seams(param, join, points))
         if join:  # (the surface asked for is joined; the start may not be)
             return refined
         return self._start_unless_beaten(refined, points, options)
@@ -3937,7 +3937,7 @@ def fit_surface(
     if coarse is not None:
         warnings.warn(coarse, RuntimeWarning, stacklevel=2)
     return _run(points, param, options, callback, checked=faces is None,
-                seam_list=seams(param, join),
+                seam_list=seams(param, join, points),
                 **dict(zip(("faces_key", "faces_set_key", "faces_set_key32", "mesh_key"),
                            (None,) * 4 if faces is None else _faces_keys(faces, points))),
                 spikes=faces is None and not drop_outliers,

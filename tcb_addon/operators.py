@@ -1266,47 +1266,72 @@ def neighbour_joins(context, obj, part: str, data) -> tuple[list, list, list]:
     return join, names, notes
 
 
-def cloud_neighbours(context, data, kwargs: dict) -> tuple[list, list, list]:
+def _world_box(ob) -> np.ndarray:
+    """The world bounding box ``(2, 3)`` of an object's geometry (its ``bound_box`` corners
+    through ``matrix_world``)."""
+    m = np.array(ob.matrix_world)
+    corners = np.array([list(c) for c in ob.bound_box], dtype=np.float64)
+    world = corners @ m[:3, :3].T + m[:3, 3]
+    return np.array([world.min(axis=0), world.max(axis=0)])
+
+
+def cloud_neighbours(context, data, kwargs: dict, param=None) -> tuple[list, list, list]:
     """The neighbours to join a point cloud's fit ``data`` to (Join Neighbours; in Object Mode,
     ``core.join.cloud_seam``), as :func:`neighbour_joins` gives a part's: ``(join, names,
     notes)``. Height fields only: a cloud fitted along a given direction (a DEM raster along
     its z, or a world axis chosen in Projection), and the surfaces in the view layer fitted so
     to other objects' clouds (DEM tiles imported one by one and fitted in turn) whose fitted
-    part reaches this cloud's border, parameterized as the fit will be; a surface reaching it
-    that cannot be joined (fitted along another direction, or reaching all of the border) is
-    named in a note. Scans on their best-fit planes are not joined (two overlapping scans of a
-    part fitted one by one are not tiles)."""
+    part reaches this cloud's border, parameterized as the fit will be (``param``, Refine:
+    the stored one); a surface reaching it that cannot be joined (fitted along another
+    direction, or reaching all of the border) is named in a note. Of a tile's results (Shift+D
+    copies, a variant kept) the one Replace Previous Result would replace (:func:`_fit_order`);
+    none of a tile deleted, and none whose mesh's box is apart from this cloud's (read before
+    its spline: 20 tiles in a scene). Scans on their best-fit planes are not joined (two
+    overlapping scans of a part fitted one by one are not tiles)."""
     core = _core()
-    if kwargs.get("projection") is None:
+    if kwargs.get("projection") is None or not len(data.points):
         return [], [], []
     mine = {o.as_pointer() for o in data.sources}
-    found = []
+    lo, hi = data.points.min(axis=0), data.points.max(axis=0)
+    pad = 1e-3 * float(np.linalg.norm(hi - lo)) + 1e-9
+    latest = {}
     for ob in context.view_layer.objects:
         if (ob.tcb.role != "SURFACE" or ob.get(PART_KEY) or live.deleted(ob)
                 or not ob.tcb.sources
-                or any(s.object is None or s.object.as_pointer() in mine
-                       for s in ob.tcb.sources)):
+                or any(s.object is None or live.deleted(s.object)
+                       or s.object.as_pointer() in mine for s in ob.tcb.sources)):
             continue
+        box = _world_box(ob)
+        if (box[0] > hi + pad).any() or (box[1] < lo - pad).any():
+            continue  # (apart)
+        key = tuple(sorted(s.object.as_pointer() for s in ob.tcb.sources))
+        if key not in latest or _fit_order(ob) > _fit_order(latest[key]):
+            latest[key] = ob
+    found = []
+    for ob in latest.values():
         try:
             surf = stored_surface(ob, use_net=True)
-        except bridge.SelectionError:
-            continue
+        except (bridge.SelectionError, core.TCBError):
+            continue  # (a damaged spline: that result's own operators say so)
         if (surf is not None and surf.parameterization.kind == "plane"
-                and surf.report.get("projection_given")):
+                and (surf.report or {}).get("projection_given")):
             found.append((ob, surf))
     if not found:
         return [], [], []
-    try:  # (this cloud's parameters, as the fit makes them: where its border is)
-        param = core.parameterize.parameterize(
-            data.points, projection=kwargs.get("projection"),
-            drop_outliers=bool(kwargs.get("drop_outliers")),
-            fill_holes=bool(kwargs.get("fill_holes")))
-    except core.TCBError:
-        return [], [], []  # (the fit says why)
+    if param is None:
+        try:  # (this cloud's parameters, as the fit makes them: where its border is)
+            with _warnings.catch_warnings():
+                _warnings.simplefilter("ignore")  # (the fit says them)
+                param = core.parameterize.parameterize(
+                    data.points, projection=kwargs.get("projection"),
+                    drop_outliers=bool(kwargs.get("drop_outliers")),
+                    fill_holes=bool(kwargs.get("fill_holes")))
+        except core.TCBError:
+            return [], [], []  # (the fit says why)
     join, names, notes = [], [], []
     for ob, surf in found:
         try:
-            core.join.cloud_seam(param, surf)
+            core.join.cloud_seam(param, surf, points=data.points)
         except core.InvalidInputError as exc:
             if "reaches no part" not in str(exc):  # (apart: not a neighbour, said nothing)
                 notes.append(f"not joined to '{ob.name}': "
@@ -1901,7 +1926,8 @@ class TCB_OT_refine(_EngineOperator, bpy.types.Operator):
             # a DEM tile joined to the tiles fitted before: to them as they are now, along the
             # direction it was fitted
             found, self._joined, notes = cloud_neighbours(
-                context, data, {"projection": tuple(stored.parameterization.axes[2])})
+                context, data, {"projection": tuple(stored.parameterization.axes[2])},
+                param=stored.parameterization)
             self._notes = list(self._notes) + notes + (
                 [] if found else ["no longer joined: no other tile's surface reaches its "
                                   "border now"])

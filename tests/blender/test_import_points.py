@@ -769,3 +769,12 @@ def test_dem_tiles_fitted_one_by_one_join_the_tiles_fitted_before(clean_scene, t
     assert spline_of(second).report["join"]["surfaces"] == 1
     alone = fit_slope(bpy, east, join_neighbours=False)
     assert "join" not in spline_of(alone).report
+    # a Shift+D copy of the first tile's surface is no second neighbour (the latest of a
+    # tile's results is); a tile whose points were deleted (X) is none (review)
+    variant = first.copy()
+    bpy.context.collection.objects.link(variant)
+    again = fit_slope(bpy, east)
+    assert spline_of(again).report["join"]["surfaces"] == 1
+    for collection in list(west.users_collection):
+        collection.objects.unlink(west)
+    assert "join" not in spline_of(fit_slope(bpy, east)).report

@@ -855,7 +855,7 @@ def test_join_fits_a_patch_to_its_neighbour_s_spline(tmp_path, capsys, monkeypat
     monkeypatch.undo()
     # what it cannot join, in one line and a non-zero exit
     for args, words in (
-            ([str(b_mesh), str(a_spline)], "was not fitted to"),  # the wrong mesh
+            ([str(b_mesh), str(a_spline)], "is an input of this fit"),  # the wrong mesh
             ([str(tmp_path / "b_s.obj"), str(a_spline)], "was not fitted to"),
     ):
         r = run("fit", b_mesh, "-o", tmp_path / "x.obj", "--join", *args)
@@ -947,6 +947,15 @@ def test_several_point_files_are_fitted_together(tmp_path):
     r = run("fit", w, tmp_path / "east.npz", "-o", tmp_path / "x.obj", "--spline",
             tmp_path / "east.npz")
     assert r.returncode == 2 and "is the same file as the input" in r.stderr, r.stderr
+    r = run("fit", w, w, "-o", tmp_path / "x.obj")
+    assert r.returncode == 2 and "west.xyz is given twice as input" in r.stderr, r.stderr
+    r = run("fit", w, e, "-o", tmp_path / "x.obj", "--join", w, tmp_path / "both.npz")
+    assert r.returncode == 2 and "west.xyz is an input of this fit" in r.stderr, r.stderr
+    # a tile with a row of no data (NaN) left out is a DEM still (it had been judged with it)
+    np.savetxt(tmp_path / "holed.xyz", np.r_[west, [[np.nan] * 3]], fmt="%.3f")
+    r = run("fit", tmp_path / "holed.xyz", e, "-o", tmp_path / "x.obj", "--drop-invalid")
+    assert r.returncode == 0 and "are DEM rasters" in r.stderr, r.stderr
+    assert "(DEM rasters)" in r.stdout, r.stdout
 
 
 def test_longitude_latitude_and_metres_are_told_to_be_projected(tmp_path):

@@ -234,7 +234,7 @@ def test_cloud_joins_refuse_what_they_cannot_join():
     with pytest.raises(InvalidInputError, match="reaches no part of this cloud's border"):
         fit_surface(east + [30.0, 0, 0], projection="z", tolerance=1e-2, join=a)
     with pytest.raises(InvalidInputError, match="projected along different directions"):
-        fit_surface(east, projection=(0.03, 0.0, 1.0), tolerance=1e-2, join=a)
+        fit_surface(east, projection=(0.3, 0.0, 1.0), tolerance=1e-2, join=a)
     with pytest.raises(InvalidInputError, match="must be the TCBSurface of a neighbouring"):
         fit_surface(east, projection="z", tolerance=1e-2, join=[np.zeros((3, 2))])
     # a pair as for meshes is taken, its vertex pairs unused: the same fit
