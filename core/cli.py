@@ -324,22 +324,31 @@ def _read_inputs(paths: list) -> tuple[np.ndarray, np.ndarray | None, list]:
         return points, faces, [(paths[0], len(points))]
     parts, files = [], []
     for path in paths:
-        with warnings.catch_warnings(record=True) as said:
-            warnings.simplefilter("always")
-            points, faces = read_geometry(path, keep_fill_values=True)
+        points, faces = _read_tile(path, str(path), "several such tiles do not line up",
+                                   "fit them together")
         if faces is not None:
             raise TCBError(f"{path} is a mesh: several inputs are point clouds fitted together "
                            "(fit a mesh alone, or its patches one by one with --join)")
-        if any("bounds are in degrees" in str(w.message) for w in said):
-            raise TCBError(f"{path} is a DEM with its bounds in degrees, which is converted to "
-                           "metres from its own south-west corner, so several such tiles do "
-                           "not line up; save the tiles with projected bounds (units='metres') "
-                           "to fit them together")
-        for w in said:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         parts.append(points)
         files.append((path, len(points)))
     return np.vstack(parts), None, files
+
+
+def _read_tile(path, who: str, why: str, to: str, keep_fill_values: bool = True):
+    """``read_geometry(path)`` of a tile put beside others (several inputs, a neighbour to
+    join), its warnings shown as reading shows them; a DEM whose bounds are in degrees is
+    refused (``who`` is it, ``why`` the harm, ``to`` what projected bounds allow): each is
+    put in metres from its own south-west corner, so tiles would lie on each other."""
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        read = read_geometry(path, keep_fill_values=keep_fill_values)
+    if read[1] is None and any("bounds are in degrees" in str(w.message) for w in said):
+        raise TCBError(f"{who} is a DEM with its bounds in degrees, which is converted to "
+                       f"metres from its own south-west corner, so {why}; save the tiles with "
+                       f"projected bounds (units='metres') to {to}")
+    for w in said:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return read
 
 
 def _all_dems(files: list, points: np.ndarray, bad: np.ndarray) -> bool:
@@ -633,18 +642,10 @@ def _neighbours(args, points: np.ndarray, faces) -> list | None:
         if any(_same_file(mesh, i) for i in args.inputs):
             raise TCBError(f"--join {mesh} {spline}: {mesh} is an input of this fit; join to "
                            "a neighbour's file and spline")
-        with warnings.catch_warnings(record=True) as said:
-            warnings.simplefilter("always")
-            other, other_faces = read_geometry(mesh, keep_fill_values=faces is None)
-        if faces is None and any("bounds are in degrees" in str(w.message) for w in said):
-            # (each such tile is put in metres from its own south-west corner: neighbouring
-            # tiles would lie on each other; review)
-            raise TCBError(f"--join {mesh} {spline}: {mesh} is a DEM with its bounds in "
-                           "degrees, which is converted to metres from its own south-west "
-                           "corner, so neighbouring tiles do not line up; save the tiles "
-                           "with projected bounds (units='metres') to join them")
-        for w in said:  # (the other warnings, as reading the input shows them)
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        # (a DEM in degrees: refused, as for several inputs; review)
+        other, other_faces = _read_tile(mesh, f"--join {mesh} {spline}: {mesh}",
+                                        "neighbouring tiles do not line up", "join them",
+                                        keep_fill_values=faces is None)
         dropped = 0
         if faces is None:  # the rows the input's fit leaves out (--drop-invalid) ...
             bad = ~np.isfinite(other).all(axis=1)
