@@ -291,11 +291,13 @@ def cloud_seam(param, surface, k: int = 0, points=None) -> CloudSeam:
         p = p + ((near - np.asarray(param.origin)) @ normal)[:, None] * normal
     theirs = other.project(p)
     shared = own & _fitted_part(other, theirs)
+    apart = (f"join[{k}]: that surface reaches no part of this cloud's border: neighbouring "
+             "clouds are joined where one's border lies on the other's fitted surface (DEM "
+             "tiles sharing their edge row of nodes, or overlapping); tiles whose nodes do not "
+             "meet (cut a cell apart) are fitted together instead (several files on the "
+             "command line, the tiles selected together in Blender)")
     if not shared.any():  # (said first: the words for any surface apart from this cloud)
-        raise InvalidInputError(
-            f"join[{k}]: that surface reaches no part of this cloud's border: neighbouring "
-            "clouds are joined where one's border lies on the other's fitted surface (DEM "
-            "tiles sharing their edge row of nodes, or overlapping)")
+        raise InvalidInputError(apart)
     n_own = np.asarray(param.axes[2], dtype=np.float64)
     n_other = np.asarray(other.axes[2], dtype=np.float64)
     if abs(float(n_own @ n_other)) < 1.0 - CLOUD_PARALLEL:
@@ -309,10 +311,7 @@ def cloud_seam(param, surface, k: int = 0, points=None) -> CloudSeam:
     targets[shared] = surface(theirs[shared])
     shared &= np.isfinite(targets).all(axis=1)
     if not shared.any():
-        raise InvalidInputError(
-            f"join[{k}]: that surface reaches no part of this cloud's border: neighbouring "
-            "clouds are joined where one's border lies on the other's fitted surface (DEM "
-            "tiles sharing their edge row of nodes, or overlapping)")
+        raise InvalidInputError(apart)
     if shared.sum() == own.sum():
         raise InvalidInputError(
             f"join[{k}]: that surface reaches all of this cloud's border (the same data, or a "
