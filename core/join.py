@@ -46,8 +46,7 @@ from scipy.spatial import cKDTree
 
 from .errors import BorderError, InvalidInputError, SingularSystemError, TCBError
 from .fit import fit_control_points
-from .geometry import coordinate_order
-from .parameterize import in_voids, trim_distance
+from .parameterize import data_spacing, in_voids, trim_distance
 from .refine import _feature_cost, insertion_points, make_space
 
 # pins inside each shared edge, as fractions along it (its two vertices are pinned too)
@@ -216,17 +215,6 @@ class CloudSeam:
         self.neighbour_error = float(neighbour_error)
 
 
-def _spacing(data: np.ndarray, tree) -> float:
-    """The median distance of a data point to its nearest one at another place (a sample of
-    about 5000 taken in the order of their coordinates, as ``trim_distance`` takes it)."""
-    order = coordinate_order(data)
-    sample = (data if order is None else data[order])[:: max(1, len(data) // 5000)]
-    dist = tree.query(sample, k=min(9, len(data)))[0]
-    apart = np.where(dist[:, 1:] > 0, dist[:, 1:], np.inf).min(axis=1, initial=np.inf)
-    apart = apart[np.isfinite(apart)]
-    return float(np.median(apart)) if len(apart) else 0.0
-
-
 def _on_border(polygon: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     """Points along the closed ``polygon`` ``(b, 2)`` at most ``step`` apart (each edge cut
     into equal pieces, its first end included), in order, and the length of the piece from
@@ -277,7 +265,7 @@ def cloud_seam(param, surface, k: int = 0, points=None) -> CloudSeam:
     finite = np.isfinite(param.uv).all(axis=1)
     data = np.asarray(param.uv)[finite]
     tree = cKDTree(data)
-    step = CLOUD_PIN_SPACING * _spacing(data, tree) / 2.0
+    step = CLOUD_PIN_SPACING * data_spacing(data, tree)[0] / 2.0
     if not step > 0:
         raise InvalidInputError(f"join[{k}]: this cloud's points have no spacing to pin "
                                 "its border at")

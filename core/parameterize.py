@@ -4070,6 +4070,21 @@ TRIM_LATTICE = 100
 CLOUD_HOLE_CELLS = 1024
 
 
+def data_spacing(data: np.ndarray, tree: cKDTree) -> tuple[float, np.ndarray]:
+    """The data's spacing: the median distance of a point to its nearest one at another place
+    (a doubled point's twin is not its spacing), over a sample of about 5000 of the
+    parameters ``data`` taken in the order of their coordinates
+    (:func:`core.geometry.coordinate_order`: the same for any order of the points); ``tree``
+    a KD-tree of them. Also the sample's 9 nearest points ``(s, 9)`` (fewer for fewer data),
+    themselves first. 0.0 when no two points are apart."""
+    order = coordinate_order(data)
+    sample = (data if order is None else data[order])[:: max(1, len(data) // 5000)]
+    dist, nb = tree.query(sample, k=min(9, len(data)))
+    apart = np.where(dist[:, 1:] > 0, dist[:, 1:], np.inf).min(axis=1, initial=np.inf)
+    apart = apart[np.isfinite(apart)]
+    return (float(np.median(apart)) if len(apart) else 0.0), nb
+
+
 def trim_distance(param: Parameterization, data: np.ndarray | None = None,
                   tree: cKDTree | None = None) -> float:
     """How far from the data a cloud's tessellation reaches (not in method.md): 4 times
@@ -4094,12 +4109,7 @@ def trim_distance(param: Parameterization, data: np.ndarray | None = None,
         data = np.asarray(param.uv)[np.isfinite(param.uv).all(axis=1)]
     if tree is None:
         tree = cKDTree(data)
-    order = coordinate_order(data)
-    sample = (data if order is None else data[order])[:: max(1, len(data) // 5000)]
-    dist, nb = tree.query(sample, k=min(9, len(data)))
-    apart = np.where(dist[:, 1:] > 0, dist[:, 1:], np.inf).min(axis=1, initial=np.inf)
-    apart = apart[np.isfinite(apart)]
-    spacing = float(np.median(apart)) if len(apart) else 0.0
+    spacing, nb = data_spacing(data, tree)
     if nb.shape[1] < 3:
         return 4 * spacing
     X = data[nb]

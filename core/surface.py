@@ -3882,8 +3882,8 @@ def fit_surface(
         (DEM tiles along z), each a TCBSurface (or ``(surface, None)``): this cloud's border
         is pinned where it lies on a neighbour's fitted surface (``core.join.cloud_seam``:
         tiles sharing their edge row of nodes, or overlapping), to that surface's height
-        there (``report["join"]["shared_length"]``, ``"pins"``). Two Jacksboro DEM tiles at
-        1e-3: up to 49.6 m apart along their shared column alone, 5.9 m joined
+        there (``report["join"]["shared_length"]``, ``"pins"``). The Jacksboro DEM in 2 x 2
+        tiles at 1e-3: their seams up to 105 m apart alone, 6.38 m joined
         (``benchmarks/dem_tiles.py``).
 
     Counts (``degree``, ``max_control_points``, ...) are whole numbers (``2.0`` is 2), flags
